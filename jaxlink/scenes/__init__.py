@@ -1,0 +1,45 @@
+"""Built-in scenes: TOML files shipped inside the package.
+
+Every scene file has a `[mechanism]` table with `name` and `description`; `jaxlink scenes`
+lists them. A FILE argument on the command line is either a path or one of these names.
+"""
+
+from __future__ import annotations
+
+import pathlib
+
+try:
+    import tomllib
+except ModuleNotFoundError:  # Python < 3.11
+    import tomli as tomllib  # type: ignore[no-redef]
+
+SCENE_DIR = pathlib.Path(__file__).resolve().parent
+
+
+def scene_paths() -> dict[str, pathlib.Path]:
+    """Name -> path of every built-in scene (name = file stem)."""
+    return {p.stem: p for p in sorted(SCENE_DIR.glob("*.toml"))}
+
+
+def describe(path: pathlib.Path) -> str:
+    with open(path, "rb") as fh:
+        data = tomllib.load(fh)
+    return str(data.get("mechanism", {}).get("description", ""))
+
+
+def resolve(name_or_path: str) -> pathlib.Path:
+    """A path if it exists, else a built-in scene name; raises `MechanismError` otherwise."""
+    from .._errors import MechanismError
+
+    p = pathlib.Path(name_or_path)
+    if p.is_file():
+        return p
+    scenes = scene_paths()
+    if name_or_path in scenes:
+        return scenes[name_or_path]
+    if p.suffix == ".toml" or "/" in name_or_path:
+        raise MechanismError(f"no such file: {name_or_path}")
+    raise MechanismError(
+        f"'{name_or_path}' is neither a file nor a built-in scene; built-in scenes: "
+        + ", ".join(scenes)
+    )
