@@ -1,0 +1,87 @@
+"""Small dense linear solves, unrolled so that XLA fuses them under `vmap`.
+
+Batched `jnp.linalg.solve` on tiny systems calls LAPACK per system and breaks XLA fusion
+(measured 5× slower than an unrolled elimination, `spec/anchors.md`). For the n ≤ 8 systems of
+loop closure (2 equations per loop) we unroll Gaussian elimination with partial pivoting in
+Python: every operation is elementwise, so a `vmap` over positions and designs becomes one
+fused kernel.
+"""
+
+from __future__ import annotations
+
+import jax.numpy as jnp
+
+UNROLL_MAX = 8
+
+
+def solve_small(a, b):
+    """Solve `a x = b` for one small system (vmap for batches).
+
+    **Arguments:**
+
+    - `a`: (n, n) matrix.
+    - `b`: (n,) right-hand side.
+
+    **Returns:** `(x, pivot_ratio)`: the solution and min |pivot| / max |a_ij|, a cheap
+    singularity indicator (≈ 1/condition number; 0 for a singular matrix, in which case `x`
+    holds non-finite values).
+    """
+    n = a.shape[-1]
+    if n > UNROLL_MAX:
+        x = jnp.linalg.solve(a, b)
+        s = jnp.linalg.svd(a, compute_uv=False)
+        return x, s[-1] / jnp.maximum(s[0], jnp.finfo(a.dtype).tiny)
+    rows = [[a[i, j] for j in range(n)] for i in range(n)]
+    rhs = [b[i] for i in range(n)]
+    scale = jnp.max(jnp.abs(a))
+    min_piv = None
+    for k in range(n):
+        # partial pivoting: bring the largest |a_ik| (i >= k) to row k, by selects
+        if k < n - 1:
+            best = jnp.abs(rows[k][k])
+            best_i = jnp.zeros((), dtype=jnp.int32) + k
+            for i in range(k + 1, n):
+                v = jnp.abs(rows[i][k])
+                better = v > best
+                best = jnp.where(better, v, best)
+                best_i = jnp.where(better, i, best_i)
+            new_k = [_pick(rows, best_i, j, k, n) for j in range(k, n)]
+            new_b_k = _pick_vec(rhs, best_i, k, n)
+            for i in range(k + 1, n):
+                swap = best_i == i
+                for j in range(k, n):
+                    rows[i][j] = jnp.where(swap, rows[k][j], rows[i][j])
+                rhs[i] = jnp.where(swap, rhs[k], rhs[i])
+            for j in range(k, n):
+                rows[k][j] = new_k[j - k]
+            rhs[k] = new_b_k
+        piv = rows[k][k]
+        apiv = jnp.abs(piv)
+        min_piv = apiv if min_piv is None else jnp.minimum(min_piv, apiv)
+        inv = 1.0 / piv
+        for i in range(k + 1, n):
+            f = rows[i][k] * inv
+            for j in range(k + 1, n):
+                rows[i][j] = rows[i][j] - f * rows[k][j]
+            rhs[i] = rhs[i] - f * rhs[k]
+    x = [None] * n
+    for i in range(n - 1, -1, -1):
+        s = rhs[i]
+        for j in range(i + 1, n):
+            s = s - rows[i][j] * x[j]
+        x[i] = s / rows[i][i]
+    return jnp.stack(x), min_piv / jnp.maximum(scale, jnp.finfo(a.dtype).tiny)
+
+
+def _pick(rows, idx, j, k, n):
+    out = rows[k][j]
+    for i in range(k + 1, n):
+        out = jnp.where(idx == i, rows[i][j], out)
+    return out
+
+
+def _pick_vec(v, idx, k, n):
+    out = v[k]
+    for i in range(k + 1, n):
+        out = jnp.where(idx == i, v[i], out)
+    return out
