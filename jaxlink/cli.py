@@ -18,6 +18,8 @@ from ._errors import MechanismError
 COMMAND_MODULES = (
     "jaxlink._cli_mechanism",
     "jaxlink._cli_sinker",
+    "jaxlink._cli_reactions",
+    "jaxlink._cli_optimize",
 )
 
 

@@ -1,0 +1,257 @@
+"""Loop-closure (assembly) solve: Newton's method with continuation over the input.
+
+For one design p and a sequence of inputs φ_0 … φ_{N-1} we solve Φ(q_k; φ_k, p) = 0:
+
+- **first position**: Newton from the file's guess q0, with a step limit (0.5 rad for angles,
+  0.5 × the length scale for lengths) so that a rough guess does not jump to another branch;
+- **continuation**: position k starts from a Lagrange extrapolation of the last (up to three)
+  converged solutions, which keeps the assembly branch of the guess through the revolution and
+  typically needs two Newton steps;
+- **Newton step**: Φ_q from forward-mode AD (`jax.jacfwd`), solved by unrolled Gaussian
+  elimination with partial pivoting (`_linalg.solve_small`), so that `vmap` over designs fuses.
+  The part of Φ that does not depend on q is evaluated once per position.
+
+Every position returns a result code (`RESULTS`) instead of raising, and a non-converged position
+never writes NaN into the output: it keeps the last finite iterate, and the continuation goes on
+from the last converged position. So one bad design or position never poisons a batch.
+
+**Exact gradients.** The whole path solve is a `jax.custom_jvp`: by the implicit function
+theorem, dq_k = −Φ_q⁻¹ (Φ_p dp + Φ_φ dφ_k) at the converged solution — one linear solve per
+position, independent of the Newton iterations (and zero at non-converged positions). Reverse
+mode (`jax.grad`) follows by transposition of that linear map.
+"""
+
+from __future__ import annotations
+
+import functools
+from typing import NamedTuple
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from ._linalg import solve_small
+from ._mechanism import Mechanism
+from ._solution import RESULTS, Solution
+
+
+class NewtonOptions(NamedTuple):
+    """Static solver settings (changing them recompiles).
+
+    - `rtol`: converged when max|Φ| ≤ rtol × length scale (the largest |length parameter|);
+      `None` = 1000 × machine epsilon of the dtype (2.2e-13 in float64, 1.2e-4 in float32).
+    - `max_steps`: Newton iterations per position after the first.
+    - `max_steps_first`: iterations for the first position (from the file's guess).
+    - `continuation`: start each position from the extrapolated previous solutions (True), or
+      every position independently from q0 (False; only safe with a close guess).
+    - `predictor_order`: 0 (previous solution), 1 (secant) or 2 (quadratic) extrapolation.
+    - `singular_ratio`: min pivot / max |Φ_q| below which the Jacobian counts as singular.
+    """
+
+    rtol: float | None = None
+    max_steps: int = 12
+    max_steps_first: int = 60
+    continuation: bool = True
+    predictor_order: int = 2
+    singular_ratio: float = 1e-10
+
+
+def default_rtol(dtype) -> float:
+    return float(1000 * np.finfo(dtype).eps)
+
+
+def _step_scales(mech: Mechanism, scale, dtype):
+    return jnp.asarray(
+        [0.5 if k == "angle" else 1.0 for k in mech.unknown_kinds], dtype=dtype
+    ) * jnp.asarray([1.0 if k == "angle" else scale for k in mech.unknown_kinds], dtype=dtype)
+
+
+def newton(mech: Mechanism, q0, phi, p, *, tol, max_steps: int, limit_step: bool, singular_ratio: float):
+    """Newton's method for one position. Returns `(q, rnorm, result, steps)` (see `RESULTS`)."""
+    dtype = jnp.result_type(q0)
+    const = mech.residual_const(phi, p)
+
+    def value_and_jac(q):
+        f = lambda qq: (mech.residual_var(qq, phi, p, const),) * 2  # noqa: E731
+        jac, r = jax.jacfwd(f, has_aux=True)(q)
+        return r, jac
+
+    step_scale = _step_scales(mech, mech.length_scale(p), dtype) if limit_step else None
+
+    def cond(state):
+        q, k, done, rn, piv = state
+        return (~done) & (k < max_steps)
+
+    def body(state):
+        q, k, done, rn, piv = state
+        r, jac = value_and_jac(q)
+        rn = jnp.max(jnp.abs(r))
+        conv = rn <= tol
+        dq, piv = solve_small(jac, r)
+        if limit_step:
+            ratio = jnp.max(jnp.abs(dq) / step_scale)
+            dq = dq * jnp.minimum(1.0, 1.0 / jnp.maximum(ratio, 1e-30))
+        q_new = q - dq
+        finite = jnp.all(jnp.isfinite(q_new)) & jnp.isfinite(rn)
+        q = jnp.where(conv | ~finite, q, q_new)
+        return q, k + 1, conv | ~finite, rn, piv
+
+    init = (q0, jnp.zeros((), jnp.int32), jnp.zeros((), bool), jnp.asarray(jnp.inf, dtype),
+            jnp.asarray(1.0, dtype))
+    q, k, done, rn, piv = jax.lax.while_loop(cond, body, init)
+    conv = rn <= tol
+    if max_steps == 0:
+        rn = jnp.max(jnp.abs(mech.residual(q, phi, p)))
+        conv = rn <= tol
+    scale = mech.length_scale(p)
+    assemble_tol = max(1e-6, 10 * float(np.sqrt(np.finfo(dtype).eps))) * scale
+    result = jnp.where(
+        conv, RESULTS.converged,
+        jnp.where(~jnp.isfinite(rn) | ~jnp.all(jnp.isfinite(q)), RESULTS.nonfinite,
+                  jnp.where(rn > assemble_tol, RESULTS.cannot_assemble,
+                            jnp.where(piv < singular_ratio, RESULTS.singular, RESULTS.max_steps))),
+    ).astype(jnp.int8)
+    # never hand out non-finite numbers: fall back to the start value
+    q = jnp.where(jnp.all(jnp.isfinite(q)), q, jnp.nan_to_num(q0))
+    return q, rn, result, k
+
+
+def _extrapolate(hist_q, hist_phi, n_good, phi, order: int):
+    """Lagrange extrapolation through the last `min(n_good, order+1)` converged solutions."""
+    q1, q2, q3 = hist_q
+    f1, f2, f3 = hist_phi
+    if order == 0:
+        return q1
+    eps = 1e-12
+    # linear
+    d12 = f1 - f2
+    ok12 = jnp.abs(d12) > eps
+    lin = q1 + (q1 - q2) * jnp.where(ok12, (phi - f1) / jnp.where(ok12, d12, 1.0), 0.0)
+    if order == 1:
+        return jnp.where(n_good >= 2, lin, q1)
+    d13, d23 = f1 - f3, f2 - f3
+    ok = ok12 & (jnp.abs(d13) > eps) & (jnp.abs(d23) > eps)
+    s13 = jnp.where(ok, d13, 1.0)
+    s23 = jnp.where(ok, d23, 1.0)
+    s12 = jnp.where(ok, d12, 1.0)
+    w1 = (phi - f2) * (phi - f3) / (s12 * s13)
+    w2 = (phi - f1) * (phi - f3) / (-s12 * s23)
+    w3 = (phi - f1) * (phi - f2) / (s13 * s23)
+    quad = w1 * q1 + w2 * q2 + w3 * q3
+    return jnp.where((n_good >= 3) & ok, quad, jnp.where(n_good >= 2, lin, q1))
+
+
+def _solve_path_impl(mech: Mechanism, opts: NewtonOptions, p, phis, q0):
+    dtype = jnp.result_type(q0)
+    rtol = opts.rtol if opts.rtol is not None else default_rtol(dtype)
+    tol = rtol * mech.length_scale(p)
+    kw = dict(tol=tol, singular_ratio=opts.singular_ratio)
+
+    q_first, r_first, c_first, k_first = newton(
+        mech, q0, phis[0], p, max_steps=opts.max_steps_first, limit_step=True, **kw
+    )
+    if phis.shape[0] == 1:
+        return q_first[None], r_first[None], c_first[None], k_first[None]
+
+    if not opts.continuation:
+        solve_one = lambda phi: newton(mech, q0, phi, p, max_steps=opts.max_steps_first,  # noqa: E731
+                                       limit_step=True, **kw)
+        q, r, c, k = jax.vmap(solve_one)(phis[1:])
+        return (jnp.concatenate([q_first[None], q]), jnp.concatenate([r_first[None], r]),
+                jnp.concatenate([c_first[None], c]), jnp.concatenate([k_first[None], k]))
+
+    good0 = c_first == RESULTS.converged
+    hist_q = (q_first, q_first, q_first)
+    hist_phi = (phis[0], phis[0], phis[0])
+    n_good = good0.astype(jnp.int32)
+
+    def step(carry, phi):
+        hist_q, hist_phi, n_good = carry
+        guess = _extrapolate(hist_q, hist_phi, n_good, phi, opts.predictor_order)
+        q, rn, code, k = newton(mech, guess, phi, p, max_steps=opts.max_steps, limit_step=False, **kw)
+        good = code == RESULTS.converged
+        new_q = tuple(jnp.where(good, a, b) for a, b in zip((q,) + hist_q[:2], hist_q))
+        new_phi = tuple(jnp.where(good, a, b) for a, b in zip((phi,) + hist_phi[:2], hist_phi))
+        return (new_q, new_phi, n_good + good.astype(jnp.int32)), (q, rn, code, k)
+
+    _, (q, r, c, k) = jax.lax.scan(step, (hist_q, hist_phi, n_good), phis[1:])
+    return (jnp.concatenate([q_first[None], q]), jnp.concatenate([r_first[None], r]),
+            jnp.concatenate([c_first[None], c]), jnp.concatenate([k_first[None], k]))
+
+
+@functools.lru_cache(maxsize=64)
+def _path_solver(mech: Mechanism, opts: NewtonOptions):
+    """The differentiable path solve for one design: (p, phis, q0) -> (q, rnorm, result, steps)."""
+
+    @jax.custom_jvp
+    def solve_path(p, phis, q0):
+        return _solve_path_impl(mech, opts, p, phis, q0)
+
+    @solve_path.defjvp
+    def _jvp(primals, tangents):
+        p, phis, q0 = primals
+        dp, dphis, _ = tangents
+        out = solve_path(p, phis, q0)
+        q, rn, code, k = out
+
+        def one(qk, phik, dphik):
+            rhs = jax.jvp(lambda pp, ph: mech.residual(qk, ph, pp), (p, phik), (dp, dphik))[1]
+            jac = jax.jacfwd(mech.residual)(qk, phik, p)
+            dq, _ = solve_small(jac, rhs)
+            return -dq
+
+        dq = jax.vmap(one)(q, phis, dphis)
+        dq = jnp.where((code == RESULTS.converged)[:, None], dq, 0.0)
+        return out, (dq, jnp.zeros_like(rn), _float0(code), _float0(k))
+
+    return solve_path
+
+
+def _float0(x):
+    return np.zeros(np.shape(x), dtype=jax.dtypes.float0)
+
+
+def solve_path(mech: Mechanism, p, phis, q0=None, *, options: NewtonOptions = NewtonOptions()) -> Solution:
+    """Solve the positions of one design along a sequence of inputs (differentiable in p, φ).
+
+    **Arguments:**
+
+    - `mech`: the compiled mechanism.
+    - `p`: (P,) parameters, SI (`mech.parameters` for the file's design).
+    - `phis`: (N,) input values, SI, in the order of the continuation.
+    - `q0`: (n,) guess at `phis[0]` (default: the file's guess).
+    - `options`: `NewtonOptions` (keyword-only, static).
+
+    **Returns:** a `Solution` with leading axis N.
+    """
+    p = jnp.asarray(p)
+    dtype = jnp.result_type(p)
+    phis = jnp.asarray(phis, dtype=dtype)
+    q0 = jnp.asarray(mech.guess if q0 is None else q0, dtype=dtype)
+    q, rn, code, k = _path_solver(mech, options)(p, phis, q0)
+    return Solution(q=q, converged=code == RESULTS.converged, residual=rn, result=code, steps=k)
+
+
+def solve(mech: Mechanism, phis, p=None, q0=None, *, options: NewtonOptions = NewtonOptions()) -> Solution:
+    """Solve positions for one design or a batch of designs, jitted.
+
+    `p` of shape (P,) gives a `Solution` with leading axis N; `p` of shape (B, P) gives leading
+    axes (B, N) (designs × positions), `vmap`ped over designs. `phis` is (N,) (shared by all
+    designs) or (B, N); `q0` is (n,) or (B, n).
+    """
+    p = jnp.asarray(mech.parameters if p is None else p)
+    if not jnp.issubdtype(p.dtype, jnp.floating):
+        p = p.astype(jnp.result_type(float))
+    phis = jnp.asarray(phis, dtype=p.dtype)
+    q0 = jnp.asarray(mech.guess if q0 is None else q0, dtype=p.dtype)
+    return _jitted_solve(mech, options, p.ndim == 2, phis.ndim == 2, q0.ndim == 2)(p, phis, q0)
+
+
+@functools.lru_cache(maxsize=64)
+def _jitted_solve(mech, options, batch_p, batch_phi, batch_q0):
+    def single(p, phis, q0):
+        return solve_path(mech, p, phis, q0, options=options)
+
+    if batch_p:
+        single = jax.vmap(single, in_axes=(0, 0 if batch_phi else None, 0 if batch_q0 else None))
+    return jax.jit(single)
