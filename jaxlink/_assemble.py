@@ -242,9 +242,33 @@ def solve(mech: Mechanism, phis, p=None, q0=None, *, options: NewtonOptions = Ne
     p = jnp.asarray(mech.parameters if p is None else p)
     if not jnp.issubdtype(p.dtype, jnp.floating):
         p = p.astype(jnp.result_type(float))
+    lead = 0
+    if q0 is None and np.ndim(phis) == 1 and not isinstance(phis, jax.core.Tracer):
+        # the file's guesses hold at `input_start`: continue from there to phis[0] first
+        lead_in = lead_in_path(mech, float(np.asarray(phis)[0]))
+        lead = len(lead_in)
+        if lead:
+            phis = np.concatenate([lead_in, np.asarray(phis, dtype=float)])
     phis = jnp.asarray(phis, dtype=p.dtype)
     q0 = jnp.asarray(mech.guess if q0 is None else q0, dtype=p.dtype)
-    return _jitted_solve(mech, options, p.ndim == 2, phis.ndim == 2, q0.ndim == 2)(p, phis, q0)
+    sol = _jitted_solve(mech, options, p.ndim == 2, phis.ndim == 2, q0.ndim == 2)(p, phis, q0)
+    if lead:
+        sol = jax.tree_util.tree_map(lambda x: x[..., lead:, :] if x.ndim == p.ndim + 1 else x[..., lead:], sol)
+    return sol
+
+
+def lead_in_path(mech: Mechanism, phi0: float, max_step: float = np.deg2rad(5.0)) -> np.ndarray:
+    """Inputs from the file's `input_start` towards `phi0` (excluded), steps ≤ `max_step`
+    (5° for an angle input; 5 % of the length scale for a length input)."""
+    start = mech.input_start
+    if mech.input_kind == "length":
+        lengths = [abs(v) for v, k in zip(mech.parameters, mech.parameter_kinds) if k == "length"]
+        max_step = 0.05 * (max(lengths) if lengths else 1.0)
+    gap = phi0 - start
+    if abs(gap) < 1e-12:
+        return np.zeros((0,))
+    n = int(np.ceil(abs(gap) / max_step))
+    return start + gap * np.arange(n) / n
 
 
 @functools.lru_cache(maxsize=64)

@@ -81,8 +81,9 @@ class Mechanism:
     - `name`, `description`, `file`: from `[mechanism]`.
     - `units`: the file's unit factors (SI = file value × factor).
     - `parameter_names`, `parameter_kinds` ("length" | "angle" | "number"), `parameters` (SI).
-    - `input_name`, `input_kind`, `input_body`.
-    - `unknown_names`, `unknown_kinds`, `guess` (SI, at the first input value).
+    - `input_name`, `input_kind`, `input_body`, `input_start` (SI: the input value at which the
+      guesses of `[unknowns]` hold; `[input] start`, default 0).
+    - `unknown_names`, `unknown_kinds`, `guess` (SI, at `input_start`).
     - `loops`, `points`: tuples of `(name, tuple[Term])`.
     - `tables`: the raw TOML of the optional tables (`bodies`, `joints`, `loads`, `optimize`, …).
     """
@@ -97,6 +98,7 @@ class Mechanism:
     input_name: str
     input_kind: str
     input_body: str | None
+    input_start: float
     unknown_names: tuple
     unknown_kinds: tuple
     guess: np.ndarray
@@ -311,6 +313,7 @@ def loads(text: str, *, file: str = "<string>", overrides: Mapping[str, float] |
     input_name = str(inp["name"])
     _check_identifier(input_name, err, "input", "name")
     input_body = inp.get("body")
+    input_start = _num(inp.get("start", 0.0), err, "input", "start")
 
     unk_raw = data.get("unknowns", {})
     if not isinstance(unk_raw, dict) or not unk_raw:
@@ -497,6 +500,7 @@ def loads(text: str, *, file: str = "<string>", overrides: Mapping[str, float] |
         input_name=input_name,
         input_kind=kinds[input_name],
         input_body=input_body,
+        input_start=float(input_start) * fac[kinds[input_name]],
         unknown_names=tuple(guesses),
         unknown_kinds=tuple(kinds[n] for n in guesses),
         guess=q_si,
