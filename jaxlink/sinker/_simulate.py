@@ -192,8 +192,8 @@ def product_cases(params: SinkerParams, cam: CamTrack, *, f=None, C=None, k_over
 class Maxima(NamedTuple):
     """Peak values of one run, per phase (seed Tables 5.1-5.5).
 
-    `rise_*` over the straight rise `[0, t_rise]`, `desc_*` over the rest `[t_rise, T]`
-    (transition arc and descent); accelerations in m/s^2, velocities in m/s, lags in m.
+    `rise_*` over the straight rise `[0, t_rise]`, `desc_*` over the straight descent
+    `[t_descent, T]` (as the seed's tables; the transition arc is in neither); accelerations in m/s^2, velocities in m/s, lags in m.
     `bounce_depth` (m) = max of `-(y_z - y)` in the rise (0 without a bounce) and
     `bounce_time` (s) = how long the contact is lost in the rise.
     """
@@ -213,7 +213,7 @@ def maxima(sol: SinkerSolution, cam: CamTrack) -> Maxima:
     t = np.asarray(sol.t)
     a, v, lg = np.asarray(sol.a), np.asarray(sol.v), np.asarray(sol.lag)
     rise = t <= float(cam.t_rise)
-    desc = ~rise
+    desc = t >= float(cam.t_descent)
     dt = t[1] - t[0]
 
     def mx(x, m):
