@@ -44,6 +44,9 @@ def kinematics_table(mech: Mechanism, phis, *, omega: float = 1.0, order: int = 
     tr = transfer(mech, sol.q, jnp.asarray(phis, dtype=dtype), jnp.asarray(p), order=order)
     _, _, v, a = time_derivatives(tr, omega)
     conv = np.asarray(sol.converged)
+    # the residual at the returned q (the solver reports the one before its last correction)
+    resid = jax.jit(jax.vmap(lambda qq, ph: jnp.max(jnp.abs(mech.residual(qq, ph, jnp.asarray(p))))))(
+        sol.q, jnp.asarray(phis, dtype=dtype))
     q = np.asarray(sol.q, dtype=float)
     pts = np.asarray(tr.points, dtype=float)
     v = None if v is None else np.where(conv[:, None, None], np.asarray(v, dtype=float), np.nan)
@@ -66,7 +69,7 @@ def kinematics_table(mech: Mechanism, phis, *, omega: float = 1.0, order: int = 
             cols += [f"{pn}_ax_m_s2", f"{pn}_ay_m_s2"]
             data += [a[:, i, 0], a[:, i, 1]]
     cols += ["converged", "residual_m"]
-    data += [conv.astype(float), np.asarray(sol.residual, dtype=float)]
+    data += [conv.astype(float), np.asarray(resid, dtype=float)]
     return KinematicsTable(cols, np.stack(data, axis=1), conv, np.asarray(sol.result), np.asarray(phis),
                            q, pts, v, a, omega, p)
 

@@ -33,7 +33,8 @@ class Solution(NamedTuple):
 
     - `q`: (N, n) unknowns, SI. Where not converged: the last finite iterate (never NaN).
     - `converged`: (N,) bool.
-    - `residual`: (N,) max-norm of the loop residual at `q`, metres.
+    - `residual`: (N,) max-norm of the loop residual before the final Newton correction, metres
+      (the correction squares it, so the residual at `q` is far smaller when converged).
     - `result`: (N,) int8 code, see `RESULTS`.
     - `steps`: (N,) Newton iterations used.
     """
