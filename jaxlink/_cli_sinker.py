@@ -33,7 +33,7 @@ def register(subparsers) -> None:
             "geometry and f; columns geometry, f, t_s, yz_m, y_m, v_m_s, a_m_s2, lag_m, N_N, "
             "contact) and a figure like the seed's graphs 5.1-5.4 (acceleration, velocity, "
             "lift, lag; one curve per f). Exit status 1 if an integration failed."),
-        formatter_class=argparse.ArgumentDefaultsHelpFormatter)
+    )
     p.add_argument("file", metavar="FILE", help=_FILE_HELP)
     p.add_argument("--set", dest="overrides", action="append", metavar="NAME=VALUE",
                    default=[], help=_SET_HELP)
@@ -55,7 +55,7 @@ def register(subparsers) -> None:
             "rise, or its lag runs away past 20 mm), found by batched bisection to "
             "[jamming].tol. Writes JSON {\"R10-45\": {\"static_f\": ..., \"dynamic_f\": ...}, "
             "...}."),
-        formatter_class=argparse.ArgumentDefaultsHelpFormatter)
+    )
     q.add_argument("file", metavar="FILE", help=_FILE_HELP)
     q.add_argument("--set", dest="overrides", action="append", metavar="NAME=VALUE",
                    default=[], help=_SET_HELP)
@@ -122,7 +122,7 @@ def _simulate_cmd(args) -> int:
                 for i_f, f in enumerate(scene.f_values):
                     s = case(i_f, i_g)
                     for row in zip(s.t, s.yz, s.y, s.v, s.a, s.lag, s.N, s.contact):
-                        w.writerow([g.name, repr(f)] + [f"{x:.10g}" for x in row])
+                        w.writerow([g.name, repr(f)] + [f"{x:.15g}" for x in row])
         print(f"wrote {args.csv}")
     if args.plot:
         _plot(args.plot, scene, geoms, cam, case, n_f)

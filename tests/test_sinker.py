@@ -140,7 +140,8 @@ def stiffness_refs():
     for c in (1e4, 3.5e4, 1e5, 1e6, 1e7):
         km = float(sk.damping_from_log_decrement(c, 1.5e-3))
         out[c] = reference_solution(radius=0.02, descent_deg=55, f=0.1, C=c, k_over_m=km,
-                                    ts=np.linspace(0.0, 19.88e-3 / SPEED, N_OUT))
+                                    ts=np.linspace(0.0, 19.88e-3 / SPEED, N_OUT),
+                                    rtol=1e-11, max_step=5e-6)
     return out
 
 

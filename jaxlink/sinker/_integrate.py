@@ -167,7 +167,8 @@ class RadauIIA5(NamedTuple):
         big = jnp.eye(3 * n, dtype=dtype) - h * jnp.einsum("ij,jab->iajb", a, j_stage).reshape(
             3 * n, 3 * n)
         scale = atol + rtol * jnp.abs(u)
-        newton_tol = max(10 * jnp.finfo(dtype).eps / rtol, min(0.03, rtol**0.5))
+        newton_tol = jnp.maximum(10 * jnp.finfo(dtype).eps / rtol,
+                                 jnp.minimum(0.03, jnp.sqrt(rtol)))
 
         def stage_f(z):
             return jax.vmap(lambda c, zi: fn(t + c * h, u + zi))(cs, z)
@@ -293,7 +294,7 @@ def integrate_hybrid(
     - `u0`, `mode0`: initial state and mode (0.0 or 1.0); `t_end`: final time; `ts`: `[n_out]`
       output times in `[0, t_end]`.
     - `solver`: `DormandPrince5()` or `RadauIIA5()` (static).
-    - `rtol`, `atol`: error tolerances (RMS norm), Python floats.
+    - `rtol`, `atol`: error tolerances (RMS norm); may be traced.
     - `h0`: first trial step; `max_step`: step cap (s); `max_steps`: attempted-step budget.
     - `event_samples`: points of the dense output where the guard is checked per step.
     - `monitor_init`, `monitor_update(carry, t, u, dense, h, theta_end, piece) -> carry`: a

@@ -59,8 +59,9 @@ def auto_method(C: float) -> str:
     return "implicit" if float(C) > AUTO_IMPLICIT_ABOVE else "explicit"
 
 
-def _simulate(params: SinkerParams, cam: CamTrack, *, n_out, method, rtol, atol, max_steps,
-              max_step, event_samples, stop_on_jam, lag_limit, h0) -> SinkerSolution:
+def _simulate(params: SinkerParams, cam: CamTrack, knobs, *, n_out, method, max_steps,
+              event_samples, stop_on_jam) -> SinkerSolution:
+    rtol, atol, max_step, lag_limit, h0 = knobs
     solver = SOLVERS[method]
     dtype = cam.t0.dtype
     ts = jnp.linspace(0.0, 1.0, n_out, dtype=dtype) * cam.t_end
@@ -107,28 +108,28 @@ def _simulate(params: SinkerParams, cam: CamTrack, *, n_out, method, rtol, atol,
                           t_jam=t_jam, result=sol.result, stats=sol.stats)
 
 
-_STATIC = ("n_out", "method", "rtol", "atol", "max_steps", "max_step", "event_samples",
-           "stop_on_jam", "lag_limit", "h0")
+_STATIC = ("n_out", "method", "max_steps", "event_samples", "stop_on_jam")
 
 
 @functools.partial(jax.jit, static_argnames=_STATIC)
-def _simulate_jit(params, cam, **kw):
-    return _simulate(params, cam, **kw)
+def _simulate_jit(params, cam, knobs, **kw):
+    return _simulate(params, cam, knobs, **kw)
 
 
 @functools.partial(jax.jit, static_argnames=_STATIC)
-def _simulate_vmap(params, cam, **kw):
-    return jax.vmap(functools.partial(_simulate, **kw))(params, cam)
+def _simulate_vmap(params, cam, knobs, **kw):
+    return jax.vmap(functools.partial(_simulate, **kw), in_axes=(0, 0, None))(params, cam,
+                                                                               knobs)
 
 
 def _kwargs(n_out=1001, method="explicit", rtol=1e-6, atol=1e-10, max_steps=50000,
             max_step=math.inf, event_samples=16, stop_on_jam=False, lag_limit=0.02, h0=1e-7):
+    """Split the keyword arguments into traced knobs and static settings."""
     if method not in SOLVERS:
         raise ValueError(f"method must be one of {sorted(SOLVERS)}, not {method!r}")
-    return dict(n_out=int(n_out), method=method, rtol=float(rtol), atol=float(atol),
-                max_steps=int(max_steps), max_step=float(max_step),
-                event_samples=int(event_samples), stop_on_jam=bool(stop_on_jam),
-                lag_limit=float(lag_limit), h0=float(h0))
+    knobs = tuple(jnp.asarray(float(x)) for x in (rtol, atol, max_step, lag_limit, h0))
+    return knobs, dict(n_out=int(n_out), method=method, max_steps=int(max_steps),
+                       event_samples=int(event_samples), stop_on_jam=bool(stop_on_jam))
 
 
 def simulate(params: SinkerParams, cam: CamTrack, **kwargs) -> SinkerSolution:
@@ -145,13 +146,15 @@ def simulate(params: SinkerParams, cam: CamTrack, **kwargs) -> SinkerSolution:
 
     **Returns:** a `SinkerSolution`.
     """
-    return _simulate_jit(params, cam, **_kwargs(**kwargs))
+    knobs, static = _kwargs(**kwargs)
+    return _simulate_jit(params, cam, knobs, **static)
 
 
 def simulate_batch(params: SinkerParams, cam: CamTrack, **kwargs) -> SinkerSolution:
     """`simulate` over stacked cases in one jitted `vmap`: every leaf of `params` and `cam`
     has the same leading batch axis (see `product_cases`). Same keyword arguments."""
-    return _simulate_vmap(params, cam, **_kwargs(**kwargs))
+    knobs, static = _kwargs(**kwargs)
+    return _simulate_vmap(params, cam, knobs, **static)
 
 
 def product_cases(params: SinkerParams, cam: CamTrack, *, f=None, C=None, k_over_m=None):
