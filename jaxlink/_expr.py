@@ -283,7 +283,10 @@ def parse_term(text: str) -> Term:
                 raise _SyntaxError(f"unexpected '{tok.text}' after the angle", tok.col)
             if _contains_vec(right):
                 raise _SyntaxError("the angle must be a scalar expression", at.col + 1)
-            return Term(1, left, right, None, None, text)
+            sign = 1
+            while isinstance(left, Neg):  # "-c @ phi": the sign belongs to the vector
+                sign, left = -sign, left.arg
+            return Term(sign, left, right, None, None, text)
         if p.peek().kind != "end":
             tok = p.peek()
             raise _SyntaxError(f"unexpected '{tok.text}'", tok.col)
@@ -341,7 +344,8 @@ def _dim_name(d: Dim | None) -> str:
         return "a bare number"
     if d in DIM_KINDS:
         return "a " + DIM_KINDS[d] if DIM_KINDS[d] != "angle" else "an angle"
-    return f"length^{d[0]}·angle^{d[1]}"
+    parts = [f"{n}^{p}" for n, p in (("length", d[0]), ("angle", d[1])) if p != 0]
+    return "·".join(parts)
 
 
 class UnitError(Exception):

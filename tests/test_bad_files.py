@@ -1,0 +1,91 @@
+"""Each kind of bad mechanism file is refused with a message naming the file, line, key and reason;
+the command line exits non-zero without a traceback."""
+
+import subprocess
+import sys
+
+import pytest
+
+import jaxlink as jl
+
+GOOD = """\
+[mechanism]
+name = "t"
+length_unit = "mm"
+angle_unit = "deg"
+
+[parameters]
+a = 20.0
+b = 60.0
+c = 45.0
+d = 55.0
+
+[input]
+name = "phi2"
+
+[unknowns]
+phi3 = 30.0
+phi4 = 80.0
+
+[loops]
+main = ["a @ phi2", "b @ phi3", "-c @ phi4", "-d @ 0"]
+"""
+
+CASES = {
+    # name: (replace old -> new, words the message must contain, line)
+    "unknown_name": (("-d @ 0", "-dd @ 0"), ["unknown name 'dd'", "did you mean 'd'", "loops.main[3]"], 20),
+    "param_and_unknown": (("phi4 = 80.0", "phi4 = 80.0\na = 1.0"), ["'a' is both a parameter and an unknown"], 18),
+    "count": (("phi4 = 80.0", "phi4 = 80.0\nphi5 = 1.0"), ["2 scalar equations but there are 3 unknowns"], 15),
+    "nonfinite": (("b = 60.0", "b = nan"), ["'b' = nan is not finite", "parameters.b"], 8),
+    "negative_length": (("c = 45.0", "c = -45.0"), ["length 'c' = -45.0 is negative"], 9),
+    "empty_loop": (('main = ["a @ phi2", "b @ phi3", "-c @ phi4", "-d @ 0"]', 'main = []'),
+                   ["loops.main is empty"], 20),
+    "bad_unit": (('length_unit = "mm"', 'length_unit = "inch"'), ["bad length unit 'inch'"], 3),
+    "syntax": (('"b @ phi3"', '"b @ * phi3"'), ["syntax error at column 5", "unexpected '*'", "loops.main[1]"], 20),
+    "mixed_units": (('"b @ phi3"', '"b @ phi3 + a"'), ["'a' is used as an angle in \"b @ phi3 + a\" but as a length in \"a @ phi2\""], 20),
+    "area_as_length": (('"b @ phi3"', '"c * c @ phi3"'),
+                       ["inconsistent units", "it is length^2 where a length is expected"], 20),
+}
+
+
+def _bad(case):
+    (old, new), _, _ = CASES[case]
+    assert old in GOOD
+    return GOOD.replace(old, new, 1)
+
+
+def test_good_file_loads():
+    mech = jl.loads(GOOD, file="good.toml")
+    assert mech.unknown_names == ("phi3", "phi4")
+
+
+@pytest.mark.parametrize("case", sorted(CASES))
+def test_bad_file_message(case, tmp_path):
+    path = tmp_path / f"{case}.toml"
+    path.write_text(_bad(case))
+    with pytest.raises(jl.MechanismError) as info:
+        jl.load(str(path))
+    msg = str(info.value)
+    _, words, line = CASES[case]
+    assert msg.startswith(f"{path}:{line}"), msg
+    for w in words:
+        assert w in msg, (w, msg)
+
+
+@pytest.mark.parametrize("case", ["unknown_name", "syntax", "count"])
+def test_cli_exits_nonzero_without_traceback(case, tmp_path):
+    path = tmp_path / f"{case}.toml"
+    path.write_text(_bad(case))
+    for cmd in (["check", str(path)], ["kinematics", str(path)]):
+        r = subprocess.run([sys.executable, "-m", "jaxlink.cli", *cmd], capture_output=True, text=True)
+        assert r.returncode == 2, r.stderr
+        assert "Traceback" not in r.stderr
+        assert r.stderr.startswith(f"jaxlink {cmd[0]}: error: {path}:"), r.stderr
+
+
+def test_cli_unknown_scene_and_bad_set(tmp_path):
+    r = subprocess.run([sys.executable, "-m", "jaxlink.cli", "check", "no-such-scene"], capture_output=True, text=True)
+    assert r.returncode == 2 and "neither a file nor a built-in scene" in r.stderr and "Traceback" not in r.stderr
+    r = subprocess.run([sys.executable, "-m", "jaxlink.cli", "kinematics", "four-bar", "--set", "zz=1"],
+                       capture_output=True, text=True)
+    assert r.returncode == 2 and "--set zz: no such parameter" in r.stderr
