@@ -248,13 +248,21 @@ class _State(NamedTuple):
     f_valid: jnp.ndarray
     h: jnp.ndarray
     mode: jnp.ndarray
-    out: jnp.ndarray
-    out_mode: jnp.ndarray
-    i_out: jnp.ndarray
     done: jnp.ndarray
     result: jnp.ndarray
     stats: Stats
     monitor: tuple
+
+
+class _Record(NamedTuple):
+    """Accepted steps (for dense output after the loop); row `size` is a dump slot."""
+
+    t: jnp.ndarray  # [size + 1] step start (inf = unused)
+    h: jnp.ndarray
+    theta_end: jnp.ndarray
+    u: jnp.ndarray  # [size + 1, n]
+    dense: jnp.ndarray  # [size + 1, n, 4]
+    mode: jnp.ndarray
 
 
 def dense_eval(dense, theta):
@@ -277,11 +285,12 @@ def integrate_hybrid(
     atol: float = 1e-10,
     h0: float = 1e-7,
     max_step: float = math.inf,
-    max_steps: int = 20000,
+    max_steps: int = 10000,
     event_samples: int = 16,
     monitor_init: tuple = (),
     monitor_update: Callable | None = None,
     stop_when: Callable | None = None,
+    axis_name=None,
 ) -> Solution:
     """Integrate a hybrid ODE from `t = 0` to `t_end`, saving the state at times `ts`.
 
@@ -292,44 +301,51 @@ def integrate_hybrid(
     - `piece_of(t) -> piece`: the piece of the input containing `t`.
     - `stops`: `[n_stops]` times the steps must land on (piece starts; `inf` = padding).
     - `u0`, `mode0`: initial state and mode (0.0 or 1.0); `t_end`: final time; `ts`: `[n_out]`
-      output times in `[0, t_end]`.
+      output times in `[0, t_end]` (evaluated after the loop from the recorded steps' dense
+      output; `n_out <= 2` records no steps).
     - `solver`: `DormandPrince5()` or `RadauIIA5()` (static).
     - `rtol`, `atol`: error tolerances (RMS norm); may be traced.
-    - `h0`: first trial step; `max_step`: step cap (s); `max_steps`: attempted-step budget.
+    - `h0`: first trial step; `max_step`: step cap (s); `max_steps`: attempted-step budget
+      (static; also the size of the step record).
     - `event_samples`: points of the dense output where the guard is checked per step.
     - `monitor_init`, `monitor_update(carry, t, u, dense, h, theta_end, piece) -> carry`: a
       running quantity over each accepted step `u(t + theta h) = u + dense @ [theta..theta^4]`,
       `0 < theta <= theta_end` (e.g. jamming); `stop_when(carry) -> bool` ends the run early
       with `RESULTS.stopped`.
+    - `axis_name`: when called under `jax.vmap(..., axis_name=...)`, pass that name: the loop
+      then runs while *any* batch member is unfinished (a `psum`), finished members idle, and
+      the step record is updated in place instead of being copied by the batched loop's
+      `select` on every iteration (which makes large batches many times faster).
 
     **Returns:** a `Solution`.
     """
     u0 = jnp.asarray(u0)
     dtype = u0.dtype
+    n = u0.shape[0]
     ts = jnp.asarray(ts, dtype=dtype)
     t_end = jnp.asarray(t_end, dtype=dtype)
     stops = jnp.asarray(stops, dtype=dtype)
-    n_out = ts.shape[0]
     expo = -1.0 / (solver.error_order + 1)
     thetas = jnp.arange(1, event_samples + 1, dtype=dtype) / event_samples
-    out = jnp.full((n_out, u0.shape[0]), jnp.nan, dtype=dtype)
-    out_mode = jnp.full((n_out,), jnp.nan, dtype=dtype)
-    # outputs at t = 0
-    at0 = ts <= 0
-    out = jnp.where(at0[:, None], u0[None, :], out)
-    out_mode = jnp.where(at0, mode0, out_mode)
-    i_out0 = jnp.sum(at0)
+    size = max_steps if ts.shape[0] > 2 else 1
+    rec = _Record(t=jnp.full((size + 1,), jnp.inf, dtype), h=jnp.ones((size + 1,), dtype),
+                  theta_end=jnp.ones((size + 1,), dtype), u=jnp.zeros((size + 1, n), dtype),
+                  dense=jnp.zeros((size + 1, n, 4), dtype), mode=jnp.zeros((size + 1,), dtype))
     zero = jnp.asarray(0)
     state = _State(
         t=jnp.asarray(0.0, dtype), u=u0, f=jnp.zeros_like(u0), f_valid=jnp.asarray(False),
-        h=jnp.asarray(h0, dtype), mode=jnp.asarray(mode0, dtype), out=out, out_mode=out_mode,
-        i_out=i_out0, done=jnp.asarray(False), result=jnp.asarray(RESULTS.successful),
-        stats=Stats(zero, zero, zero, zero, zero), monitor=monitor_init)
+        h=jnp.asarray(h0, dtype), mode=jnp.asarray(mode0, dtype), done=jnp.asarray(False),
+        result=jnp.asarray(RESULTS.successful), stats=Stats(zero, zero, zero, zero, zero),
+        monitor=monitor_init)
 
-    def cond(s):
-        return ~s.done
+    def cond(carry):
+        s, _ = carry
+        if axis_name is None:
+            return ~s.done
+        return lax.psum(jnp.where(s.done, 0, 1), axis_name) > 0
 
-    def body(s: _State) -> _State:
+    def body(carry):
+        s, rec = carry
         t, u, mode = s.t, s.u, s.mode
         later = jnp.where(stops > t * (1 + 4 * jnp.finfo(dtype).eps) + 1e-300, stops, jnp.inf)
         next_stop = jnp.minimum(jnp.min(later), t_end)
@@ -349,14 +365,13 @@ def integrate_hybrid(
         finite = jnp.all(jnp.isfinite(r.u_new)) & jnp.isfinite(err_norm)
         accept = r.ok & finite & (err_norm <= 1.0)
 
-        # --- events: guard on the dense output
+        # --- events: the guard on the step's dense output
         sign = jnp.where(mode > 0.5, 1.0, -1.0)
 
         def g_at(theta):
             return sign * guard(t + theta * h_try, u + dense_eval(r.dense, theta), piece)
 
-        g_s = jax.vmap(g_at)(thetas)
-        bad = g_s < 0
+        bad = jax.vmap(g_at)(thetas) < 0
         any_bad = jnp.any(bad)
         j = jnp.argmax(bad)
         lo0 = jnp.where(j > 0, thetas[jnp.maximum(j - 1, 0)], 0.0)
@@ -375,22 +390,12 @@ def integrate_hybrid(
                           jnp.where(clamped, next_stop, t + h_try))
         u_new = jnp.where(event, u + dense_eval(r.dense, theta_ev), r.u_new)
 
-        # --- outputs in (t, t_new]
-        def out_cond(c):
-            i, _, _ = c
-            return (i < n_out) & (ts[jnp.minimum(i, n_out - 1)] <= t_new)
-
-        def out_body(c):
-            i, o, om = c
-            theta = jnp.clip((ts[i] - t) / h_try, 0.0, theta_end)
-            o = o.at[i].set(u + dense_eval(r.dense, theta))
-            om = om.at[i].set(mode)
-            return i + 1, o, om
-
-        i_out, out, out_mode = lax.cond(
-            accept,
-            lambda: lax.while_loop(out_cond, out_body, (s.i_out, s.out, s.out_mode)),
-            lambda: (s.i_out, s.out, s.out_mode))
+        # --- record the accepted step (in place; idle or rejected -> dump slot)
+        live = accept & ~s.done
+        i = jnp.where(live, s.stats.num_steps, size)
+        rec = _Record(t=rec.t.at[i].set(jnp.where(live, t, jnp.inf)), h=rec.h.at[i].set(h_try),
+                      theta_end=rec.theta_end.at[i].set(theta_end), u=rec.u.at[i].set(u),
+                      dense=rec.dense.at[i].set(r.dense), mode=rec.mode.at[i].set(mode))
 
         # --- step size
         fac = jnp.where(err_norm == 0, 10.0, 0.9 * err_norm**expo)
@@ -427,17 +432,34 @@ def integrate_hybrid(
                                                jnp.where(too_many, RESULTS.max_steps_reached,
                                                          RESULTS.successful))))
         done = finished | stopped | too_many | too_small
-        return _State(
+        new = _State(
             t=t_acc,
             u=jnp.where(accept, u_new, u),
             f=r.f_new,
             f_valid=accept & solver.fsal & ~event & ~clamped,
             h=h_next,
             mode=jnp.where(accept, mode_new, mode),
-            out=out, out_mode=out_mode, i_out=i_out,
             done=done, result=result, stats=stats, monitor=monitor)
+        # a finished member of a batch idles (only reachable with axis_name)
+        new = jax.tree.map(lambda old, nw: jnp.where(s.done, old, nw), s, new)
+        return new, rec
 
-    final = lax.while_loop(cond, body, state)
-    return Solution(ts=ts, us=final.out, modes=final.out_mode, t_final=final.t,
-                    u_final=final.u, result=final.result, stats=final.stats,
-                    monitor=final.monitor)
+    final, rec = lax.while_loop(cond, body, (state, rec))
+
+    # --- dense output at ts from the record
+    if size > 1:
+        k = jnp.clip(jnp.searchsorted(rec.t[:size], ts, side="right") - 1, 0, size - 1)
+        theta = jnp.clip((ts - rec.t[k]) / rec.h[k], 0.0, rec.theta_end[k])
+        us = rec.u[k] + jax.vmap(dense_eval)(rec.dense[k], theta)
+        modes = rec.mode[k]
+    else:
+        us = jnp.where((ts >= t_end)[:, None], final.u[None, :], u0[None, :])
+        modes = jnp.full(ts.shape, jnp.nan, dtype)
+    beyond = ts > final.t
+    us = jnp.where(beyond[:, None], jnp.nan, us)
+    us = jnp.where((ts == final.t)[:, None], final.u[None, :], us)
+    modes = jnp.where(beyond, jnp.nan, jnp.where(ts == final.t, final.mode, modes))
+    if size <= 1:
+        modes = jnp.where(ts == 0, jnp.asarray(mode0, dtype), modes)
+    return Solution(ts=ts, us=us, modes=modes, t_final=final.t, u_final=final.u,
+                    result=final.result, stats=final.stats, monitor=final.monitor)

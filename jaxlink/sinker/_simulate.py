@@ -60,7 +60,7 @@ def auto_method(C: float) -> str:
 
 
 def _simulate(params: SinkerParams, cam: CamTrack, knobs, *, n_out, method, max_steps,
-              event_samples, stop_on_jam) -> SinkerSolution:
+              event_samples, stop_on_jam, axis_name=None) -> SinkerSolution:
     rtol, atol, max_step, lag_limit, h0 = knobs
     solver = SOLVERS[method]
     dtype = cam.t0.dtype
@@ -94,7 +94,7 @@ def _simulate(params: SinkerParams, cam: CamTrack, knobs, *, n_out, method, max_
         event_samples=event_samples,
         monitor_init=(jnp.asarray(False), jnp.asarray(jnp.inf, dtype)),
         monitor_update=monitor_update,
-        stop_when=(lambda c: c[0]) if stop_on_jam else None)
+        stop_when=(lambda c: c[0]) if stop_on_jam else None, axis_name=axis_name)
 
     def point(t, u, mode):
         k = cam_segment(cam, t)
@@ -118,11 +118,11 @@ def _simulate_jit(params, cam, knobs, **kw):
 
 @functools.partial(jax.jit, static_argnames=_STATIC)
 def _simulate_vmap(params, cam, knobs, **kw):
-    return jax.vmap(functools.partial(_simulate, **kw), in_axes=(0, 0, None))(params, cam,
-                                                                               knobs)
+    fn = functools.partial(_simulate, axis_name="cases", **kw)
+    return jax.vmap(fn, in_axes=(0, 0, None), axis_name="cases")(params, cam, knobs)
 
 
-def _kwargs(n_out=1001, method="explicit", rtol=1e-6, atol=1e-10, max_steps=50000,
+def _kwargs(n_out=1001, method="explicit", rtol=1e-6, atol=1e-10, max_steps=10000,
             max_step=math.inf, event_samples=16, stop_on_jam=False, lag_limit=0.02, h0=1e-7):
     """Split the keyword arguments into traced knobs and static settings."""
     if method not in SOLVERS:
@@ -141,7 +141,8 @@ def simulate(params: SinkerParams, cam: CamTrack, **kwargs) -> SinkerSolution:
     - `n_out`: number of equally spaced output times on `[0, T]` (default 1001).
     - `method`: `"explicit"` (Dormand-Prince 5(4)) or `"implicit"` (Radau IIA 5).
     - `rtol`, `atol`: tolerances (default 1e-6, 1e-10; state in m and m/s).
-    - `max_steps` (50000), `max_step` (s, default inf), `event_samples` (16), `h0` (1e-7 s).
+    - `max_steps` (10000; also the size of the step record), `max_step` (s, default inf),
+      `event_samples` (16), `h0` (1e-7 s).
     - `stop_on_jam`: end the run when a jam is detected; `lag_limit`: runaway lag (m, 0.02).
 
     **Returns:** a `SinkerSolution`.
