@@ -1,0 +1,339 @@
+"""Kinetostatics: joint reactions and the driving torque from the solved kinematics (seed 000 §6.1,
+the d'Alembert "release" method, A_S F_S = Q_S).
+
+Every moving body b is released from its joints. With its centroid c_b, mass m_b, inertia J_b about
+the centroid and orientation θ_b, d'Alembert's principle gives three equations per body (forces, and
+moments about a reference point r_b of the body — its centroid, or its first joint if massless):
+
+    Σ_j F_bj  +  Σ F_ext  +  m_b g − m_b c̈_b                                         = 0
+    Σ_j (P_j − r_b) × F_bj + Σ M_bj + Σ (P − r_b) × F_ext + Σ T_ext
+        + (c_b − r_b) × (m_b g − m_b c̈_b) − J_b θ̈_b                                  = 0
+
+with, per joint j between bodies (A, B), the unknown force F_j on B from A (−F_j on A): two
+components (F_x, F_y) for a revolute joint at P_j; for a prismatic joint, a normal force N along
+the left normal n = (−sin a, cos a) of its axis a, at P_j, and a moment M. The drive torque τ acts
+on the input body (from the ground). Unknowns F_S = (F_1x, F_1y, …, τ) number 2·joints + 1, equations
+3·bodies; they agree when Grübler's mobility is 1 (checked when the file is read). The accelerations
+come from the transfer functions: c̈ = c'' ω² + c' α (c' = dc/dφ, c'' = d²c/dφ²; see
+`_kinematics`), likewise θ̈. Moment rows and moment unknowns are scaled by the mechanism's length
+scale so that A_S is O(1) in any unit.
+
+Power balance (a check, `tests/test_kinetostatics.py`): τ ω + Σ P_loads = d(T + V_gravity + V_springs)/dt.
+
+The linear solve is unrolled for n ≤ 8 (`_linalg.solve_small`) and `jnp.linalg.solve` otherwise;
+a position whose A_S is singular (σ_min/σ_max below `singular_ratio`: a toggle position, or joints
+that over-constrain the motion) gets `KRESULTS.singular` and zeros, never an exception, so that
+`vmap` over positions and designs never fails as a whole.
+"""
+
+from __future__ import annotations
+
+import functools
+from typing import NamedTuple
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from . import _bodies, _expr
+from ._assemble import solve
+from ._expr import ANGLE
+from ._kinematics import transfer_one
+from ._linalg import UNROLL_MAX, solve_small
+from ._mechanism import Mechanism
+
+
+class KRESULTS:
+    """Result codes of a kinetostatic solve (int8)."""
+
+    ok = 0
+    singular = 1
+    not_assembled = 2
+    nonfinite = 3
+
+    messages = {
+        0: "ok",
+        1: "singular system: a toggle/dead-centre position, or joints that over-constrain the motion; the "
+           "reactions are not determined here",
+        2: "the kinematics did not converge at this position (see `jaxlink kinematics`)",
+        3: "non-finite values: check masses, parameters and expressions",
+    }
+    names = {0: "ok", 1: "singular", 2: "not_assembled", 3: "nonfinite"}
+
+
+class Reactions(NamedTuple):
+    """Joint reactions and drive torque (leading axes: designs, positions as the inputs).
+
+    **Fields:**
+
+    - `force`: (…, J, 2) N, the force on each joint's second body from its first (x, y).
+    - `moment`: (…, J) N·m, the reaction moment of each prismatic joint (0 for revolute joints).
+    - `torque`: (…,) N·m, the drive torque on the input body from the ground (counter-clockwise +).
+    - `result`: (…,) int8 code (`KRESULTS`); where not ok, the values are 0.
+    - `ratio`: (…,) σ_min/σ_max (or min pivot/max entry) of the scaled system, a singularity indicator.
+    """
+
+    force: jax.Array
+    moment: jax.Array
+    torque: jax.Array
+    result: jax.Array
+    ratio: jax.Array
+
+
+# ----------------------------------------------------------------------------- geometry
+
+
+def vector_sum(mech: Mechanism, terms, env, dtype):
+    """A vector sum (tuple of `Term`s) evaluated in SI: array (2,)."""
+    x, y = 0.0, 0.0
+    for t in terms:
+        tx, ty = mech._term_vector(t, env)
+        x, y = x + tx, y + ty
+    return jnp.stack([jnp.asarray(x, dtype=dtype), jnp.asarray(y, dtype=dtype)])
+
+
+def angle_value(mech: Mechanism, node, env, dtype):
+    return jnp.asarray(_expr.evaluate(node, env, mech.kinds, mech.units, ANGLE), dtype=dtype)
+
+
+def motion(mech: Mechanism, mdl: _bodies.Model, q, phi, p):
+    """Centroids (nb, 2) and angles (nb,) of the bodies (0 where not declared)."""
+    dtype = jnp.result_type(q)
+    env = mech._env(q, phi, p)
+    zero2 = jnp.zeros((2,), dtype)
+    zero = jnp.zeros((), dtype)
+    c = [vector_sum(mech, b.centroid, env, dtype) if b.centroid is not None else zero2 for b in mdl.bodies]
+    a = [angle_value(mech, b.angle, env, dtype) if b.angle is not None else zero for b in mdl.bodies]
+    return jnp.stack(c), jnp.stack(a)
+
+
+def _geometry(mech: Mechanism, mdl: _bodies.Model, q, phi, p):
+    """Joint points (nj, 2) and axes (nj,), force points (nf, 2), spring ends (ns, 2, 2)."""
+    dtype = jnp.result_type(q)
+    env = mech._env(q, phi, p)
+    pts = jnp.stack([vector_sum(mech, j.at, env, dtype) for j in mdl.joints])
+    axes = jnp.stack([angle_value(mech, j.axis, env, dtype) if j.axis is not None else jnp.zeros((), dtype)
+                      for j in mdl.joints])
+    fpts = (jnp.stack([vector_sum(mech, f.at, env, dtype) for f in mdl.forces]) if mdl.forces
+            else jnp.zeros((0, 2), dtype))
+    spts = (jnp.stack([jnp.stack([vector_sum(mech, s.start, env, dtype), vector_sum(mech, s.end, env, dtype)])
+                       for s in mdl.springs]) if mdl.springs else jnp.zeros((0, 2, 2), dtype))
+    return pts, axes, fpts, spts
+
+
+def _d1_d2(f, x, v, w):
+    """(f(x), d/ds f(x + s v + s² w/2), d²/ds² …) at s = 0; x, v, w tuples of arrays."""
+
+    def curve(s):
+        return f(*[xi + s * vi + 0.5 * s * s * wi for xi, vi, wi in zip(x, v, w)])
+
+    def first(s):
+        return jax.jvp(curve, (s,), (jnp.ones_like(s),))
+
+    s0 = jnp.zeros((), dtype=jnp.result_type(x[0]))
+    (val, d1), (_, d2) = jax.jvp(first, (s0,), (jnp.ones_like(s0),))
+    return val, d1, d2
+
+
+def body_kinematics(mech: Mechanism, mdl: _bodies.Model, q, phi, p):
+    """Centroids and angles with their first and second derivatives with respect to the input:
+    `((c, c', c''), (θ, θ', θ''))`, shapes (nb, 2) and (nb,)."""
+    t = transfer_one(mech, q, phi, p, 2)
+    one = jnp.ones_like(phi)
+    (c, a), (c1, a1), (c2, a2) = _d1_d2(lambda qq, ph: motion(mech, mdl, qq, ph, p), (q, phi), (t.mu, one),
+                                        (t.nu, jnp.zeros_like(phi)))
+    return (c, c1, c2), (a, a1, a2)
+
+
+def _cross(r, f):
+    return r[0] * f[1] - r[1] * f[0]
+
+
+# ----------------------------------------------------------------------------- the system
+
+
+def system(mech: Mechanism, mdl: _bodies.Model, q, phi, p, omega, alpha=0.0):
+    """The scaled kinetostatic system of one position: `(A, Q, L, axes)` with A (n, n), Q (n,), the
+    length scale L by which moment rows were divided and moment unknowns multiplied (the unknowns
+    are (F_1x, F_1y, …, N_j, M_j/L, …, τ/L)), and the joint axes (nj,) (0 for revolute joints)."""
+    dtype = jnp.result_type(q)
+    (c, c1, c2), (th, th1, th2) = body_kinematics(mech, mdl, q, phi, p)
+    acc_c = c2 * omega**2 + c1 * alpha
+    acc_th = th2 * omega**2 + th1 * alpha
+    pts, axes, fpts, spts = _geometry(mech, mdl, q, phi, p)
+    L = mech.length_scale(p)
+    nb, nj = len(mdl.bodies), len(mdl.joints)
+    n = 2 * nj + 1
+    zero = jnp.zeros((), dtype)
+    A = [[zero] * n for _ in range(3 * nb)]
+    Q = [zero] * (3 * nb)
+    g = jnp.asarray(mdl.gravity, dtype)
+
+    # reference point of each body: its centroid if it has one, else its first joint
+    ref = []
+    for i, b in enumerate(mdl.bodies):
+        if b.centroid is not None:
+            ref.append(c[i])
+        else:
+            first = next(k for k, j in enumerate(mdl.joints) if i in (j.a, j.b))
+            ref.append(pts[first])
+
+    for k, j in enumerate(mdl.joints):
+        P = pts[k]
+        if j.kind == "revolute":
+            for body, sign in ((j.b, 1.0), (j.a, -1.0)):
+                if body < 0:
+                    continue
+                r = P - ref[body]
+                A[3 * body][2 * k] = A[3 * body][2 * k] + sign
+                A[3 * body + 1][2 * k + 1] = A[3 * body + 1][2 * k + 1] + sign
+                # moment of (Fx, 0) and (0, Fy) at r: -r_y Fx + r_x Fy
+                A[3 * body + 2][2 * k] = A[3 * body + 2][2 * k] - sign * r[1] / L
+                A[3 * body + 2][2 * k + 1] = A[3 * body + 2][2 * k + 1] + sign * r[0] / L
+        else:
+            nx, ny = -jnp.sin(axes[k]), jnp.cos(axes[k])
+            for body, sign in ((j.b, 1.0), (j.a, -1.0)):
+                if body < 0:
+                    continue
+                r = P - ref[body]
+                A[3 * body][2 * k] = A[3 * body][2 * k] + sign * nx
+                A[3 * body + 1][2 * k] = A[3 * body + 1][2 * k] + sign * ny
+                A[3 * body + 2][2 * k] = A[3 * body + 2][2 * k] + sign * (r[0] * ny - r[1] * nx) / L
+                A[3 * body + 2][2 * k + 1] = A[3 * body + 2][2 * k + 1] + sign  # M/L
+    A[3 * mdl.input_body + 2][n - 1] = A[3 * mdl.input_body + 2][n - 1] + 1.0  # τ/L
+
+    # right-hand side: Q = m c̈ − m g − F_ext;  J θ̈ − (c − r) × (m g − m c̈) − Σ (P − r) × F_ext − T_ext
+    ext_f = [jnp.zeros((2,), dtype) for _ in range(nb)]
+    ext_m = [zero for _ in range(nb)]
+
+    def apply(body, point, f):
+        if body < 0:
+            return
+        ext_f[body] = ext_f[body] + f
+        ext_m[body] = ext_m[body] + _cross(point - ref[body], f)
+
+    for k, fl in enumerate(mdl.forces):
+        apply(fl.body, fpts[k], jnp.asarray(fl.force, dtype))
+    for tl in mdl.torques:
+        if tl.body >= 0:
+            ext_m[tl.body] = ext_m[tl.body] + tl.torque
+    for k, s in enumerate(mdl.springs):
+        start, end = spts[k, 0], spts[k, 1]
+        d = end - start
+        length = _safe_norm(d)
+        u = d / length
+        tension = s.preload + s.stiffness * (length - s.length)
+        apply(s.a, start, tension * u)  # pulls the first end towards the second
+        apply(s.b, end, -tension * u)
+    for i, b in enumerate(mdl.bodies):
+        gravity_minus_inertia = b.mass * g - b.mass * acc_c[i]
+        Q[3 * i] = -ext_f[i][0] - gravity_minus_inertia[0]
+        Q[3 * i + 1] = -ext_f[i][1] - gravity_minus_inertia[1]
+        Q[3 * i + 2] = (b.inertia * acc_th[i] - _cross(c[i] - ref[i], gravity_minus_inertia) - ext_m[i]) / L
+    A = jnp.stack([jnp.stack([jnp.asarray(x, dtype) for x in row]) for row in A])
+    Q = jnp.stack([jnp.asarray(x, dtype) for x in Q])
+    return A, Q, L, axes
+
+
+def _safe_norm(d):
+    sq = jnp.sum(d * d)
+    ok = sq > 0
+    return jnp.where(ok, jnp.sqrt(jnp.where(ok, sq, 1.0)), 0.0)
+
+
+def default_singular_ratio(dtype) -> float:
+    return float(max(1e-10, 1e3 * np.finfo(dtype).eps))
+
+
+def reactions_one(mech: Mechanism, mdl: _bodies.Model, q, phi, p, omega, alpha=0.0, *,
+                  singular_ratio: float | None = None) -> Reactions:
+    """Reactions and drive torque at one position (see the module docstring)."""
+    dtype = jnp.result_type(q)
+    A, Q, L, axes = system(mech, mdl, q, phi, p, omega, alpha)
+    n = A.shape[0]
+    if n <= UNROLL_MAX:
+        x, ratio = solve_small(A, Q)
+    else:
+        s = jnp.linalg.svd(A, compute_uv=False)
+        ratio = s[-1] / jnp.maximum(s[0], jnp.finfo(dtype).tiny)
+        x = jnp.linalg.solve(A, Q)
+    thr = default_singular_ratio(dtype) if singular_ratio is None else singular_ratio
+    finite = jnp.all(jnp.isfinite(x))
+    code = jnp.where(ratio < thr, KRESULTS.singular, jnp.where(finite, KRESULTS.ok, KRESULTS.nonfinite))
+    ok = code == KRESULTS.ok
+    x = jnp.where(ok, x, 0.0)
+    nj = len(mdl.joints)
+    f = x[: 2 * nj].reshape(nj, 2)
+    moments = []
+    forces = []
+    for k, j in enumerate(mdl.joints):
+        if j.kind == "revolute":
+            forces.append(f[k])
+            moments.append(jnp.zeros((), dtype))
+        else:
+            forces.append(f[k, 0] * jnp.stack([-jnp.sin(axes[k]), jnp.cos(axes[k])]))
+            moments.append(f[k, 1] * L)
+    return Reactions(jnp.stack(forces), jnp.stack(moments), x[-1] * L, code.astype(jnp.int8), ratio)
+
+
+# ----------------------------------------------------------------------------- batched entry points
+
+
+def reactions(mech: Mechanism, q, phis, p=None, *, omega, alpha=0.0, converged=None,
+              singular_ratio: float | None = None) -> Reactions:
+    """Reactions and drive torque at solved positions, jitted and `vmap`ped.
+
+    **Arguments:**
+
+    - `mech`: a mechanism whose file has `[bodies]` and `[joints]` (validated by `_bodies.model`).
+    - `q`: (N, n) solved unknowns, or (B, N, n) for a batch of designs.
+    - `phis`: (N,) inputs (rad), or (B, N).
+    - `p`: (P,) parameters SI (default: the file's), or (B, P).
+    - `omega`, `alpha` (keyword-only): input speed (rad/s) and acceleration (rad/s²); traced.
+    - `converged`: optional (…, N) bool from the position solve; positions that did not converge get
+      `KRESULTS.not_assembled` and zeros.
+    - `singular_ratio`: σ_min/σ_max below which the system counts as singular (static).
+
+    **Returns:** `Reactions` with leading axes (N,) or (B, N).
+    """
+    mdl = _bodies.model(mech)
+    p = jnp.asarray(mech.parameters if p is None else p)
+    if not jnp.issubdtype(p.dtype, jnp.floating):
+        p = p.astype(jnp.result_type(float))
+    q = jnp.asarray(q, dtype=p.dtype)
+    phis = jnp.asarray(phis, dtype=p.dtype)
+    omega = jnp.asarray(omega, dtype=p.dtype)
+    alpha = jnp.asarray(alpha, dtype=p.dtype)
+    out = _jitted(mech, mdl, p.ndim == 2, phis.ndim == 2, singular_ratio)(q, phis, p, omega, alpha)
+    if converged is not None:
+        conv = jnp.asarray(converged, dtype=bool)
+        out = Reactions(
+            jnp.where(conv[..., None, None], out.force, 0.0),
+            jnp.where(conv[..., None], out.moment, 0.0),
+            jnp.where(conv, out.torque, 0.0),
+            jnp.where(conv, out.result, jnp.int8(KRESULTS.not_assembled)).astype(jnp.int8),
+            out.ratio,
+        )
+    return out
+
+
+@functools.lru_cache(maxsize=64)
+def _jitted(mech, mdl, batch_p, batch_phi, singular_ratio):
+    def one(q, phi, p, omega, alpha):
+        return reactions_one(mech, mdl, q, phi, p, omega, alpha, singular_ratio=singular_ratio)
+
+    f = jax.vmap(one, in_axes=(0, 0, None, None, None))
+    if batch_p:
+        f = jax.vmap(f, in_axes=(0, 0 if batch_phi else None, 0, None, None))
+    return jax.jit(f)
+
+
+def solve_reactions(mech: Mechanism, phis, p=None, *, omega, alpha=0.0, singular_ratio: float | None = None):
+    """Solve the positions (`_assemble.solve`) and then the reactions: returns `(Solution, Reactions)`.
+
+    `p` (P,) or (B, P) as in `solve`; `phis` (N,) in rad; `omega` rad/s."""
+    _bodies.model(mech)  # validate before the (longer) position solve
+    sol = solve(mech, phis, p)
+    pp = mech.parameters if p is None else p
+    return sol, reactions(mech, sol.q, phis, pp, omega=omega, alpha=alpha, converged=sol.converged,
+                          singular_ratio=singular_ratio)
