@@ -30,7 +30,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ._linalg import solve_small
+from . import _dyads, _structure
+from ._linalg import solve_block_lower, solve_small
 from ._mechanism import Mechanism
 from ._solution import RESULTS, Solution
 
@@ -38,16 +39,18 @@ from ._solution import RESULTS, Solution
 class NewtonOptions(NamedTuple):
     """Static solver settings (changing them recompiles).
 
+    - `method`: `"auto"` (closed-form dyads when every block of the structure is a dyad, else
+      Newton with continuation), `"closed_form"`, `"continuation"` or `"independent"` (every
+      position by Newton from q0: only safe with a close guess).
     - `rtol`: converged when max|Φ| ≤ rtol × length scale (the largest |length parameter|);
       `None` = 1000 × machine epsilon of the dtype (2.2e-13 in float64, 1.2e-4 in float32). Once
       the residual is below it, one more (small) Newton correction is applied, which squares the
       error: the returned q is accurate to rounding (tested against closed forms to 1e-15 rad).
     - `max_steps`: Newton iterations per position after the first.
     - `max_steps_first`: iterations for the first position (from the file's guess).
-    - `continuation`: start each position from the extrapolated previous solutions (True), or
-      every position independently from q0 (False; only safe with a close guess).
+    - `continuation`: False is the same as `method="independent"` (kept for compatibility).
     - `predictor_order`: 0 (previous solution), 1 (secant) or 2 (quadratic) extrapolation.
-    - `singular_ratio`: min pivot / max |Φ_q| below which the Jacobian counts as singular.
+    - `singular_ratio`: pivot ratio of Φ_q (≈ 1/condition) below which it counts as singular.
     """
 
     rtol: float | None = None
@@ -56,6 +59,10 @@ class NewtonOptions(NamedTuple):
     continuation: bool = True
     predictor_order: int = 2
     singular_ratio: float = 1e-10
+    method: str = "auto"
+
+
+METHODS = ("auto", "closed_form", "continuation", "independent")
 
 
 def default_rtol(dtype) -> float:
@@ -68,18 +75,35 @@ def _step_scales(mech: Mechanism, scale, dtype):
     ) * jnp.asarray([1.0 if k == "angle" else scale for k in mech.unknown_kinds], dtype=dtype)
 
 
+def _linear_solve(mech: Mechanism):
+    order = _structure.blocks(mech)
+    blocks = tuple((tuple(r for li in loops for r in (2 * li, 2 * li + 1)), cols) for loops, cols in order)
+    if len(blocks) == 1 and len(blocks[0][1]) > 2:
+        return solve_small
+    return lambda a, b: solve_block_lower(a, b, blocks)
+
+
 def newton(mech: Mechanism, q0, phi, p, *, tol, max_steps: int, limit_step: bool, singular_ratio: float):
-    """Newton's method for one position. Returns `(q, rnorm, result, steps)` (see `RESULTS`)."""
+    """Newton's method for one position. Returns `(q, rnorm, result, steps)` (see `RESULTS`).
+
+    Gives up early (as `cannot_assemble`) when after 4 iterations the residual has not fallen
+    below 1e-4 × the length scale: from a continuation predictor Newton converges quadratically
+    in 2–3 steps, so such a position is almost surely unreachable, and under `vmap` one hopeless
+    position would otherwise hold the whole batch for `max_steps` iterations.
+    """
     dtype = jnp.result_type(q0)
     const = mech.residual_const(phi, p)
+    lin = _linear_solve(mech)
+    scale = mech.length_scale(p)
 
     def value_and_jac(q):
         f = lambda qq: (mech.residual_var(qq, phi, p, const),) * 2  # noqa: E731
         jac, r = jax.jacfwd(f, has_aux=True)(q)
         return r, jac
 
-    step_scale = _step_scales(mech, mech.length_scale(p), dtype) if limit_step else None
-    tiny_scale = 1e-3 * _step_scales(mech, mech.length_scale(p), dtype)
+    step_scale = _step_scales(mech, scale, dtype) if limit_step else None
+    tiny_scale = 1e-3 * _step_scales(mech, scale, dtype)
+    hopeless = 1e-4 * scale
 
     def cond(state):
         q, k, done, rn, piv = state
@@ -87,10 +111,13 @@ def newton(mech: Mechanism, q0, phi, p, *, tol, max_steps: int, limit_step: bool
 
     def body(state):
         q, k, done, rn, piv = state
-        r, jac = value_and_jac(q)
+        # materialize r and Φ_q once: without the barrier XLA re-computes the trigonometry in
+        # every fused kernel of the elimination (measured 3-4× slower)
+        r, jac = jax.lax.optimization_barrier(value_and_jac(q))
         rn = jnp.max(jnp.abs(r))
         conv = rn <= tol
-        dq, piv = solve_small(jac, r)
+        dq, piv = lin(jac, r)
+        dq = jax.lax.optimization_barrier(dq)
         if limit_step:
             ratio = jnp.max(jnp.abs(dq) / step_scale)
             dq = dq * jnp.minimum(1.0, 1.0 / jnp.maximum(ratio, 1e-30))
@@ -100,26 +127,59 @@ def newton(mech: Mechanism, q0, phi, p, *, tol, max_steps: int, limit_step: bool
         # the error for free); never at a singular point where it would be garbage
         small = jnp.max(jnp.abs(dq) / tiny_scale) <= 1.0
         q = jnp.where(finite & (~conv | small), q_new, q)
-        return q, k + 1, conv | ~finite, rn, piv
+        give_up = (not limit_step) & (k >= 3) & (rn > hopeless)
+        return q, k + 1, conv | ~finite | give_up, rn, piv
 
     init = (q0, jnp.zeros((), jnp.int32), jnp.zeros((), bool), jnp.asarray(jnp.inf, dtype),
             jnp.asarray(1.0, dtype))
     q, k, done, rn, piv = jax.lax.while_loop(cond, body, init)
     conv = rn <= tol
-    if max_steps == 0:
-        rn = jnp.max(jnp.abs(mech.residual(q, phi, p)))
-        conv = rn <= tol
-    scale = mech.length_scale(p)
+    result = _classify(conv, rn, q, piv, scale, dtype, singular_ratio)
+    # never hand out non-finite numbers: fall back to the start value
+    q = jnp.where(jnp.all(jnp.isfinite(q)), q, jnp.nan_to_num(q0))
+    return q, rn, result, k
+
+
+def _classify(conv, rn, q, piv, scale, dtype, singular_ratio):
     assemble_tol = max(1e-6, 10 * float(np.sqrt(np.finfo(dtype).eps))) * scale
-    result = jnp.where(
+    return jnp.where(
         conv, RESULTS.converged,
         jnp.where(~jnp.isfinite(rn) | ~jnp.all(jnp.isfinite(q)), RESULTS.nonfinite,
                   jnp.where(rn > assemble_tol, RESULTS.cannot_assemble,
                             jnp.where(piv < singular_ratio, RESULTS.singular, RESULTS.max_steps))),
     ).astype(jnp.int8)
-    # never hand out non-finite numbers: fall back to the start value
-    q = jnp.where(jnp.all(jnp.isfinite(q)), q, jnp.nan_to_num(q0))
-    return q, rn, result, k
+
+
+def method_for(mech: Mechanism, opts: "NewtonOptions") -> str:
+    """The path method `opts` resolves to for this mechanism."""
+    if opts.method not in METHODS:
+        raise ValueError(f"unknown method {opts.method!r}; use one of {METHODS}")
+    if not opts.continuation and opts.method in ("auto", "continuation"):
+        return "independent"
+    if opts.method == "auto":
+        return "closed_form" if _dyads.classify(mech) is not None else "continuation"
+    if opts.method == "closed_form" and _dyads.classify(mech) is None:
+        raise ValueError(f"{mech.name}: not every block is a dyad of known form; no closed form")
+    return opts.method
+
+
+def _closed_form_path(mech, opts, p, phis, q_ref, ref_code, tol, dtype):
+    ref_ok = ref_code == RESULTS.converged
+    dyads = _dyads.classify(mech)
+    sigma = _dyads.branches(mech, dyads, q_ref, phis[0], p)
+
+    def one(phi):
+        q, ok, _ = _dyads.solve(mech, dyads, sigma, q_ref, phi, p)
+        rn = jnp.max(jnp.abs(mech.residual(q, phi, p)))
+        conv = ok & (rn <= tol) & ref_ok
+        code = jnp.where(conv, RESULTS.converged,
+                         jnp.where(~ref_ok, ref_code,
+                                   jnp.where(~jnp.isfinite(rn), RESULTS.nonfinite,
+                                             jnp.where(ok, RESULTS.max_steps, RESULTS.cannot_assemble))))
+        q = jnp.where(jnp.all(jnp.isfinite(q)), q, q_ref)
+        return q, rn, code.astype(jnp.int8), jnp.zeros((), jnp.int32)
+
+    return jax.vmap(one)(phis)
 
 
 def _extrapolate(hist_q, hist_phi, n_good, phi, order: int):
@@ -153,13 +213,18 @@ def _solve_path_impl(mech: Mechanism, opts: NewtonOptions, p, phis, q0):
     tol = rtol * mech.length_scale(p)
     kw = dict(tol=tol, singular_ratio=opts.singular_ratio)
 
+    method = method_for(mech, opts)
     q_first, r_first, c_first, k_first = newton(
         mech, q0, phis[0], p, max_steps=opts.max_steps_first, limit_step=True, **kw
     )
+    if method == "closed_form":
+        # the branches (circuits) are those of the configuration solved at the first input
+        q, r, c, k = _closed_form_path(mech, opts, p, phis, q_first, c_first, tol, dtype)
+        return q, r, c, k.at[0].set(k_first)
     if phis.shape[0] == 1:
         return q_first[None], r_first[None], c_first[None], k_first[None]
 
-    if not opts.continuation:
+    if method == "independent":
         solve_one = lambda phi: newton(mech, q0, phi, p, max_steps=opts.max_steps_first,  # noqa: E731
                                        limit_step=True, **kw)
         q, r, c, k = jax.vmap(solve_one)(phis[1:])
@@ -200,14 +265,19 @@ def _path_solver(mech: Mechanism, opts: NewtonOptions):
         out = solve_path(p, phis, q0)
         q, rn, code, k = out
 
-        def one(qk, phik, dphik):
+        lin = _linear_solve(mech)
+
+        def one(qk, phik, dphik, ok):
             rhs = jax.jvp(lambda pp, ph: mech.residual(qk, ph, pp), (p, phik), (dp, dphik))[1]
             jac = jax.jacfwd(mech.residual)(qk, phik, p)
-            dq, _ = solve_small(jac, rhs)
-            return -dq
+            # where not converged the sensitivity is undefined: solve a harmless identity system
+            # instead (and zero the result), so that neither the JVP nor its transpose (grad)
+            # produces NaN
+            eye = jnp.eye(jac.shape[0], dtype=jac.dtype)
+            dq, _ = lin(jnp.where(ok, jac, eye), jnp.where(ok, rhs, 0.0))
+            return jnp.where(ok, -dq, 0.0)
 
-        dq = jax.vmap(one)(q, phis, dphis)
-        dq = jnp.where((code == RESULTS.converged)[:, None], dq, 0.0)
+        dq = jax.vmap(one)(q, phis, dphis, code == RESULTS.converged)
         return out, (dq, jnp.zeros_like(rn), _float0(code), _float0(k))
 
     return solve_path

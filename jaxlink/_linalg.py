@@ -85,3 +85,45 @@ def _pick_vec(v, idx, k, n):
     for i in range(k + 1, n):
         out = jnp.where(idx == i, v[i], out)
     return out
+
+
+def solve_2x2(a00, a01, a10, a11, b0, b1):
+    """Cramer's rule for one 2×2 system; returns (x0, x1, |det| / max|a_ij|²)."""
+    det = a00 * a11 - a01 * a10
+    scale = jnp.maximum(jnp.maximum(jnp.abs(a00), jnp.abs(a01)), jnp.maximum(jnp.abs(a10), jnp.abs(a11)))
+    inv = 1.0 / det
+    return (a11 * b0 - a01 * b1) * inv, (a00 * b1 - a10 * b0) * inv, jnp.abs(det) / jnp.maximum(
+        scale * scale, jnp.finfo(jnp.result_type(det)).tiny)
+
+
+def solve_block_lower(a, b, blocks):
+    """Solve `a x = b` when `a` is block lower-triangular in the order `blocks`.
+
+    `blocks` is a tuple of `(row_indices, col_indices)` (as from `_structure.blocks`, with loop ℓ
+    giving rows 2ℓ, 2ℓ+1): rows of block i involve only the columns of blocks ≤ i. Forward
+    substitution with Cramer's rule on 2×2 diagonal blocks and `solve_small` on larger ones.
+    Returns `(x, pivot_ratio)` like `solve_small`.
+    """
+    n = a.shape[-1]
+    x = [None] * n
+    ratio = None
+    done: list = []
+    for rows, cols in blocks:
+        rhs = []
+        for r in rows:
+            s = b[r]
+            for j in done:
+                s = s - a[r, j] * x[j]
+            rhs.append(s)
+        if len(cols) == 2 and len(rows) == 2:
+            (r0, r1), (c0, c1) = rows, cols
+            x0, x1, rr = solve_2x2(a[r0, c0], a[r0, c1], a[r1, c0], a[r1, c1], rhs[0], rhs[1])
+            x[c0], x[c1] = x0, x1
+        else:
+            sub = jnp.stack([jnp.stack([a[r, c] for c in cols]) for r in rows])
+            xs, rr = solve_small(sub, jnp.stack(rhs))
+            for k, c in enumerate(cols):
+                x[c] = xs[k]
+        ratio = rr if ratio is None else jnp.minimum(ratio, rr)
+        done.extend(cols)
+    return jnp.stack(x), ratio

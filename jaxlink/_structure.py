@@ -56,3 +56,47 @@ def structure(mech: Mechanism) -> dict:
     if isinstance(joints, dict) and joints:
         info["grubler"] = grubler(joints, file=mech.file)
     return info
+
+
+# ----------------------------------------------------------------------------- solve order
+
+
+def _unknowns_of(mech: Mechanism, terms) -> set:
+    from . import _expr
+
+    names = set(mech.unknown_names)
+    return {nm.name for t in terms for nd in t.nodes() for nm in _expr.names_in(nd) if nm.name in names}
+
+
+def blocks(mech: Mechanism) -> tuple:
+    """A block-triangular solve order of the loop equations.
+
+    Returns a tuple of `(loop_indices, unknown_indices)`: each block's loops determine exactly its
+    unknowns once the unknowns of the earlier blocks are known (a dyad — Assur group of class II —
+    is one loop with two new unknowns). Loops that cannot be ordered so (class III groups and
+    higher) form one final block. In this order Φ_q is block lower-triangular, so Newton's linear
+    solve is a forward substitution with small diagonal blocks, and blocks of known form have
+    closed-form solutions (`_dyads`).
+    """
+    index = {n: i for i, n in enumerate(mech.unknown_names)}
+    remaining = list(range(len(mech.loops)))
+    uses = {i: _unknowns_of(mech, mech.loops[i][1]) for i in remaining}
+    known: set = set()
+    out = []
+    progress = True
+    while remaining and progress:
+        progress = False
+        for i in remaining:
+            new = uses[i] - known
+            if len(new) == 2:
+                out.append(((i,), tuple(sorted(index[n] for n in new))))
+                known |= new
+                remaining.remove(i)
+                progress = True
+                break
+            if len(new) == 0:
+                break
+    if remaining:
+        rest = set().union(*(uses[i] for i in remaining)) - known
+        out.append((tuple(remaining), tuple(sorted(index[n] for n in rest))))
+    return tuple(out)

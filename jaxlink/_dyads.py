@@ -1,0 +1,223 @@
+"""Closed-form solutions of the dyads (Assur groups of class II) of a loop-closure system.
+
+A block of `_structure.blocks` that is one loop with two new unknowns is a dyad when each unknown
+appears in exactly one vector of the loop, as follows (s = ±1 the term's sign; L, c, e known):
+
+- **RRR** — two angles:  s_a L_a e(θ_a + c_a) + s_b L_b e(θ_b + c_b) = w  (w = −Σ other vectors).
+  With u the first vector and v = w − u:  |u| = r_a, |w − u| = r_b, a circle–circle intersection
+      u = x ŵ + σ h ŵ⊥,   x = (|w|² + r_a² − r_b²) / (2|w|),   h = √(r_a² − x²).
+- **RRP** — an angle and a length (a slider):  s_a L_a e(θ_a + c_a) + s_b ℓ e_b = w,  with e_b a
+  known unit vector:  |w − s_b ℓ e_b| = r_a  gives  s_b ℓ = w·e_b + σ √(r_a² − (w × e_b)²).
+- **PP** — two lengths along known directions: a 2×2 linear system (Cramer).
+
+σ = ±1 is the *assembly branch* (circuit) of the dyad. It is read off a reference configuration
+(the file's guess solved by Newton) and kept: the closed form then stays on that branch for every
+input and every design, with no continuation. Where the square root's argument is negative the
+dyad cannot be assembled (result code), and the output stays finite (the double-`where` trick
+keeps gradients NaN-free). Angles are returned within ±π of the reference configuration.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import jax.numpy as jnp
+
+from . import _expr
+from ._mechanism import Mechanism
+from ._structure import blocks
+
+
+@dataclasses.dataclass(frozen=True)
+class Dyad:
+    kind: str  # "RRR" | "RRP" | "PP"
+    loop: int
+    unknowns: tuple  # (a, b) indices into q
+    terms: tuple  # (term index of a, term index of b)
+    offsets: tuple  # (angle offset node or None, ...) for angle unknowns: θ = q + offset
+    rest: tuple  # indices of the other terms of the loop
+
+
+def _angle_offset(node, name):
+    """If `node` is `name + c` (c free of `name`), return c's node (or Num(0)); else None."""
+    if isinstance(node, _expr.Name):
+        return _expr.Num(0.0) if node.name == name else None
+    if isinstance(node, _expr.Bin) and node.op in "+-":
+        inl = any(n.name == name for n in _expr.names_in(node.left))
+        inr = any(n.name == name for n in _expr.names_in(node.right))
+        if inl and not inr:
+            c = _angle_offset(node.left, name)
+            if c is None:
+                return None
+            return _expr.Bin(node.op, c, node.right)
+        if inr and not inl and node.op == "+":
+            c = _angle_offset(node.right, name)
+            if c is None:
+                return None
+            return _expr.Bin("+", node.left, c)
+    return None
+
+
+def _contains(node, names) -> bool:
+    return any(n.name in names for n in _expr.names_in(node))
+
+
+def classify(mech: Mechanism) -> tuple | None:
+    """The dyads of every block, in solve order, or None if some block has no closed form."""
+    out = []
+    for loops, unk in blocks(mech):
+        if len(loops) != 1 or len(unk) != 2:
+            return None
+        li = loops[0]
+        terms = mech.loops[li][1]
+        names = [mech.unknown_names[i] for i in unk]
+        where = {}
+        for ti, t in enumerate(terms):
+            inside = [n for n in names if any(_contains(nd, {n}) for nd in t.nodes())]
+            if len(inside) > 1:
+                return None
+            if inside:
+                if inside[0] in where:
+                    return None
+                where[inside[0]] = ti
+        if len(where) != 2:
+            return None
+        kinds = []
+        offsets = []
+        for n in names:
+            t = terms[where[n]]
+            if not t.polar:
+                return None
+            if not _contains(t.length, {n}) and _contains(t.angle, {n}):
+                off = _angle_offset(t.angle, n)
+                if off is None:
+                    return None
+                kinds.append("R")
+                offsets.append(off)
+            elif isinstance(t.length, _expr.Name) and t.length.name == n and not _contains(t.angle, set(names)):
+                kinds.append("P")
+                offsets.append(None)
+            else:
+                return None
+        kind = "".join(sorted(kinds, reverse=True))  # "RR", "RP" or "PP"
+        order = (0, 1) if kinds[0] >= kinds[1] else (1, 0)  # R before P
+        a, b = (unk[order[0]], unk[order[1]])
+        na, nb = names[order[0]], names[order[1]]
+        out.append(Dyad(
+            kind={"RR": "RRR", "RP": "RRP", "PP": "PP"}[kind],
+            loop=li,
+            unknowns=(a, b),
+            terms=(where[na], where[nb]),
+            offsets=(offsets[order[0]], offsets[order[1]]),
+            rest=tuple(i for i in range(len(terms)) if i not in (where[na], where[nb])),
+        ))
+    return tuple(out)
+
+
+def _cross(a, b):
+    return a[0] * b[1] - a[1] * b[0]
+
+
+def _safe_sqrt(x):
+    ok = x > 0
+    return jnp.where(ok, jnp.sqrt(jnp.where(ok, x, 1.0)), 0.0), ok
+
+
+def _known_parts(mech: Mechanism, dyad: Dyad, env):
+    """w = −Σ rest, and for each unknown term its fixed parts."""
+    terms = mech.loops[dyad.loop][1]
+    sx, sy = 0.0, 0.0
+    for i in dyad.rest:
+        x, y = mech._term_vector(terms[i], env)
+        sx, sy = sx + x, sy + y
+    return -sx, -sy
+
+
+def _radius_and_offset(mech, term, offset, env):
+    """For `s L @ (q + c)`: returns (signed length s·L, c) evaluated in SI."""
+    L = _expr.evaluate(term.length, env, mech.kinds, mech.units, _expr.LENGTH)
+    c = _expr.evaluate(offset, env, mech.kinds, mech.units, _expr.ANGLE)
+    return term.sign * L, c
+
+
+def branches(mech: Mechanism, dyads, q, phi, p):
+    """σ of every dyad in the configuration q (the reference), shape (n_dyads,)."""
+    env = mech._env(q, phi, p)
+    out = []
+    for d in dyads:
+        terms = mech.loops[d.loop][1]
+        wx, wy = _known_parts(mech, d, env)
+        ta, tb = terms[d.terms[0]], terms[d.terms[1]]
+        if d.kind == "RRR":
+            ux, uy = mech._term_vector(ta, env)
+            out.append(jnp.where(_cross((wx, wy), (ux, uy)) >= 0, 1.0, -1.0))
+        elif d.kind == "RRP":
+            ell = q[d.unknowns[1]]
+            ang = _expr.evaluate(tb.angle, env, mech.kinds, mech.units, _expr.ANGLE)
+            ex, ey = jnp.cos(ang) * tb.sign, jnp.sin(ang) * tb.sign  # the term is ℓ·(ex, ey)
+            out.append(jnp.where(ell - (wx * ex + wy * ey) >= 0, 1.0, -1.0))
+        else:
+            out.append(jnp.ones_like(jnp.asarray(wx)))
+    return jnp.stack([jnp.asarray(o, dtype=jnp.result_type(q)) for o in out]) if out else jnp.zeros((0,))
+
+
+def _wrap_near(theta, ref):
+    return ref + jnp.remainder(theta - ref + jnp.pi, 2 * jnp.pi) - jnp.pi
+
+
+def solve(mech: Mechanism, dyads, sigma, q_ref, phi, p):
+    """All unknowns in closed form at input φ, on the branches σ. Returns (q, assemblable, h_rel)
+    with h_rel = min over dyads of (discriminant height / radius), 0 at a dead centre."""
+    q = q_ref
+    ok_all = jnp.asarray(True)
+    hmin = jnp.asarray(jnp.inf, dtype=jnp.result_type(q_ref))
+    for k, d in enumerate(dyads):
+        env = mech._env(q, phi, p)
+        terms = mech.loops[d.loop][1]
+        ta, tb = terms[d.terms[0]], terms[d.terms[1]]
+        wx, wy = _known_parts(mech, d, env)
+        s = sigma[k]
+        ia, ib = d.unknowns
+        if d.kind == "RRR":
+            La, ca = _radius_and_offset(mech, ta, d.offsets[0], env)
+            Lb, cb = _radius_and_offset(mech, tb, d.offsets[1], env)
+            ra2, rb2 = La * La, Lb * Lb
+            w2 = wx * wx + wy * wy
+            wn, _ = _safe_sqrt(w2)
+            wn = jnp.where(wn > 0, wn, 1.0)
+            x = (w2 + ra2 - rb2) / (2 * wn)
+            h, ok = _safe_sqrt(ra2 - x * x)
+            ux = (x * wx - s * h * wy) / wn
+            uy = (x * wy + s * h * wx) / wn
+            vx, vy = wx - ux, wy - uy
+            tha = jnp.arctan2(jnp.sign(La) * uy, jnp.sign(La) * ux) - ca
+            thb = jnp.arctan2(jnp.sign(Lb) * vy, jnp.sign(Lb) * vx) - cb
+            q = q.at[ia].set(_wrap_near(tha, q_ref[ia])).at[ib].set(_wrap_near(thb, q_ref[ib]))
+            hrel = h / jnp.maximum(jnp.minimum(jnp.abs(La), jnp.abs(Lb)), 1e-300)
+        elif d.kind == "RRP":
+            La, ca = _radius_and_offset(mech, ta, d.offsets[0], env)
+            ang = _expr.evaluate(tb.angle, env, mech.kinds, mech.units, _expr.ANGLE)
+            ex, ey = jnp.cos(ang) * tb.sign, jnp.sin(ang) * tb.sign  # the term is ℓ·(ex, ey)
+            along = wx * ex + wy * ey
+            across = wx * ey - wy * ex
+            h, ok = _safe_sqrt(La * La - across * across)
+            ell = along + s * h
+            ux, uy = wx - ell * ex, wy - ell * ey
+            tha = jnp.arctan2(jnp.sign(La) * uy, jnp.sign(La) * ux) - ca
+            q = q.at[ia].set(_wrap_near(tha, q_ref[ia])).at[ib].set(ell)
+            hrel = h / jnp.maximum(jnp.abs(La), 1e-300)
+        else:  # PP: ℓa ea + ℓb eb = w
+            angA = _expr.evaluate(ta.angle, env, mech.kinds, mech.units, _expr.ANGLE)
+            angB = _expr.evaluate(tb.angle, env, mech.kinds, mech.units, _expr.ANGLE)
+            ea = (ta.sign * jnp.cos(angA), ta.sign * jnp.sin(angA))
+            eb = (tb.sign * jnp.cos(angB), tb.sign * jnp.sin(angB))
+            det = _cross(ea, eb)
+            ok = jnp.abs(det) > 1e-12
+            det = jnp.where(ok, det, 1.0)
+            la = _cross((wx, wy), eb) / det
+            lb = _cross(ea, (wx, wy)) / det
+            q = q.at[ia].set(la).at[ib].set(lb)
+            hrel = jnp.abs(det)
+        ok_all = ok_all & ok
+        hmin = jnp.minimum(hmin, hrel)
+    return q, ok_all, hmin
