@@ -169,8 +169,7 @@ def _closed_form_path(mech, opts, p, phis, q_ref, ref_code, tol, dtype):
     sigma = _dyads.branches(mech, dyads, q_ref, phis[0], p)
 
     def one(phi):
-        q, ok, _ = _dyads.solve(mech, dyads, sigma, q_ref, phi, p)
-        rn = jnp.max(jnp.abs(mech.residual(q, phi, p)))
+        q, ok, rn = _dyads.solve(mech, dyads, sigma, q_ref, phi, p)
         conv = ok & (rn <= tol) & ref_ok
         code = jnp.where(conv, RESULTS.converged,
                          jnp.where(~ref_ok, ref_code,

@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import dataclasses
 
+import jax
 import jax.numpy as jnp
 
 from . import _expr
@@ -123,21 +124,30 @@ def _safe_sqrt(x):
     return jnp.where(ok, jnp.sqrt(jnp.where(ok, x, 1.0)), 0.0), ok
 
 
-def _known_parts(mech: Mechanism, dyad: Dyad, env):
-    """w = −Σ rest, and for each unknown term its fixed parts."""
+def _known_parts(mech: Mechanism, dyad: Dyad, env, trig=None):
+    """w = −Σ of the loop's other (known) vectors."""
     terms = mech.loops[dyad.loop][1]
     sx, sy = 0.0, 0.0
     for i in dyad.rest:
-        x, y = mech._term_vector(terms[i], env)
+        x, y = mech._term_vector(terms[i], env, trig)
         sx, sy = sx + x, sy + y
     return -sx, -sy
 
 
-def _radius_and_offset(mech, term, offset, env):
-    """For `s L @ (q + c)`: returns (signed length s·L, c) evaluated in SI."""
+def _radius_and_offset(mech, term, offset, env, trig):
+    """For `s L @ (q + c)`: returns (signed length s·L, (cos c, sin c))."""
     L = _expr.evaluate(term.length, env, mech.kinds, mech.units, _expr.LENGTH)
-    c = _expr.evaluate(offset, env, mech.kinds, mech.units, _expr.ANGLE)
-    return term.sign * L, c
+    return term.sign * L, mech.unit_vector(offset, env, trig)
+
+
+def _angle_from(ux, uy, L, cs):
+    """θ with L e(θ + c) = u, and (cos θ, sin θ), from u, L and (cos c, sin c) — one atan2."""
+    n = jnp.sqrt(ux * ux + uy * uy)
+    n = jnp.where(n > 0, n, 1.0) * jnp.sign(L)
+    ex, ey = ux / n, uy / n  # e(θ + c)
+    cc, sc = cs
+    ct, st = ex * cc + ey * sc, ey * cc - ex * sc  # rotate by −c
+    return jnp.arctan2(st, ct), (ct, st)
 
 
 def branches(mech: Mechanism, dyads, q, phi, p):
@@ -166,58 +176,59 @@ def _wrap_near(theta, ref):
 
 
 def solve(mech: Mechanism, dyads, sigma, q_ref, phi, p):
-    """All unknowns in closed form at input φ, on the branches σ. Returns (q, assemblable, h_rel)
-    with h_rel = min over dyads of (discriminant height / radius), 0 at a dead centre."""
+    """All unknowns in closed form at input φ, on the branches σ.
+
+    Returns `(q, assemblable, residual)`: the residual max|Φ| is evaluated with the unit vectors
+    of the solved angles (no further trigonometry), so it measures what the closed form got
+    wrong (e.g. the loss of accuracy next to a dead centre). Angle values come from one atan2
+    each; (cos, sin) of solved angles are reused by later dyads and by the residual.
+    """
     q = q_ref
     ok_all = jnp.asarray(True)
-    hmin = jnp.asarray(jnp.inf, dtype=jnp.result_type(q_ref))
+    trig = {mech.input_name: (jnp.cos(phi), jnp.sin(phi))} if mech.input_kind == "angle" else {}
     for k, d in enumerate(dyads):
+        # materialize what the earlier dyads computed: otherwise XLA duplicates their
+        # trigonometry into every fused kernel that uses it (measured 1.5-2× slower)
+        q, trig = jax.lax.optimization_barrier((q, trig))
         env = mech._env(q, phi, p)
         terms = mech.loops[d.loop][1]
         ta, tb = terms[d.terms[0]], terms[d.terms[1]]
-        wx, wy = _known_parts(mech, d, env)
+        wx, wy = _known_parts(mech, d, env, trig)
         s = sigma[k]
         ia, ib = d.unknowns
+        na, nb = mech.unknown_names[ia], mech.unknown_names[ib]
         if d.kind == "RRR":
-            La, ca = _radius_and_offset(mech, ta, d.offsets[0], env)
-            Lb, cb = _radius_and_offset(mech, tb, d.offsets[1], env)
-            ra2, rb2 = La * La, Lb * Lb
+            La, csa = _radius_and_offset(mech, ta, d.offsets[0], env, trig)
+            Lb, csb = _radius_and_offset(mech, tb, d.offsets[1], env, trig)
             w2 = wx * wx + wy * wy
             wn, _ = _safe_sqrt(w2)
             wn = jnp.where(wn > 0, wn, 1.0)
-            x = (w2 + ra2 - rb2) / (2 * wn)
-            h, ok = _safe_sqrt(ra2 - x * x)
+            x = (w2 + La * La - Lb * Lb) / (2 * wn)
+            h, ok = _safe_sqrt(La * La - x * x)
             ux = (x * wx - s * h * wy) / wn
             uy = (x * wy + s * h * wx) / wn
-            vx, vy = wx - ux, wy - uy
-            tha = jnp.arctan2(jnp.sign(La) * uy, jnp.sign(La) * ux) - ca
-            thb = jnp.arctan2(jnp.sign(Lb) * vy, jnp.sign(Lb) * vx) - cb
+            tha, trig[na] = _angle_from(ux, uy, La, csa)
+            thb, trig[nb] = _angle_from(wx - ux, wy - uy, Lb, csb)
             q = q.at[ia].set(_wrap_near(tha, q_ref[ia])).at[ib].set(_wrap_near(thb, q_ref[ib]))
-            hrel = h / jnp.maximum(jnp.minimum(jnp.abs(La), jnp.abs(Lb)), 1e-300)
         elif d.kind == "RRP":
-            La, ca = _radius_and_offset(mech, ta, d.offsets[0], env)
-            ang = _expr.evaluate(tb.angle, env, mech.kinds, mech.units, _expr.ANGLE)
-            ex, ey = jnp.cos(ang) * tb.sign, jnp.sin(ang) * tb.sign  # the term is ℓ·(ex, ey)
+            La, csa = _radius_and_offset(mech, ta, d.offsets[0], env, trig)
+            ca, sa = mech.unit_vector(tb.angle, env, trig)
+            ex, ey = ca * tb.sign, sa * tb.sign  # the slider term is ℓ·(ex, ey)
             along = wx * ex + wy * ey
             across = wx * ey - wy * ex
             h, ok = _safe_sqrt(La * La - across * across)
             ell = along + s * h
-            ux, uy = wx - ell * ex, wy - ell * ey
-            tha = jnp.arctan2(jnp.sign(La) * uy, jnp.sign(La) * ux) - ca
+            tha, trig[na] = _angle_from(wx - ell * ex, wy - ell * ey, La, csa)
             q = q.at[ia].set(_wrap_near(tha, q_ref[ia])).at[ib].set(ell)
-            hrel = h / jnp.maximum(jnp.abs(La), 1e-300)
         else:  # PP: ℓa ea + ℓb eb = w
-            angA = _expr.evaluate(ta.angle, env, mech.kinds, mech.units, _expr.ANGLE)
-            angB = _expr.evaluate(tb.angle, env, mech.kinds, mech.units, _expr.ANGLE)
-            ea = (ta.sign * jnp.cos(angA), ta.sign * jnp.sin(angA))
-            eb = (tb.sign * jnp.cos(angB), tb.sign * jnp.sin(angB))
+            ca, sa = mech.unit_vector(ta.angle, env, trig)
+            cb, sb = mech.unit_vector(tb.angle, env, trig)
+            ea = (ta.sign * ca, ta.sign * sa)
+            eb = (tb.sign * cb, tb.sign * sb)
             det = _cross(ea, eb)
             ok = jnp.abs(det) > 1e-12
             det = jnp.where(ok, det, 1.0)
-            la = _cross((wx, wy), eb) / det
-            lb = _cross(ea, (wx, wy)) / det
-            q = q.at[ia].set(la).at[ib].set(lb)
-            hrel = jnp.abs(det)
+            q = q.at[ia].set(_cross((wx, wy), eb) / det).at[ib].set(_cross(ea, (wx, wy)) / det)
         ok_all = ok_all & ok
-        hmin = jnp.minimum(hmin, hrel)
-    return q, ok_all, hmin
+    resid = jnp.max(jnp.abs(mech.residual_trig(q, phi, p, trig)))
+    return q, ok_all, resid

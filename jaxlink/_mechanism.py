@@ -156,23 +156,44 @@ class Mechanism:
         env[self.input_name] = phi
         return env
 
-    def _term_vector(self, term: Term, env):
+    def _term_vector(self, term: Term, env, trig=None):
+        """(x, y) of one term in SI. `trig` optionally maps names to known (cos, sin) of their
+        value, so that angles like `q + c` need no new trigonometry (see `unit_vector`)."""
         if term.polar:
             length = _expr.evaluate(term.length, env, self.kinds, self.units, LENGTH)
-            angle = _expr.evaluate(term.angle, env, self.kinds, self.units, ANGLE)
-            return term.sign * length * jnp.cos(angle), term.sign * length * jnp.sin(angle)
+            c, s = self.unit_vector(term.angle, env, trig)
+            return term.sign * length * c, term.sign * length * s
         x = _expr.evaluate(term.x, env, self.kinds, self.units, LENGTH)
         y = _expr.evaluate(term.y, env, self.kinds, self.units, LENGTH)
         return term.sign * x, term.sign * y
 
-    def _sum(self, terms, env, which: str):
+    def unit_vector(self, node, env, trig=None):
+        """(cos θ, sin θ) of an angle expression θ. Sums and differences that contain names of
+        `trig` are composed by the angle-addition formulas from their cached (cos, sin)."""
+        if trig:
+            if isinstance(node, _expr.Name) and node.name in trig:
+                return trig[node.name]
+            if isinstance(node, (_expr.Bin, _expr.Neg)) and any(n.name in trig for n in _expr.names_in(node)):
+                if isinstance(node, _expr.Neg):
+                    c, s = self.unit_vector(node.arg, env, trig)
+                    return c, -s
+                if node.op in "+-":
+                    ca, sa = self.unit_vector(node.left, env, trig)
+                    cb, sb = self.unit_vector(node.right, env, trig)
+                    if node.op == "+":
+                        return ca * cb - sa * sb, sa * cb + ca * sb
+                    return ca * cb + sa * sb, sa * cb - ca * sb
+        v = _expr.evaluate(node, env, self.kinds, self.units, ANGLE)
+        return jnp.cos(v), jnp.sin(v)
+
+    def _sum(self, terms, env, which: str, trig=None):
         """Sum of the terms that depend on the unknowns (`which="var"`), do not ("const"), or all."""
         unknowns = set(self.unknown_names)
         sx, sy = 0.0, 0.0
         for term in terms:
             dep = any(n.name in unknowns for node in term.nodes() for n in _expr.names_in(node))
             if which == "all" or (which == "var") == dep:
-                x, y = self._term_vector(term, env)
+                x, y = self._term_vector(term, env, trig)
                 sx, sy = sx + x, sy + y
         return sx, sy
 
@@ -182,6 +203,14 @@ class Mechanism:
         out = []
         for _, terms in self.loops:
             out.extend(self._sum(terms, env, "all"))
+        return _stack(out, q)
+
+    def residual_trig(self, q, phi, p, trig):
+        """Φ evaluated with known (cos, sin) of some names (`trig`), e.g. from a closed form."""
+        env = self._env(q, phi, p)
+        out = []
+        for _, terms in self.loops:
+            out.extend(self._sum(terms, env, "all", trig))
         return _stack(out, q)
 
     def residual_const(self, phi, p):
