@@ -183,14 +183,14 @@ def solve(mech: Mechanism, dyads, sigma, q_ref, phi, p):
     wrong (e.g. the loss of accuracy next to a dead centre). Angle values come from one atan2
     each; (cos, sin) of solved angles are reused by later dyads and by the residual.
     """
-    q = q_ref
     ok_all = jnp.asarray(True)
     trig = {mech.input_name: (jnp.cos(phi), jnp.sin(phi))} if mech.input_kind == "angle" else {}
+    env = {n: p[i] for i, n in enumerate(mech.parameter_names)}
+    env[mech.input_name] = phi
     for k, d in enumerate(dyads):
-        # materialize what the earlier dyads computed: otherwise XLA duplicates their
-        # trigonometry into every fused kernel that uses it (measured 1.5-2× slower)
-        q, trig = jax.lax.optimization_barrier((q, trig))
-        env = mech._env(q, phi, p)
+        # materialize what the earlier dyads computed: otherwise XLA may duplicate their
+        # trigonometry into every fused kernel that uses it
+        env, trig = jax.lax.optimization_barrier((env, trig))
         terms = mech.loops[d.loop][1]
         ta, tb = terms[d.terms[0]], terms[d.terms[1]]
         wx, wy = _known_parts(mech, d, env, trig)
@@ -207,9 +207,8 @@ def solve(mech: Mechanism, dyads, sigma, q_ref, phi, p):
             h, ok = _safe_sqrt(La * La - x * x)
             ux = (x * wx - s * h * wy) / wn
             uy = (x * wy + s * h * wx) / wn
-            tha, trig[na] = _angle_from(ux, uy, La, csa)
-            thb, trig[nb] = _angle_from(wx - ux, wy - uy, Lb, csb)
-            q = q.at[ia].set(_wrap_near(tha, q_ref[ia])).at[ib].set(_wrap_near(thb, q_ref[ib]))
+            env[na], trig[na] = _angle_from(ux, uy, La, csa)
+            env[nb], trig[nb] = _angle_from(wx - ux, wy - uy, Lb, csb)
         elif d.kind == "RRP":
             La, csa = _radius_and_offset(mech, ta, d.offsets[0], env, trig)
             ca, sa = mech.unit_vector(tb.angle, env, trig)
@@ -218,8 +217,8 @@ def solve(mech: Mechanism, dyads, sigma, q_ref, phi, p):
             across = wx * ey - wy * ex
             h, ok = _safe_sqrt(La * La - across * across)
             ell = along + s * h
-            tha, trig[na] = _angle_from(wx - ell * ex, wy - ell * ey, La, csa)
-            q = q.at[ia].set(_wrap_near(tha, q_ref[ia])).at[ib].set(ell)
+            env[na], trig[na] = _angle_from(wx - ell * ex, wy - ell * ey, La, csa)
+            env[nb] = ell
         else:  # PP: ℓa ea + ℓb eb = w
             ca, sa = mech.unit_vector(ta.angle, env, trig)
             cb, sb = mech.unit_vector(tb.angle, env, trig)
@@ -228,7 +227,12 @@ def solve(mech: Mechanism, dyads, sigma, q_ref, phi, p):
             det = _cross(ea, eb)
             ok = jnp.abs(det) > 1e-12
             det = jnp.where(ok, det, 1.0)
-            q = q.at[ia].set(_cross((wx, wy), eb) / det).at[ib].set(_cross(ea, (wx, wy)) / det)
+            env[na] = _cross((wx, wy), eb) / det
+            env[nb] = _cross(ea, (wx, wy)) / det
         ok_all = ok_all & ok
+    q = jnp.stack([
+        _wrap_near(env[n], q_ref[i]) if k == "angle" else jnp.asarray(env[n], dtype=q_ref.dtype)
+        for i, (n, k) in enumerate(zip(mech.unknown_names, mech.unknown_kinds))
+    ])
     resid = jnp.max(jnp.abs(mech.residual_trig(q, phi, p, trig)))
     return q, ok_all, resid
