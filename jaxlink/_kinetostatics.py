@@ -20,9 +20,10 @@ scale so that A_S is O(1) in any unit.
 
 Power balance (a check, `tests/test_kinetostatics.py`): τ ω + Σ P_loads = d(T + V_gravity + V_springs)/dt.
 
-The linear solve is unrolled for n ≤ 8 (`_linalg.solve_small`) and `jnp.linalg.solve` otherwise;
-a position whose A_S is singular (σ_min/σ_max below `singular_ratio`: a toggle position, or joints
-that over-constrain the motion) gets `KRESULTS.singular` and zeros, never an exception, so that
+The linear solve is unrolled for n ≤ 8 (`_linalg.solve_small`) and an LU factorization with partial
+pivoting otherwise (`jax.scipy.linalg.lu_factor`, what `jnp.linalg.solve` does, keeping the pivots);
+a position whose A_S is singular (min |pivot| / max |entry| below `singular_ratio`: a toggle position,
+or joints placed so that they over-constrain a body) gets `KRESULTS.singular` and zeros, never an exception, so that
 `vmap` over positions and designs never fails as a whole.
 """
 
@@ -70,7 +71,7 @@ class Reactions(NamedTuple):
     - `moment`: (…, J) N·m, the reaction moment of each prismatic joint (0 for revolute joints).
     - `torque`: (…,) N·m, the drive torque on the input body from the ground (counter-clockwise +).
     - `result`: (…,) int8 code (`KRESULTS`); where not ok, the values are 0.
-    - `ratio`: (…,) σ_min/σ_max (or min pivot/max entry) of the scaled system, a singularity indicator.
+    - `ratio`: (…,) min |pivot| / max |entry| of the scaled system, a singularity indicator (≈ 1/condition).
     """
 
     force: jax.Array
@@ -164,75 +165,92 @@ def system(mech: Mechanism, mdl: _bodies.Model, q, phi, p, omega, alpha=0.0):
     L = mech.length_scale(p)
     nb, nj = len(mdl.bodies), len(mdl.joints)
     n = 2 * nj + 1
-    zero = jnp.zeros((), dtype)
-    A = [[zero] * n for _ in range(3 * nb)]
-    Q = [zero] * (3 * nb)
     g = jnp.asarray(mdl.gravity, dtype)
+    st = _static(mdl)
 
     # reference point of each body: its centroid if it has one, else its first joint
-    ref = []
-    for i, b in enumerate(mdl.bodies):
-        if b.centroid is not None:
-            ref.append(c[i])
-        else:
-            first = next(k for k, j in enumerate(mdl.joints) if i in (j.a, j.b))
-            ref.append(pts[first])
+    ref = jnp.where(st.has_centroid[:, None], c, pts[st.first_joint])
 
-    for k, j in enumerate(mdl.joints):
-        P = pts[k]
-        if j.kind == "revolute":
-            for body, sign in ((j.b, 1.0), (j.a, -1.0)):
-                if body < 0:
-                    continue
-                r = P - ref[body]
-                A[3 * body][2 * k] = A[3 * body][2 * k] + sign
-                A[3 * body + 1][2 * k + 1] = A[3 * body + 1][2 * k + 1] + sign
-                # moment of (Fx, 0) and (0, Fy) at r: -r_y Fx + r_x Fy
-                A[3 * body + 2][2 * k] = A[3 * body + 2][2 * k] - sign * r[1] / L
-                A[3 * body + 2][2 * k + 1] = A[3 * body + 2][2 * k + 1] + sign * r[0] / L
-        else:
-            nx, ny = -jnp.sin(axes[k]), jnp.cos(axes[k])
-            for body, sign in ((j.b, 1.0), (j.a, -1.0)):
-                if body < 0:
-                    continue
-                r = P - ref[body]
-                A[3 * body][2 * k] = A[3 * body][2 * k] + sign * nx
-                A[3 * body + 1][2 * k] = A[3 * body + 1][2 * k] + sign * ny
-                A[3 * body + 2][2 * k] = A[3 * body + 2][2 * k] + sign * (r[0] * ny - r[1] * nx) / L
-                A[3 * body + 2][2 * k + 1] = A[3 * body + 2][2 * k + 1] + sign  # M/L
-    A[3 * mdl.input_body + 2][n - 1] = A[3 * mdl.input_body + 2][n - 1] + 1.0  # τ/L
+    # unit "wrench" of each unknown column of joint k: a force f (at P_k) and a moment m (already / L)
+    # revolute: (e_x, 0), (e_y, 0); prismatic: (n, 0), (0, 1) with n = (-sin a, cos a)
+    normal = jnp.stack([-jnp.sin(axes), jnp.cos(axes)], axis=-1)  # (nj, 2)
+    ex = jnp.broadcast_to(jnp.asarray([1.0, 0.0], dtype), (nj, 2))
+    ey = jnp.broadcast_to(jnp.asarray([0.0, 1.0], dtype), (nj, 2))
+    prism = st.prismatic[:, None]
+    f0 = jnp.where(prism, normal, ex)
+    f1 = jnp.where(prism, 0.0, ey)
+    fb = jnp.stack([f0, f1], axis=1)  # (nj, 2 columns, 2)
+    mb = jnp.stack([jnp.zeros((nj,), dtype), jnp.where(st.prismatic, 1.0, 0.0)], axis=1)  # (nj, 2)
+    if len(st.inc_joint):
+        k, i, sgn = st.inc_joint, st.inc_body, st.inc_sign
+        r = pts[k] - ref[i]  # (ni, 2)
+        f = fb[k]  # (ni, 2, 2)
+        mom = (r[:, None, 0] * f[..., 1] - r[:, None, 1] * f[..., 0]) / L + mb[k]  # (ni, 2)
+        vals = sgn[:, None, None] * jnp.stack([f[..., 0], f[..., 1], mom], axis=-1)  # (ni, 2 cols, 3 rows)
+        A = jnp.zeros((3 * nb, n), dtype).at[st.rows, st.cols].add(vals.reshape(-1))
+    else:
+        A = jnp.zeros((3 * nb, n), dtype)
+    A = A.at[3 * mdl.input_body + 2, n - 1].add(1.0)  # τ/L on the input body
 
     # right-hand side: Q = m c̈ − m g − F_ext;  J θ̈ − (c − r) × (m g − m c̈) − Σ (P − r) × F_ext − T_ext
-    ext_f = [jnp.zeros((2,), dtype) for _ in range(nb)]
-    ext_m = [zero for _ in range(nb)]
+    ext_f = jnp.zeros((nb + 1, 2), dtype)  # row nb collects what acts on the ground (dropped)
+    ext_m = jnp.zeros((nb + 1,), dtype)
+    ref_g = jnp.concatenate([ref, jnp.zeros((1, 2), dtype)])
 
-    def apply(body, point, f):
-        if body < 0:
-            return
-        ext_f[body] = ext_f[body] + f
-        ext_m[body] = ext_m[body] + _cross(point - ref[body], f)
+    def apply(ext_f, ext_m, body, point, force):
+        b = body if body >= 0 else nb
+        return ext_f.at[b].add(force), ext_m.at[b].add(_cross(point - ref_g[b], force))
 
-    for k, fl in enumerate(mdl.forces):
-        apply(fl.body, fpts[k], jnp.asarray(fl.force, dtype))
+    for kf, fl in enumerate(mdl.forces):
+        ext_f, ext_m = apply(ext_f, ext_m, fl.body, fpts[kf], jnp.asarray(fl.force, dtype))
     for tl in mdl.torques:
-        if tl.body >= 0:
-            ext_m[tl.body] = ext_m[tl.body] + tl.torque
-    for k, s in enumerate(mdl.springs):
-        start, end = spts[k, 0], spts[k, 1]
+        ext_m = ext_m.at[tl.body if tl.body >= 0 else nb].add(tl.torque)
+    for ks, sp in enumerate(mdl.springs):
+        start, end = spts[ks, 0], spts[ks, 1]
         d = end - start
         length = _safe_norm(d)
-        u = d / length
-        tension = s.preload + s.stiffness * (length - s.length)
-        apply(s.a, start, tension * u)  # pulls the first end towards the second
-        apply(s.b, end, -tension * u)
-    for i, b in enumerate(mdl.bodies):
-        gravity_minus_inertia = b.mass * g - b.mass * acc_c[i]
-        Q[3 * i] = -ext_f[i][0] - gravity_minus_inertia[0]
-        Q[3 * i + 1] = -ext_f[i][1] - gravity_minus_inertia[1]
-        Q[3 * i + 2] = (b.inertia * acc_th[i] - _cross(c[i] - ref[i], gravity_minus_inertia) - ext_m[i]) / L
-    A = jnp.stack([jnp.stack([jnp.asarray(x, dtype) for x in row]) for row in A])
-    Q = jnp.stack([jnp.asarray(x, dtype) for x in Q])
+        u = d / jnp.where(length > 0, length, 1.0)
+        tension = sp.preload + sp.stiffness * (length - sp.length)
+        ext_f, ext_m = apply(ext_f, ext_m, sp.a, start, tension * u)  # pulls the first end towards the second
+        ext_f, ext_m = apply(ext_f, ext_m, sp.b, end, -tension * u)
+    gmi = st.mass[:, None] * (g - acc_c)  # gravity minus inertia force, (nb, 2)
+    q_f = -ext_f[:nb] - gmi
+    q_m = (st.inertia * acc_th - _cross_rows(c - ref, gmi) - ext_m[:nb]) / L
+    Q = jnp.stack([q_f[:, 0], q_f[:, 1], q_m], axis=1).reshape(-1)
     return A, Q, L, axes
+
+
+class _Static(NamedTuple):
+    has_centroid: np.ndarray  # (nb,) bool
+    first_joint: np.ndarray  # (nb,) int: a joint of each body
+    prismatic: np.ndarray  # (nj,) bool
+    mass: np.ndarray  # (nb,)
+    inertia: np.ndarray  # (nb,)
+    inc_joint: np.ndarray  # (ni,) joint of each (joint, moving body) incidence
+    inc_body: np.ndarray  # (ni,)
+    inc_sign: np.ndarray  # (ni,) +1 on the joint's second body, −1 on its first
+    rows: np.ndarray  # (ni·2·3,) rows of A for the incidence values (ni, 2 columns, 3 rows)
+    cols: np.ndarray
+
+
+@functools.lru_cache(maxsize=64)
+def _static(mdl: _bodies.Model) -> _Static:
+    inc = [(k, body, sign) for k, j in enumerate(mdl.joints) for body, sign in ((j.b, 1.0), (j.a, -1.0))
+           if body >= 0]
+    k = np.array([e[0] for e in inc], dtype=np.int32)
+    i = np.array([e[1] for e in inc], dtype=np.int32)
+    rows = (3 * i[:, None, None] + np.arange(3)[None, None, :]) + np.zeros((1, 2, 1), np.int32)
+    cols = (2 * k[:, None, None] + np.arange(2)[None, :, None]) + np.zeros((1, 1, 3), np.int32)
+    first = [next(kk for kk, j in enumerate(mdl.joints) if bi in (j.a, j.b)) for bi in range(len(mdl.bodies))]
+    return _Static(
+        np.array([b.centroid is not None for b in mdl.bodies]), np.array(first, dtype=np.int32),
+        np.array([j.kind == "prismatic" for j in mdl.joints]),
+        np.array([b.mass for b in mdl.bodies]), np.array([b.inertia for b in mdl.bodies]),
+        k, i, np.array([e[2] for e in inc]), rows.reshape(-1), cols.reshape(-1))
+
+
+def _cross_rows(r, f):
+    return r[:, 0] * f[:, 1] - r[:, 1] * f[:, 0]
 
 
 def _safe_norm(d):
@@ -254,9 +272,9 @@ def reactions_one(mech: Mechanism, mdl: _bodies.Model, q, phi, p, omega, alpha=0
     if n <= UNROLL_MAX:
         x, ratio = solve_small(A, Q)
     else:
-        s = jnp.linalg.svd(A, compute_uv=False)
-        ratio = s[-1] / jnp.maximum(s[0], jnp.finfo(dtype).tiny)
-        x = jnp.linalg.solve(A, Q)
+        lu, piv = jax.scipy.linalg.lu_factor(A)
+        ratio = jnp.min(jnp.abs(jnp.diag(lu))) / jnp.maximum(jnp.max(jnp.abs(A)), jnp.finfo(dtype).tiny)
+        x = jax.scipy.linalg.lu_solve((lu, piv), Q)
     thr = default_singular_ratio(dtype) if singular_ratio is None else singular_ratio
     finite = jnp.all(jnp.isfinite(x))
     code = jnp.where(ratio < thr, KRESULTS.singular, jnp.where(finite, KRESULTS.ok, KRESULTS.nonfinite))
@@ -292,7 +310,8 @@ def reactions(mech: Mechanism, q, phis, p=None, *, omega, alpha=0.0, converged=N
     - `omega`, `alpha` (keyword-only): input speed (rad/s) and acceleration (rad/s²); traced.
     - `converged`: optional (…, N) bool from the position solve; positions that did not converge get
       `KRESULTS.not_assembled` and zeros.
-    - `singular_ratio`: σ_min/σ_max below which the system counts as singular (static).
+    - `singular_ratio`: pivot ratio below which the system counts as singular (static; default
+      max(1e-10, 1000 eps)).
 
     **Returns:** `Reactions` with leading axes (N,) or (B, N).
     """
