@@ -38,8 +38,9 @@ class ReactionsTable:
         return np.hypot(f[..., 0], f[..., 1])
 
 
-def reactions_table(mech, phis, *, omega: float, p=None, dtype=np.float64) -> ReactionsTable:
-    """Solve positions at `phis` (rad) and the reactions at input speed `omega` (rad/s)."""
+def reactions_table(mech, phis, *, omega: float, p=None, dtype=np.float64, degrees=None) -> ReactionsTable:
+    """Solve positions at `phis` (rad) and the reactions at input speed `omega` (rad/s). `degrees`:
+    the input angles as given (the `input_deg` column; default `phis` converted)."""
     from . import _bodies
     from ._kinetostatics import KRESULTS, solve_reactions
 
@@ -51,7 +52,7 @@ def reactions_table(mech, phis, *, omega: float, p=None, dtype=np.float64) -> Re
     force = np.where(ok[:, None, None], np.asarray(r.force, dtype=float), np.nan)
     torque = np.where(ok, np.asarray(r.torque, dtype=float), np.nan)
     cols = ["input_deg"]
-    data = [np.rad2deg(np.asarray(phis, dtype=float))]
+    data = [np.rad2deg(np.asarray(phis, dtype=float)) if degrees is None else np.asarray(degrees, dtype=float)]
     for k, name in enumerate(mdl.joint_names):
         cols += [f"{name}_Fx_N", f"{name}_Fy_N"]
         data += [force[:, k, 0], force[:, k, 1]]
@@ -139,7 +140,8 @@ def cmd_reactions(args) -> int:
     _bodies.model(mech)  # file errors first
     phis = inputs_from_args(mech, args)
     omega = omega_from_args(args)
-    table = reactions_table(mech, phis, omega=omega, dtype=dtype)
+    degrees = args.start + args.step * np.arange(len(phis))  # exactly as asked (no rad round trip)
+    table = reactions_table(mech, phis, omega=omega, dtype=dtype, degrees=degrees)
     if args.csv:
         write_csv(args.csv, table)
         print(f"wrote {args.csv}: {len(phis)} rows, {len(table.columns)} columns")

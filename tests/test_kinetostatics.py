@@ -1,5 +1,6 @@
-"""Kinetostatics: a hand-derived slider-crank, the power balance of every scene with mass, batches
-over designs, singular systems, unconverged positions."""
+"""Kinetostatics: a hand-derived slider-crank, the power balance of every scene with mass, the feed
+six-bar against the independent model of spec/feed-six-bar.md §3, batches over designs, singular
+systems, unconverged positions."""
 
 import functools
 
@@ -164,7 +165,36 @@ def test_power_balance(name, overrides, start, step, omega, alpha):
     assert err <= 1e-8 * np.abs(drive).max(), (err, np.abs(drive).max())
 
 
-# ----------------------------------------------------------------------------- batches, gradients, failures
+# ----------------------------------------------------------------------------- the feed six-bar
+
+# spec/feed-six-bar.md §3: peak |reaction| (N) and its crank angle on the 5° grid, and max |Mk| (N·m)
+SPEC_FEED = {
+    (2.0, 1.0, -10.0): ({"A": (20.6, 190), "B": (22.3, 195), "C": (4.96, 105), "D": (16.2, 195), "E": (28.4, 375),
+                         "F": (9.25, 375), "H": (2.63, 165)}, 0.019),
+    (2.1, 0.9, -10.0): ({"A": (21.7, 190), "B": (23.4, 195), "C": (4.44, 105), "D": (17.0, 195), "E": (29.6, 375),
+                         "F": (9.63, 375), "H": (2.66, 170)}, 0.021),
+}
+
+
+def test_feed_peak_reactions_match_the_independent_model():
+    mech = scene("sewing-feed", l2=2.0, l22=1.0, gamma=-10.0)  # as in test_power_balance: shared compiles
+    names = _bodies.model(mech).joint_names
+    phis = np.deg2rad(75.0 + 5.0 * np.arange(72))
+    for design, (peaks, torque) in SPEC_FEED.items():
+        p = mech.with_parameters(l2=design[0], l22=design[1], gamma=design[2])
+        _, r = solve_reactions(mech, phis, p, omega=575.0)
+        assert np.all(np.asarray(r.result) == KRESULTS.ok)
+        mags = np.linalg.norm(np.asarray(r.force), axis=-1)  # (72, joints)
+        for k, name in enumerate(names):
+            value, angle = peaks[name]
+            i = int(np.argmax(mags[:, k]))
+            assert abs(mags[i, k] - value) <= 0.01 * value, (design, name, mags[i, k], value)
+            assert abs(np.rad2deg(phis[i]) - angle) < 1e-9, (design, name, np.rad2deg(phis[i]), angle)
+        tmax = np.abs(np.asarray(r.torque)).max()
+        assert abs(tmax - torque) <= 0.01 * torque, (design, tmax, torque)
+
+
+# ----------------------------------------------------------------------------- batches, failures
 
 
 def test_batched_designs_match_single_designs():
