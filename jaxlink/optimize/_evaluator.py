@@ -1,0 +1,214 @@
+"""The one batched evaluator: designs → traced paths → objective, jitted, vmapped over designs,
+sharded over devices.
+
+A design is a vector u ∈ [0, 1]^V of normalized variables (x = lower + u (upper − lower) in file
+units) and a circuit index c (which branch signs of the dyads; 0 = the file's). For each design:
+
+1. p = the file's parameters with the variables replaced (SI);
+2. a starting configuration at the first input on the circuit (`_start.py`), gradient stopped;
+3. the path solve over the `samples` inputs (`jaxlink._assemble.solve_path`: closed-form dyads or
+   Newton continuation; differentiable in p by implicit differentiation);
+4. the point's path (and its input derivatives if the objective needs them, `_kinematics`);
+5. the objective. A design is *feasible* iff the start and every position converged; an
+   infeasible design gets the value +inf (never NaN), and it is counted.
+
+One *mechanism evaluation* = one design solved over its revolution (on one circuit: with
+`circuits = "all"` a design costs one evaluation per circuit).
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from .._assemble import NewtonOptions, default_rtol, solve_path
+from .._kinematics import transfer_one
+from ._objectives import OBJECTIVES, PathData, to_python
+from ._problem import Problem
+from ._sharding import design_sharding, pad_rows, put
+from ._start import circuit_signs, closed_form_start, continuation_start, dyads_of, file_configuration
+
+
+class Evaluator:
+    """Batched, jitted, sharded evaluation of designs for a `Problem`.
+
+    **Arguments:**
+
+    - `problem`: the parsed `[optimize]` problem.
+    - `chunk`: designs per compiled batch (keyword-only; batches are padded to it).
+    - `devices`: the devices to shard over (default: all).
+    """
+
+    def __init__(self, problem: Problem, *, chunk: int = 256, devices=None, options: NewtonOptions = NewtonOptions()):
+        self.problem = problem
+        mech = problem.mech
+        self.mech = mech
+        self.objective = OBJECTIVES.build(problem)
+        self.options = options
+        self.sharding = design_sharding(devices)
+        self.n_devices = len(self.sharding.mesh.devices.flat)
+        self.chunk = -(-chunk // self.n_devices) * self.n_devices
+        phi0 = float(problem.phis[0])
+        self.phi0 = phi0
+        self.q_file = file_configuration(mech, phi0)
+        self.dyads = dyads_of(mech)
+        method = problem.start_method
+        if method == "auto":
+            method = "closed_form" if self.dyads is not None else "continuation"
+        if method == "closed_form" and self.dyads is None:
+            raise problem.error("start_method = \"closed_form\" needs a mechanism made of dyads (RRR/RRP/PP "
+                                "blocks); use \"continuation\"", "start_method")
+        if problem.circuits == "all" and self.dyads is None:
+            raise problem.error("circuits = \"all\" needs a mechanism made of dyads; use \"file\"", "circuits")
+        self.start_method = method
+        if self.dyads is not None:
+            self.sigmas = circuit_signs(mech, self.q_file, phi0, all_circuits=problem.circuits == "all")
+        else:
+            self.sigmas = np.zeros((1, 0))
+        self.n_circuits = len(self.sigmas)
+        default_report = 7200 if problem.objective == "points" else len(problem.phis)
+        self.report_samples = int(problem.option("report_samples", default_report))
+        self.evaluations = 0  # mechanism evaluations made through this object
+        self.infeasible = 0
+
+    # ------------------------------------------------------------------ single design (traced)
+    def params(self, u):
+        pr = self.problem
+        x = jnp.asarray(pr.lower) + u * jnp.asarray(pr.upper - pr.lower)
+        p = jnp.asarray(self.mech.parameters, dtype=u.dtype)
+        return p.at[jnp.asarray(pr.index)].set(x * jnp.asarray(pr.factor))
+
+    def start(self, p, c):
+        dtype = p.dtype
+        tol = default_rtol(dtype) * self.mech.length_scale(p)
+        if self.start_method == "closed_form":
+            sigma = jnp.asarray(self.sigmas, dtype)[c]
+            return closed_form_start(self.mech, self.dyads, self.q_file, self.phi0, p, sigma, tol)
+        return continuation_start(self.mech, self.q_file, self.mech.parameters, self.phi0, p, tol)
+
+    def path(self, u, c, phis, order: int):
+        """(PathData in file units, feasible) of one design."""
+        p = self.params(u)
+        q0, ok0 = self.start(p, c)
+        q0 = jax.lax.stop_gradient(q0)
+        sol = solve_path(self.mech, p, phis, q0, options=self.options)
+        feasible = ok0 & jnp.all(sol.converged)
+        lf = self.mech.units.length
+        k = self.problem.point
+        t = jax.vmap(lambda q, ph: transfer_one(self.mech, q, ph, p, order))(sol.q, phis)
+        xy = t.points[:, k] / lf
+        dxy = None if t.dpoints is None else t.dpoints[:, k] / lf
+        ddxy = None if t.ddpoints is None else t.ddpoints[:, k] / lf
+        return PathData(xy, dxy, ddxy), feasible
+
+    def value_single(self, u, c):
+        """Exact objective of one design (+inf if infeasible) and its feasibility."""
+        phis = jnp.asarray(self.problem.phis, u.dtype)
+        path, feas = self.path(u, c, phis, self.objective.order)
+        v = self.objective.value(path)
+        ok = feas & jnp.isfinite(v)
+        return jnp.where(ok, v, jnp.inf), ok
+
+    def smooth_single(self, u, c):
+        """Smoothed objective of one design (+inf if infeasible): what the gradient search uses."""
+        phis = jnp.asarray(self.problem.phis, u.dtype)
+        path, feas = self.path(u, c, phis, self.objective.order)
+        v = self.objective.smooth(path)
+        ok = feas & jnp.isfinite(v)
+        return jnp.where(ok, v, jnp.inf)
+
+    # ------------------------------------------------------------------ batched (jitted)
+    @functools.cached_property
+    def _values_all_circuits(self):
+        def one(u):
+            cs = jnp.arange(self.n_circuits)
+            v, ok = jax.vmap(lambda c: self.value_single(u, c))(cs)
+            i = jnp.argmin(v)
+            return v[i], ok[i], i
+
+        return jax.jit(jax.vmap(one))
+
+    @functools.cached_property
+    def _values_given_circuit(self):
+        return jax.jit(jax.vmap(self.value_single))
+
+    def evaluate(self, U, circuits=None):
+        """Objective of a batch of designs.
+
+        **Arguments:** `U` (B, V) normalized designs; `circuits` (B,) circuit indices, or None:
+        the file's circuit, or with `circuits = "all"` the best circuit of each design.
+
+        **Returns:** dict of numpy arrays `value` (B,) (+inf if infeasible), `feasible` (B,),
+        `circuit` (B,). Counts `B × circuits tried` mechanism evaluations.
+        """
+        U = np.asarray(U, dtype=float)
+        B = len(U)
+        vals, oks, cs = [], [], []
+        for s in range(0, B, self.chunk):
+            part = U[s:s + self.chunk]
+            padded, n = pad_rows(part, self.chunk)
+            if circuits is None and self.n_circuits > 1:
+                v, ok, c = self._values_all_circuits(put(jnp.asarray(padded), self.sharding))
+                self.evaluations += n * self.n_circuits
+            else:
+                cc = np.zeros(len(part), int) if circuits is None else np.asarray(circuits[s:s + self.chunk])
+                cc, _ = pad_rows(cc, self.chunk)
+                v, ok = self._values_given_circuit(*put((jnp.asarray(padded), jnp.asarray(cc)), self.sharding))
+                c = cc
+                self.evaluations += n
+            vals.append(np.asarray(v)[:n])
+            oks.append(np.asarray(ok)[:n])
+            cs.append(np.asarray(c)[:n])
+        out = {
+            "value": np.concatenate(vals) if vals else np.zeros(0),
+            "feasible": np.concatenate(oks) if oks else np.zeros(0, bool),
+            "circuit": np.concatenate(cs) if cs else np.zeros(0, int),
+        }
+        self.infeasible += int((~out["feasible"]).sum())
+        return out
+
+    # ------------------------------------------------------------------ reports
+    def report(self, u, c: int = 0) -> dict:
+        """The exact objective and metrics of one design, re-solved with `report_samples` inputs
+        (the objective's own samples unless it is `points`)."""
+        u = jnp.asarray(u, dtype=float)
+        pr = self.problem
+        order = max(self.objective.order, self.objective.report_order)
+        path, feas = self._path_fn(int(c), self.report_samples, order)(u)
+        x = pr.to_file_units(np.asarray(u))
+        out = {
+            "parameters": {n: float(v) for n, v in zip(pr.names, x)},
+            "feasible": bool(feas),
+            "circuit": int(c),
+        }
+        if bool(feas):
+            out["objective"] = float(self.objective.value(path))
+            out["metrics"] = to_python(self.objective.metrics(path))
+        else:
+            out["objective"] = None
+            out["metrics"] = {}
+        return out
+
+    def path_points(self, u, c: int = 0, samples: int | None = None) -> np.ndarray:
+        """(N, 2) path of the point (file units) for plots."""
+        n = samples or self.report_samples
+        path, _ = self._path_fn(int(c), n, 0)(jnp.asarray(u, dtype=float))
+        return np.asarray(path.xy)
+
+    @functools.lru_cache(maxsize=16)
+    def _path_fn(self, c: int, samples: int, order: int):
+        phis = self.problem.phis[0] + 2 * np.pi * np.arange(samples) / samples
+        return jax.jit(lambda uu: self.path(uu, c, jnp.asarray(phis, uu.dtype), order))
+
+
+def evaluation_count_note() -> str:
+    return ("one evaluation = one design solved over its revolution on one circuit; a gradient "
+            "(value and gradient of one design) counts 2 (forward + backward pass)")
+
+
+def _isfinite(x) -> bool:
+    return math.isfinite(float(x))

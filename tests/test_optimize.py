@@ -1,0 +1,198 @@
+"""Design search: objectives against closed forms, the seed's published path figures, the
+literature reference errors, gradients against finite differences, the searches, infeasible
+designs, the CLI's JSON, and kill + resume."""
+
+import json
+import math
+import pathlib
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from jaxlink._errors import MechanismError
+from jaxlink._mechanism import load, loads
+from jaxlink.optimize import Evaluator, PathData, problem_from
+from jaxlink.optimize._objectives import OBJECTIVES
+from jaxlink.optimize._search import _u_of_v, _v_of_u, run
+
+ROOT = pathlib.Path(__file__).resolve().parents[1]
+CASES = ROOT / "experiments" / "fourbar_cases"
+BENCH = ROOT.parent / "shared" / "benchmarks" / "fourbar-path" / "fourbar_path_benchmarks.json"
+
+
+@pytest.fixture(scope="module")
+def feed():
+    return Evaluator(problem_from(load("sewing-feed-opt")), chunk=64)
+
+
+def _objective(kind, **options):
+    mech = load("sewing-feed-opt")
+    table = dict(mech.tables["optimize"], objective=kind, **options)
+    return OBJECTIVES.build(problem_from(mech, table))
+
+
+# ----------------------------------------------------------------------------- objectives
+
+
+def test_ellipse_objective_closed_forms():
+    obj = _objective("ellipse", axes=[2.5, 1.0])
+    t = 2 * np.pi * np.arange(36) / 36
+    # the target ellipse itself, anywhere: J = 0
+    ell = PathData(jnp.stack([3.0 + 2.5 * np.cos(t), -7.0 + 1.0 * np.sin(t)], axis=1))
+    assert float(obj.value(ell)) < 1e-28
+    # a circle of radius r: f = r²cos²/a² + r²sin²/b² − 1, J = mean f² (by hand)
+    r = 1.5
+    circ = PathData(jnp.stack([r * np.cos(t), r * np.sin(t)], axis=1))
+    f = r**2 * np.cos(t) ** 2 / 2.5**2 + r**2 * np.sin(t) ** 2 / 1.0**2 - 1
+    assert float(obj.value(circ)) == pytest.approx(np.mean(f**2), rel=1e-12)
+    assert float(obj.smooth(circ)) == pytest.approx(np.mean(f**2), rel=1e-12)
+
+
+def test_points_objective_against_circle_distance():
+    mech = load("sewing-feed-opt")
+    rng = np.random.default_rng(1)
+    targets = rng.normal(size=(7, 2)) * 2.0
+    table = dict(mech.tables["optimize"], objective="points", targets=targets.tolist(), smoothing=1e-4)
+    obj = OBJECTIVES.build(problem_from(mech, table))
+    n, r = 20000, 1.3
+    t = 2 * np.pi * np.arange(n) / n
+    path = PathData(jnp.stack([r * np.cos(t), r * np.sin(t)], axis=1))
+    exact = np.sum((np.hypot(*targets.T) - r) ** 2)  # distance to a circle in closed form
+    v = float(obj.value(path))
+    assert v == pytest.approx(exact, rel=1e-6)
+    s = float(obj.smooth(path))
+    assert s <= v + 1e-15 and s >= v - len(targets) * (1e-4 * 5) ** 2 * math.log(n) - 1e-12
+
+
+def test_feed_reproduces_published_path_figures(feed):
+    # seed 000 ch. 11: 2a = 5.1158 mm, centre (-10.6925, 55.27) from the l2 loop of the combined
+    # program (2.1 / 0.3 / 14°); 2b = 2.2676 mm and Δx = 0.235 mm (2.1 / 0.9 / 2°), l4 = 46, 36 points
+    pr = feed.problem
+    r1 = feed.report(pr.to_unit([2.1, 0.3, 14.0]))["metrics"]
+    assert r1["two_a"] == pytest.approx(5.1158, abs=6e-5)
+    assert r1["sx"] == pytest.approx(-10.6925, abs=1e-3)
+    assert r1["sy"] == pytest.approx(55.27, abs=5e-3)
+    r2 = feed.report(pr.to_unit([2.1, 0.9, 2.0]))["metrics"]
+    assert r2["two_b"] == pytest.approx(2.2676, abs=2e-4)
+    assert abs(r2["dx"]) == pytest.approx(0.235, abs=5e-4)
+
+
+@pytest.mark.skipif(not BENCH.exists(), reason="benchmarks/fourbar-path not available")
+@pytest.mark.parametrize("case", ["mkh2", "mcgarva"])
+def test_literature_case_files_reproduce_reference_error(case):
+    ref = json.loads(BENCH.read_text())[case]["ref_sse_nearest"]
+    pr = problem_from(load(CASES / f"{case}.toml"))
+    ev = Evaluator(pr, chunk=8)
+    rep = ev.report(pr.to_unit(pr.file_design()), 0)
+    # the polyline through 7200 samples vs the nearest of 72,000 sampled points (independent): the
+    # polyline is closer to the true curve than any sample, so ours is a little smaller
+    assert ref * (1 - 1e-4) <= rep["objective"] <= ref * (1 + 1e-9)
+
+
+# ----------------------------------------------------------------------------- evaluator
+
+
+def test_infeasible_designs_are_counted_never_nan():
+    # a four-bar whose crank must turn fully: feasible iff Grashof with the crank shortest
+    text = (ROOT / "jaxlink" / "scenes" / "four-bar.toml").read_text() + """
+[optimize]
+point = "P"
+variables = { a = [5, 60], b = [20, 90] }
+samples = 24
+objective = "points"
+targets = [[30, 40], [10, 50]]
+"""
+    pr = problem_from(loads(text, file="four-bar-opt.toml"))
+    ev = Evaluator(pr, chunk=128)
+    rng = np.random.default_rng(0)
+    U = rng.random((256, 2))
+    res = ev.evaluate(U)
+    x = pr.to_file_units(U)
+    a, b, c, d = x[:, 0], x[:, 1], 45.0, 55.0
+    lengths = np.stack([a, b, np.full_like(a, c), np.full_like(a, d)], axis=1)
+    s, l = lengths.min(1), lengths.max(1)
+    grashof_crank = (a == s) & (s + l <= lengths.sum(1) - s - l)
+    assert not np.any(np.isnan(res["value"]))
+    assert np.array_equal(res["feasible"], grashof_crank)  # no design wrongly infeasible (or feasible)
+    assert np.all(np.isinf(res["value"][~res["feasible"]]))
+    assert 0.2 < (~res["feasible"]).mean() < 0.95
+
+
+def test_gradient_matches_finite_differences(feed):
+    from jaxlink.optimize._search import Gradient
+
+    g = Gradient(feed, budget=100, seed=0, starts=2)
+    v = jnp.asarray(_v_of_u(feed.problem.to_unit(np.array([[2.0, 0.7, 5.0], [2.6, 1.3, -8.0]]))))
+    c = jnp.zeros(2, int)
+    value, grad = g._vg(v, c)
+    f = jax.jit(jax.vmap(lambda vv, cc: feed.smooth_single(_u_of_v(vv), cc)))
+    h = 1e-6
+    for j in range(3):
+        e = jnp.zeros(3).at[j].set(h)
+        fd = (f(v + e, c) - f(v - e, c)) / (2 * h)
+        np.testing.assert_allclose(np.asarray(grad[:, j]), np.asarray(fd), rtol=1e-6, atol=1e-10)
+
+
+# ----------------------------------------------------------------------------- searches
+
+
+def test_gradient_beats_sampling_with_ten_times_fewer_evaluations(feed):
+    mc = run(feed, "montecarlo", budget=4000, seed=3)
+    grid = run(feed, "uniform", budget=4000, seed=3)
+    gr = run(feed, "gradient", budget=400, seed=3, starts=8)
+    assert gr["evaluations"] <= 400
+    assert gr["best"]["objective"] <= min(mc["best"]["objective"], grid["best"]["objective"])
+    # the stationary point found satisfies the seed's bounds on the path
+    m = gr["best"]["metrics"]
+    assert 4.9 < m["two_a"] < 5.1 and 1.9 < m["two_b"] < 2.1
+
+
+@pytest.mark.parametrize("method", ["montecarlo", "gradient"])
+def test_killed_and_resumed_search_ends_with_the_same_best(feed, tmp_path, method):
+    kw = dict(budget=300, seed=7, starts=4) if method == "gradient" else dict(budget=300, seed=7)
+    whole = run(feed, method, out=tmp_path / "whole.json", **kw)
+    part = run(feed, method, out=tmp_path / "part.json", stop_after_chunks=2, **kw)
+    assert not part["complete"]
+    assert json.loads((tmp_path / "part.json").read_text())["complete"] is False
+    done = run(feed, method, out=tmp_path / "part.json", resume=True, **kw)
+    assert done["complete"]
+    assert done["evaluations"] == whole["evaluations"]
+    assert done["best"]["parameters"] == whole["best"]["parameters"]
+    assert done["best"]["objective"] == whole["best"]["objective"]
+    log = [json.loads(x) for x in (tmp_path / "part.log.jsonl").read_text().splitlines()]
+    assert [r["chunk"] for r in log] == list(range(1, len(log) + 1))  # nothing lost or repeated
+
+
+# ----------------------------------------------------------------------------- files and CLI
+
+
+def test_bad_optimize_sections_name_the_key():
+    mech = load("sewing-feed-opt")
+    bad = [
+        ({"variables": {"l9": [0, 1]}}, "variables.l9"),
+        ({"variables": {"l2": [3, 1]}}, "variables.l2"),
+        ({"objective": "nope"}, "objective"),
+        ({"point": "Q"}, "point"),
+        ({"samples": 2}, "samples"),
+        ({"colour": 1}, "colour"),
+    ]
+    for override, key in bad:
+        with pytest.raises(MechanismError) as exc:
+            problem_from(mech, override)
+        assert exc.value.key == "optimize." + key
+
+
+def test_cli_writes_the_spec_json(tmp_path, capsys):
+    from jaxlink.cli import main
+
+    out = tmp_path / "r.json"
+    assert main(["optimize", "sewing-feed-opt", "--method", "montecarlo", "--budget", "64",
+                 "--chunk", "64", "--out", str(out), "--progress", "off"]) == 0
+    data = json.loads(out.read_text())
+    for key in ("method", "best", "evaluations", "wall_s", "infeasible_fraction"):
+        assert key in data
+    assert set(data["best"]["parameters"]) == {"l2", "l22", "gamma"}
+    assert data["evaluations"] == 64 and data["method"] == "montecarlo"
+    assert main(["optimize", "four-bar", "--method", "uniform"]) == 2  # no [optimize] section
