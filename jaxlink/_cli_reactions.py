@@ -42,11 +42,18 @@ def reactions_table(mech, phis, *, omega: float, p=None, dtype=np.float64, degre
     """Solve positions at `phis` (rad) and the reactions at input speed `omega` (rad/s). `degrees`:
     the input angles as given (the `input_deg` column; default `phis` converted)."""
     from . import _bodies
-    from ._kinetostatics import KRESULTS, solve_reactions
+    from ._errors import MechanismError
+    from ._kinetostatics import KRESULTS, rigidity_errors, solve_reactions
 
     mdl = _bodies.model(mech)
     p = np.asarray(mech.parameters if p is None else p, dtype=dtype)
-    _, r = solve_reactions(mech, np.asarray(phis, dtype=dtype), p, omega=omega)
+    sol, r = solve_reactions(mech, np.asarray(phis, dtype=dtype), p, omega=omega)
+    conv = np.asarray(sol.converged)
+    if conv.sum() >= 2:
+        errors = rigidity_errors(mech, np.asarray(sol.q)[conv], np.asarray(phis)[conv], p)
+        if errors:
+            raise MechanismError("the bodies do not move rigidly with the kinematics: " + "; ".join(errors),
+                                 file=mech.file, key="bodies")
     res = np.asarray(r.result)
     ok = res == KRESULTS.ok
     force = np.where(ok[:, None, None], np.asarray(r.force, dtype=float), np.nan)

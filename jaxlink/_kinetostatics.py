@@ -356,3 +356,65 @@ def solve_reactions(mech: Mechanism, phis, p=None, *, omega, alpha=0.0, singular
     pp = mech.parameters if p is None else p
     return sol, reactions(mech, sol.q, phis, pp, omega=omega, alpha=alpha, converged=sol.converged,
                           singular_ratio=singular_ratio)
+
+
+# ----------------------------------------------------------------------------- consistency of the file
+
+
+@functools.lru_cache(maxsize=64)
+def _jitted_points(mech, mdl):
+    def one(q, phi, p):
+        c, a = motion(mech, mdl, q, phi, p)
+        pts, _, fpts, spts = _geometry(mech, mdl, q, phi, p)
+        return c, a, pts, fpts, spts
+
+    return jax.jit(jax.vmap(one, in_axes=(0, 0, None)))
+
+
+def rigidity_errors(mech: Mechanism, q, phis, p=None, *, rtol: float = 1e-7) -> list:
+    """Check that the points the file attaches to each body move with it: its revolute joints, its
+    centroid and the points where loads act on it. For a body with an `angle`, their coordinates in
+    the body's frame (rotated by −angle, relative to the first point) must stay constant over the
+    positions; for a body without one, their mutual distances. Returns messages (empty if all is
+    well) naming the body, the point and how much it drifts; tolerance `rtol` × the length scale.
+    A prismatic joint's point slides on one of its bodies and is not checked. `q` (N, n) converged."""
+    mdl = _bodies.model(mech)
+    p = np.asarray(mech.parameters if p is None else p)
+    c, a, pts, fpts, spts = (np.asarray(x) for x in _jitted_points(mech, mdl)(
+        jnp.asarray(q), jnp.asarray(phis, dtype=jnp.asarray(q).dtype), jnp.asarray(p)))
+    scale = float(mech.length_scale(jnp.asarray(p)))
+    unit = mech.units.length
+    lu = {1.0: "m", 1e-3: "mm", 1e-2: "cm"}.get(unit, "m")
+    out = []
+    for i, b in enumerate(mdl.bodies):
+        named = []
+        for k, j in enumerate(mdl.joints):
+            if j.kind == "revolute" and i in (j.a, j.b):
+                named.append((f"joint {j.name}", pts[:, k]))
+        if b.centroid is not None:
+            named.append(("the centroid", c[:, i]))
+        for k, f in enumerate(mdl.forces):
+            if f.body == i:
+                named.append((f"load {f.name}", fpts[:, k]))
+        for k, s in enumerate(mdl.springs):
+            for end, body in ((0, s.a), (1, s.b)):
+                if body == i:
+                    named.append((f"spring {s.name} ({'from' if end == 0 else 'to'})", spts[:, k, end]))
+        if len(named) < 2:
+            continue
+        ref_name, ref = named[0]
+        for name, P in named[1:]:
+            d = P - ref
+            if b.angle is not None:
+                ca, sa = np.cos(a[:, i]), np.sin(a[:, i])
+                local = np.stack([ca * d[:, 0] + sa * d[:, 1], -sa * d[:, 0] + ca * d[:, 1]], axis=1)
+                drift = np.max(np.ptp(local, axis=0))
+                what = f"its position relative to {ref_name}, in the frame turned by the body's angle, changes"
+            else:
+                dist = np.hypot(d[:, 0], d[:, 1])
+                drift = np.ptp(dist)
+                what = f"its distance from {ref_name} changes"
+            if drift > rtol * scale:
+                out.append(f"{name} is not fixed in body '{b.name}': {what} by {drift / unit:.4g} {lu} over the "
+                           "positions (check its vector sum, and the body's angle)")
+    return out

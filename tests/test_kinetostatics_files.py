@@ -3,6 +3,7 @@
 import subprocess
 import sys
 
+import numpy as np
 import pytest
 
 from jaxlink import _bodies
@@ -123,3 +124,23 @@ def test_files_without_bodies_still_load_and_reactions_says_why(tmp_path):
     r = subprocess.run([sys.executable, "-m", "jaxlink.cli", "reactions", "four-bar"], capture_output=True, text=True)
     assert r.returncode == 2
     assert "four-bar.toml" in r.stderr and "[bodies]" in r.stderr and "no bodies" in r.stderr
+
+
+def test_points_that_do_not_move_with_their_body_are_named(tmp_path):
+    from jaxlink._assemble import solve
+    from jaxlink._kinetostatics import rigidity_errors
+
+    mdl, path = model_of(tmp_path, BASE)
+    mech = load(path)
+    phis = np.deg2rad(np.arange(0.0, 360.0, 30.0))
+    assert rigidity_errors(mech, solve(mech, phis).q, phis) == []
+    # the rod's centroid written without the crank: it is then not on the rod
+    bad = BASE.replace('centroid = ["h2 @ psi12", "h3/2 @ psi13"]', 'centroid = ["h3/2 @ psi13"]')
+    path2 = tmp_path / "bad.toml"
+    path2.write_text(bad)
+    mech = load(str(path2))
+    errors = rigidity_errors(mech, solve(mech, phis).q, phis)
+    assert len(errors) == 1 and "the centroid is not fixed in body 'rod'" in errors[0]
+    # the missing crank vector (25 mm) turns in the rod's frame: it drifts by about its diameter
+    drift = float(errors[0].split("changes by ")[1].split(" mm")[0])
+    assert 45.0 < drift <= 50.0
