@@ -371,15 +371,19 @@ def _jitted_points(mech, mdl):
     return jax.jit(jax.vmap(one, in_axes=(0, 0, None)))
 
 
-def rigidity_errors(mech: Mechanism, q, phis, p=None, *, rtol: float = 1e-7) -> list:
+def rigidity_errors(mech: Mechanism, q, phis, p=None, *, rtol: float | None = None) -> list:
     """Check that the points the file attaches to each body move with it: its revolute joints, its
     centroid and the points where loads act on it. For a body with an `angle`, their coordinates in
     the body's frame (rotated by −angle, relative to the first point) must stay constant over the
     positions; for a body without one, their mutual distances. Returns messages (empty if all is
-    well) naming the body, the point and how much it drifts; tolerance `rtol` × the length scale.
+    well) naming the body, the point and how much it drifts; tolerance `rtol` × the length scale
+    (default max(1e-7, 1000 eps) of the dtype of `q`).
     A prismatic joint's point slides on one of its bodies and is not checked. `q` (N, n) converged."""
     mdl = _bodies.model(mech)
-    p = np.asarray(mech.parameters if p is None else p)
+    q = jnp.asarray(q)
+    if rtol is None:
+        rtol = max(1e-7, 1e3 * float(jnp.finfo(q.dtype).eps))
+    p = np.asarray(mech.parameters if p is None else p, dtype=q.dtype)
     c, a, pts, fpts, spts = (np.asarray(x) for x in _jitted_points(mech, mdl)(
         jnp.asarray(q), jnp.asarray(phis, dtype=jnp.asarray(q).dtype), jnp.asarray(p)))
     scale = float(mech.length_scale(jnp.asarray(p)))
