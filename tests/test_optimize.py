@@ -80,7 +80,7 @@ def test_feed_reproduces_published_path_figures(feed):
 
 
 @pytest.mark.skipif(not BENCH.exists(), reason="benchmarks/fourbar-path not available")
-@pytest.mark.parametrize("case", ["mkh2", "mcgarva"])
+@pytest.mark.parametrize("case", ["mcgarva"])  # its literature solution is on circuit c2
 def test_literature_case_files_reproduce_reference_error(case):
     ref = json.loads(BENCH.read_text())[case]["ref_sse_nearest"]
     pr = problem_from(load(CASES / f"{case}.toml"))
@@ -123,9 +123,10 @@ targets = [[30, 40], [10, 50]]
 def test_gradient_matches_finite_differences(feed):
     from jaxlink.optimize._search import Gradient
 
-    g = Gradient(feed, budget=100, seed=0, starts=2)
-    v = jnp.asarray(_v_of_u(feed.problem.to_unit(np.array([[2.0, 0.7, 5.0], [2.6, 1.3, -8.0]]))))
-    c = jnp.zeros(2, int)
+    g = Gradient(feed, budget=100, seed=0, starts=4)
+    designs = [[2.0, 0.7, 5.0], [2.6, 1.3, -8.0], [1.0, 3.0, 25.0], [3.5, 0.2, -29.0]]
+    v = jnp.asarray(_v_of_u(feed.problem.to_unit(np.array(designs))))
+    c = jnp.zeros(4, int)
     value, grad = g._vg(v, c)
     f = jax.jit(jax.vmap(lambda vv, cc: feed.smooth_single(_u_of_v(vv), cc)))
     h = 1e-6
@@ -139,10 +140,10 @@ def test_gradient_matches_finite_differences(feed):
 
 
 def test_gradient_beats_sampling_with_ten_times_fewer_evaluations(feed):
-    mc = run(feed, "montecarlo", budget=4000, seed=3)
-    grid = run(feed, "uniform", budget=4000, seed=3)
-    gr = run(feed, "gradient", budget=400, seed=3, starts=8)
-    assert gr["evaluations"] <= 400
+    mc = run(feed, "montecarlo", budget=2000, seed=3)
+    grid = run(feed, "uniform", budget=2000, seed=3)
+    gr = run(feed, "gradient", budget=200, seed=3, starts=4)
+    assert gr["evaluations"] <= 200
     assert gr["best"]["objective"] <= min(mc["best"]["objective"], grid["best"]["objective"])
     # the stationary point found satisfies the seed's bounds on the path
     m = gr["best"]["metrics"]
@@ -196,3 +197,91 @@ def test_cli_writes_the_spec_json(tmp_path, capsys):
     assert set(data["best"]["parameters"]) == {"l2", "l22", "gamma"}
     assert data["evaluations"] == 64 and data["method"] == "montecarlo"
     assert main(["optimize", "four-bar", "--method", "uniform"]) == 2  # no [optimize] section
+
+
+# ----------------------------------------------------------------------------- starts, sharding
+
+_SHARDED = r"""
+import json
+import jax
+jax.config.update("jax_enable_x64", True)
+assert len(jax.devices()) == 4, jax.devices()
+from jaxlink._mechanism import load
+from jaxlink.optimize import Evaluator, problem_from
+from jaxlink.optimize._search import searcher
+ev = Evaluator(problem_from(load("sewing-feed-opt")), chunk=64)
+assert ev.n_devices == 4
+s = searcher(ev, "montecarlo", budget=256, seed=11)
+st = s.init()
+while not s.done(st):
+    st = s.step(st)
+print(json.dumps([st["best_u"].tolist(), float(st["best_value"]), int(st["evaluations"])]))
+"""
+
+
+def test_sharded_run_equals_single_device_run(feed):
+    import os
+    import subprocess
+    import sys
+
+    from jaxlink.optimize._search import searcher
+
+    env = dict(os.environ, XLA_FLAGS="--xla_force_host_platform_device_count=4", JAX_PLATFORMS="cpu")
+    proc = subprocess.run([sys.executable, "-c", _SHARDED], env=env, capture_output=True, text=True,
+                          timeout=300, cwd=ROOT)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    best_u, best_value, evaluations = json.loads(proc.stdout.strip().splitlines()[-1])
+    assert feed.n_devices == 1
+    s = searcher(feed, "montecarlo", budget=256, seed=11)
+    st = s.init()
+    while not s.done(st):
+        st = s.step(st)
+    assert evaluations == int(st["evaluations"]) == 256
+    np.testing.assert_array_equal(np.asarray(best_u), st["best_u"])
+    assert best_value == pytest.approx(float(st["best_value"]), rel=1e-13)
+
+
+def _feed_assemblable(l2, l22, gamma, p, sigma1, phis):
+    """Independent numpy check: both dyads of the feed six-bar close at every input, with the
+    lever dyad on branch sigma1 (circle-circle intersections, spec/feed-six-bar.md)."""
+    ok = np.ones(len(l2), bool)
+    E = np.array([p["l8"], p["l7"]])
+    for phi in phis:
+        B = l2[:, None] * np.array([np.cos(phi), np.sin(phi)])
+        w = E - B
+        r = np.hypot(*w.T)
+        x = (r**2 + p["l3"] ** 2 - p["l44"] ** 2) / (2 * r)
+        h2 = p["l3"] ** 2 - x**2
+        ok &= h2 >= 0
+        h = np.sqrt(np.maximum(h2, 0))
+        D = B + (x[:, None] * w + sigma1 * h[:, None] * np.stack([-w[:, 1], w[:, 0]], 1)) / r[:, None]
+        F = D + p["l4"] / p["l44"] * (E - D)
+        C = -l22[:, None] * np.stack([np.cos(phi + gamma), np.sin(phi + gamma)], 1)
+        dist = np.hypot(*(C - F).T)
+        ok &= (dist <= p["l5"] + p["l6"]) & (dist >= abs(p["l5"] - p["l6"]))
+    return ok
+
+
+def test_continuation_start_rarely_declares_assemblable_designs_infeasible(feed):
+    # ground truth: the independent numpy circle intersections on the file's lever branch; the
+    # continuation in the parameters must agree (and the closed-form start exactly)
+    mech = load("sewing-feed-opt")
+    table = dict(mech.tables["optimize"], start_method="continuation",
+                 variables={"l2": [0.0, 25.0], "l22": [0.0, 25.0], "gamma": [-180.0, 180.0]})
+    pr = problem_from(mech, table)
+    cont = Evaluator(pr, chunk=512)
+    U = np.random.default_rng(5).random((512, 3))
+    x = pr.to_file_units(U)
+    p = {n: mech.from_si(n, v) for n, v in zip(mech.parameter_names, mech.parameters)}
+    q = cont.q_file  # the file's configuration at the first input: its lever-dyad branch
+    B = p["l2"] * np.array([np.cos(pr.phis[0]), np.sin(pr.phis[0])])
+    D = B + p["l3"] * np.array([np.cos(q[0]), np.sin(q[0])])
+    E = np.array([p["l8"], p["l7"]])
+    u, v = E - B, D - B
+    sigma1 = np.sign(u[0] * v[1] - u[1] * v[0])
+    truth = _feed_assemblable(x[:, 0], x[:, 1], np.deg2rad(x[:, 2]), p, sigma1, pr.phis)
+    assert 0.05 < (~truth).mean() < 0.95  # the box does reach unassemblable designs
+    b = cont.evaluate(U)
+    wrongly = truth & ~b["feasible"]
+    assert not np.any(b["feasible"] & ~truth)
+    assert wrongly.mean() <= 0.01, wrongly.mean()

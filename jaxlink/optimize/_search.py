@@ -283,7 +283,7 @@ class Gradient:
 
     def _start_lbfgs(self, st):
         ok = np.isfinite(st["pool_value"])
-        if not ok.any():
+        if not ok.any() or int(st["evaluations"]) + 3 * self.S > self.budget:
             st["done"] = np.bool_(True)
             return
         # starts not found feasible: repeat the best ones (they then move alike; harmless)
@@ -320,7 +320,8 @@ class Gradient:
         searching = st["active"].copy()
         new_v, new_f, new_g = v.copy(), f.copy(), g.copy()
         for _ in range(self.linesearch_steps):
-            if not searching.any() or int(st["evaluations"]) + 2 * self.S > self.budget:
+            # a trial costs 2S; S more are kept for the exact evaluation at the end of the chunk
+            if not searching.any() or int(st["evaluations"]) + 3 * self.S > self.budget:
                 break
             trial = np.where(searching[:, None], v + t[:, None] * d, v)
             tf, tg = self._value_and_grad(st, trial)
