@@ -14,8 +14,8 @@ components (F_x, F_y) for a revolute joint at P_j; for a prismatic joint, a norm
 the left normal n = (−sin a, cos a) of its axis a, at P_j, and a moment M. The drive torque τ acts
 on the input body (from the ground). Unknowns F_S = (F_1x, F_1y, …, τ) number 2·joints + 1, equations
 3·bodies; they agree when Grübler's mobility is 1 (checked when the file is read). The accelerations
-come from the transfer functions: c̈ = c'' ω² + c' α (c' = dc/dφ, c'' = d²c/dφ²; see
-`_kinematics`), likewise θ̈. Moment rows and moment unknowns are scaled by the mechanism's length
+come from the transfer functions μ = dq/dφ, ν = d²q/dφ² (as in `_kinematics`): c̈ = c'' ω² + c' α with
+c' = dc/dφ, c'' = d²c/dφ² by forward AD along the solution curve, likewise θ̈. Moment rows and moment unknowns are scaled by the mechanism's length
 scale so that A_S is O(1) in any unit.
 
 Power balance (a check, `tests/test_kinetostatics.py`): τ ω + Σ P_loads = d(T + V_gravity + V_springs)/dt.
@@ -39,7 +39,6 @@ import numpy as np
 from . import _bodies, _expr
 from ._assemble import solve
 from ._expr import ANGLE
-from ._kinematics import transfer_one
 from ._linalg import UNROLL_MAX, solve_small
 from ._mechanism import Mechanism
 
@@ -136,13 +135,27 @@ def _d1_d2(f, x, v, w):
     return val, d1, d2
 
 
+def transfer_functions(mech: Mechanism, q, phi, p):
+    """μ = dq/dφ and ν = d²q/dφ² at one solved position (as `_kinematics.transfer_one`, without the
+    points): Φ_q μ = −Φ_φ,  Φ_q ν = −d²/ds² Φ(q + sμ, φ + s)."""
+    res = lambda qq, ph: mech.residual(qq, ph, p)  # noqa: E731
+    jac = jax.jacfwd(res, argnums=0)(q, phi)
+    one = jnp.ones_like(phi)
+    phi_t = jax.jvp(lambda ph: res(q, ph), (phi,), (one,))[1]
+    mu, _ = solve_small(jac, phi_t)
+    mu = -mu
+    _, _, gamma = _d1_d2(res, (q, phi), (mu, one), (jnp.zeros_like(q), jnp.zeros_like(phi)))
+    nu, _ = solve_small(jac, gamma)
+    return mu, -nu
+
+
 def body_kinematics(mech: Mechanism, mdl: _bodies.Model, q, phi, p):
     """Centroids and angles with their first and second derivatives with respect to the input:
     `((c, c', c''), (θ, θ', θ''))`, shapes (nb, 2) and (nb,)."""
-    t = transfer_one(mech, q, phi, p, 2)
+    mu, nu = transfer_functions(mech, q, phi, p)
     one = jnp.ones_like(phi)
-    (c, a), (c1, a1), (c2, a2) = _d1_d2(lambda qq, ph: motion(mech, mdl, qq, ph, p), (q, phi), (t.mu, one),
-                                        (t.nu, jnp.zeros_like(phi)))
+    (c, a), (c1, a1), (c2, a2) = _d1_d2(lambda qq, ph: motion(mech, mdl, qq, ph, p), (q, phi), (mu, one),
+                                        (nu, jnp.zeros_like(phi)))
     return (c, c1, c2), (a, a1, a2)
 
 
