@@ -28,9 +28,10 @@ def slider_crank_hand(phi, omega):
     """Newton–Euler by hand for the scene slider-crank-mass (offset h1, crank h2, rod h3, guide along x):
     returns the forces at O (on crank), A (on rod), B (on slider), the guide's normal force (on the
     slider) and the drive torque. Massive crank (centroid h2/3), rod (centroid h3/2, J3) and slider,
-    gravity −y, working force −200 N along x, spring from (200, 12) mm to B."""
+    gravity −y, working force −200 N along x, a 2 N·m moment on the rod, spring from (200, 12) mm to B."""
     h1, h2, h3 = 0.012, 0.025, 0.080
     m2, m3, J3, m4 = 0.3, 0.5, 2.6667e-4, 0.8
+    T_rod = 2.0
     e = lambda a: np.array([np.cos(a), np.sin(a)])  # noqa: E731
     en = lambda a: np.array([-np.sin(a), np.cos(a)])  # noqa: E731
     cross = lambda a, b: a[0] * b[1] - a[1] * b[0]  # noqa: E731
@@ -48,11 +49,11 @@ def slider_crank_hand(phi, omega):
     tension = 10.0 + 500.0 * (abs(d) - 0.060)
     f_spring_x = -tension * np.sign(d)  # the spring pulls B towards (200, 12) mm
     FBx = m4 * xBdd + 200.0 - f_spring_x
-    # rod: F_A - F_B + m3 g = m3 aG3;  moments about G3: -h3/2 e x F_A - h3/2 e x F_B = J3 psidd
+    # rod: F_A - F_B + m3 g = m3 aG3;  moments about G3: -h3/2 e x F_A - h3/2 e x F_B + T_rod = J3 psidd
     K = m3 * (aG3 - gv)  # F_A = F_B + K
     u = e(psi)
-    # -(h3/2) u x (F_B + K) - (h3/2) u x F_B = J3 psidd  ->  -h3 u x F_B = J3 psidd + (h3/2) u x K
-    rhs = -(J3 * psidd + (h3 / 2) * cross(u, K)) / h3  # = u x F_B = u0 FBy - u1 FBx
+    # -(h3/2) u x (F_B + K) - (h3/2) u x F_B + T_rod = J3 psidd  ->  -h3 u x F_B = J3 psidd + (h3/2) u x K - T_rod
+    rhs = -(J3 * psidd + (h3 / 2) * cross(u, K) - T_rod) / h3  # = u x F_B = u0 FBy - u1 FBx
     FBy = (rhs + u[1] * FBx) / u[0]
     FB = np.array([FBx, FBy])
     N = m4 * G - FBy

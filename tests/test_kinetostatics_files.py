@@ -40,6 +40,7 @@ def test_the_scene_parses_into_bodies_joints_and_loads(tmp_path):
         ("O", "revolute", -1, 0), ("A", "revolute", 0, 1), ("B", "revolute", 1, 2), ("guide", "prismatic", -1, 2)]
     assert mdl.bodies[1].mass == 0.5 and mdl.bodies[1].inertia == 2.6667e-4
     assert mdl.forces[0].force == (-200.0, 0.0)
+    assert (mdl.torques[0].body, mdl.torques[0].torque) == (1, 2.0)
     spring = mdl.springs[0]
     assert (spring.a, spring.b, spring.stiffness, spring.preload) == (-1, 2, 500.0, 10.0)
     assert spring.length == pytest.approx(0.060)  # mm in the file, SI inside
