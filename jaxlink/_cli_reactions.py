@@ -106,7 +106,7 @@ def plot(path: str, mech, table: ReactionsTable) -> None:
     fig, (ax, ax2) = plt.subplots(2, 1, figsize=(9, 7), sharex=True, gridspec_kw={"height_ratios": [2, 1]})
     styles = ("-", "--", "-.", ":")  # two-force members give equal curves: keep them visible
     for k, name in enumerate(table.joint_names):
-        ax.plot(ang, mags[:, k], styles[(k // 10) % 4] if k >= 10 else styles[k % 4], label=name, lw=1.6)
+        ax.plot(ang, mags[:, k], styles[k % 4], label=name, lw=1.6)
     ax.set_ylabel("reaction |F| (N)")
     ax.set_title(f"{mech.name}: joint reactions, ω = {table.omega:g} rad/s")
     ax.grid(alpha=0.3)
