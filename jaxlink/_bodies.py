@@ -51,7 +51,6 @@ import functools
 import math
 import pathlib
 
-import numpy as np
 
 from . import _expr
 from ._errors import MechanismError
