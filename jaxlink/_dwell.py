@@ -294,3 +294,278 @@ def grashof_margin(mech, p):
     shortest_other = jnp.min(others, axis=-1)
     margin = jnp.sum(others, axis=-1) - longest - crank - longest  # (p + q) − (s + l)
     return jnp.minimum(margin, shortest_other - crank) / crank
+
+
+# ----------------------------------------------------------------------------- the `dwell` objective
+
+#: `[optimize]` keys of the dwell objective (file units: mm, degrees) and their defaults.
+DWELL_OPTIONS = {
+    "stroke": 20.0,            # required stroke h (file length units)
+    "stroke_tol": 0.01,        # |h − stroke| allowed in the exact check (file length units)
+    "dwell_weight": 0.3,       # objective: maximize dwell(abs_tol) + dwell_weight · dwell(1 %)
+    "abs_tol": 0.05,           # the absolute band (file length units), 0.05 mm
+    "mu_min": 40.0,            # transmission angle ≥ (deg)
+    "rod_max": 45.0,           # rod (pressure) angle ≤ (deg)
+    "toggle_min": 1.0,         # toggle clearance ≥ (deg)
+    "amax_max": 1.95,          # peak |s''| / l2 ≤
+    "sign_changes": 2,         # acceleration sign changes per revolution (exactly)
+    "penalty": 10.0,           # weight ρ of the squared, normalized constraint violations
+}
+# normalization of each constraint violation in the penalty, and the margin the smooth search
+# keeps inside each inequality so that the quadratic penalty's optimum is exactly feasible
+_SCALE = {"stroke": 0.2, "mu": 10.0, "rod": 10.0, "toggle": 1.0, "amax": 0.1, "grashof": 0.1, "sign": 1.0}
+_MARGIN = {"mu": 0.05, "rod": 0.05, "toggle": 0.01, "amax": 0.002, "grashof": 0.0}
+
+
+def _relu(x):
+    return jnp.maximum(x, 0.0)
+
+
+def _sign_surrogate(s, dds):
+    """Smooth stand-in for "exactly 2 sign changes of s''": s'' should be ≤ 0 on the upper quarter
+    of the stroke and ≥ 0 on the lower quarter (a sag or a wiggle breaks one of them). Returns a
+    violation ≥ 0 normalized by max|s''| (0 for a clean stroke), with logistic weights (width 2 %
+    of the stroke) so that it is differentiable."""
+    h = jnp.max(s) - jnp.min(s)
+    z = (s - jnp.min(s)) / h
+    a = dds / jnp.max(jnp.abs(dds))
+    top = jax.nn.sigmoid((z - 0.75) / 0.02)
+    bottom = jax.nn.sigmoid((0.25 - z) / 0.02)
+    return jnp.sqrt(jnp.mean(top * _relu(a) ** 2 + bottom * _relu(-a) ** 2) + 1e-30)
+
+
+def dwell_score(m, opts, *, smooth_sign=None):
+    """(objective J to minimize, constraints-met flag) from metrics `m` (exact or smooth).
+
+    J = −(dwell_abs + w · dwell_1%)/100 + ρ Σ_i (violation_i / scale_i)², the violations of
+    |h − stroke| ≤ stroke_tol, μ_min ≥ mu_min, rod ≤ rod_max, toggle ≥ toggle_min, amax ≤ amax_max,
+    Grashof crank-rocker (crank shortest) and the sign-change count (`smooth_sign`: the surrogate
+    violation instead of |count − 2|). The smooth search keeps small margins (`_MARGIN`).
+    """
+    margin = _MARGIN if smooth_sign is not None else dict.fromkeys(_MARGIN, 0.0)
+    v = {
+        "stroke": _relu(jnp.abs(m["stroke_file"] - opts["stroke"]) - (0.0 if smooth_sign is not None else opts["stroke_tol"])),
+        "mu": _relu(opts["mu_min"] + margin["mu"] - m["mu_min_deg"]),
+        "rod": _relu(m["rod_angle_max_deg"] - opts["rod_max"] + margin["rod"]),
+        "toggle": _relu(opts["toggle_min"] + margin["toggle"] - m["toggle_clear_deg"]),
+        "amax": _relu(m["amax_rel"] - opts["amax_max"] + margin["amax"]),
+        "grashof": _relu(margin["grashof"] - m["grashof_margin_rel"]),
+        "sign": (smooth_sign if smooth_sign is not None
+                 else jnp.abs(m["acc_sign_changes"] - opts["sign_changes"]).astype(float)),
+    }
+    pen = sum((v[k] / _SCALE[k]) ** 2 for k in v)
+    dwell = m["dwell_abs_deg"] + opts["dwell_weight"] * m["dwell_1pct_deg"]
+    j = -dwell / 100.0 + opts["penalty"] * pen
+    exact = dict(v)
+    exact["stroke"] = _relu(jnp.abs(m["stroke_file"] - opts["stroke"]) - opts["stroke_tol"])
+    ok = jnp.all(jnp.stack([exact[k] <= 0 for k in exact if k != "sign"])) & (m["acc_sign_changes"] == opts["sign_changes"])
+    return j, ok
+
+
+def _design_metrics(mech, q, s, ds, dds, p, crank, abs_tol_si, length_factor):
+    """The metrics the objective needs (jax, one design; file units for the stroke)."""
+    deg = 180.0 / math.pi
+    h = jnp.max(s) - jnp.min(s)
+    eps = jnp.stack([abs_tol_si, 0.01 * h])
+    w = jax.vmap(band_width, in_axes=(None, None, 0))(s, ds, eps) * deg
+    m = {"stroke_file": h / length_factor, "dwell_abs_deg": w[0], "dwell_1pct_deg": w[1],
+         "acc_sign_changes": sign_changes(dds), "amax_rel": jnp.max(jnp.abs(dds)) / crank,
+         "grashof_margin_rel": grashof_margin(mech, p)}
+    m.update(angle_metrics(*needle_angles(mech, q, p)))
+    return m
+
+
+class DwellEvaluator:
+    """Batched evaluation of needle designs for the `dwell` objective, with the interface of
+    `jaxlink.optimize.Evaluator` that the searches use (`evaluate`, `smooth_single`, `report`,
+    counters), so `jaxlink.optimize._search.run(ev, "uniform" | "montecarlo" | "gradient")` works
+    on it. Unlike the generic evaluator it sees the whole solved configuration (the transmission,
+    rod and toggle angles need the joint angles, not only the needle's path).
+
+    **Arguments:** `problem` (`jaxlink.optimize.problem_from` of a file whose `[optimize]` has
+    `objective = "dwell"`), `chunk` (designs per compiled batch).
+    """
+
+    def __init__(self, problem, *, chunk: int = 256):
+        from .optimize._sharding import design_sharding
+
+        self.problem = problem
+        self.mech = mech = problem.mech
+        self.opts = {k: problem.option(k, d) for k, d in DWELL_OPTIONS.items()}
+        self.sharding = design_sharding(jax.devices()[:1])
+        self.n_devices = 1
+        self.n_circuits = 1
+        self.chunk = int(chunk)
+        self.evaluations = 0
+        self.infeasible = 0
+        self.lf = mech.units.length
+        self.abs_tol_si = self.opts["abs_tol"] * self.lf
+        self.crank_index = mech.parameter_index("l2")
+        self.report_samples = int(problem.option("report_samples", 7200))
+        self.phis = np.asarray(problem.phis)
+
+    # -------------------------------------------------------------- designs
+    def params(self, u):
+        pr = self.problem
+        x = jnp.asarray(pr.lower) + u * jnp.asarray(pr.upper - pr.lower)
+        p = jnp.asarray(self.mech.parameters, dtype=u.dtype)
+        return p.at[jnp.asarray(pr.index)].set(x * jnp.asarray(pr.factor))
+
+    def _metrics_batch(self, P, phis):
+        import jaxlink
+
+        sol = jaxlink.solve(self.mech, phis, P)
+        t = jaxlink.transfer(self.mech, sol.q, phis, P, order=2)
+        j = self.mech.unknown_names.index("s")
+        conv = jnp.all(sol.converged, axis=-1)
+        return sol.q, sol.q[..., j], t.mu[..., j], t.nu[..., j], conv
+
+    @functools.cached_property
+    def _score_batch(self):
+        mech, opts = self.mech, self.opts
+
+        def one(q, s, ds, dds, p):
+            m = _design_metrics(mech, q, s, ds, dds, p, p[self.crank_index], self.abs_tol_si, self.lf)
+            j, ok = dwell_score(m, opts)
+            return j, ok, m
+
+        return jax.jit(jax.vmap(one))
+
+    def exact(self, U, phis=None):
+        """Exact penalized objective J (B,), constraints met (B,), assemblable (B,) and metrics."""
+        phis = self.phis if phis is None else phis
+        U = np.atleast_2d(np.asarray(U, float))
+        P = np.asarray(jax.vmap(self.params)(jnp.asarray(U)))
+        q, s, ds, dds, conv = self._metrics_batch(P, phis)
+        j, ok, m = self._score_batch(q, s, ds, dds, jnp.asarray(P))
+        conv = np.asarray(conv)
+        j = np.where(conv & np.isfinite(np.asarray(j)), np.asarray(j), np.inf)
+        return j, np.asarray(ok) & conv, conv, {k: np.asarray(v) for k, v in m.items()}
+
+    def evaluate(self, U, circuits=None):
+        """Searches' ranking value: J, plus 10 when a constraint is not met (so feasible designs
+        always rank first while infeasible ones still guide the presample); +inf if unassemblable."""
+        del circuits  # unused: the file's circuit
+        U = np.asarray(U, float)
+        vals, feas = [], []
+        for a in range(0, len(U), self.chunk):
+            part = U[a:a + self.chunk]
+            n = len(part)
+            pad = np.concatenate([part, np.repeat(part[:1], self.chunk - n, 0)]) if n < self.chunk else part
+            j, ok, conv, _ = self.exact(pad)
+            vals.append(np.where(ok, j, j + 10.0)[:n])
+            feas.append(conv[:n])
+            self.evaluations += n
+        out = {"value": np.concatenate(vals), "feasible": np.concatenate(feas),
+               "circuit": np.zeros(len(U), int)}
+        self.infeasible += int((~out["feasible"]).sum())
+        return out
+
+    def smooth_single(self, u, c=0):
+        """Smooth objective of one design (traced; +inf if unassemblable): exact dwell widths
+        (differentiable crossings), hard max/min over the samples, the sign-change surrogate."""
+        del c  # unused
+        from ._assemble import solve_path
+        from ._kinematics import transfer_one
+
+        p = self.params(u)
+        phis = jnp.asarray(self.phis, u.dtype)
+        sol = solve_path(self.mech, p, phis)
+        t = jax.vmap(lambda q, ph: transfer_one(self.mech, q, ph, p, 2))(sol.q, phis)
+        j = self.mech.unknown_names.index("s")
+        s, ds, dds = sol.q[:, j], t.mu[:, j], t.nu[:, j]
+        m = _design_metrics(self.mech, sol.q, s, ds, dds, p, p[self.crank_index], self.abs_tol_si, self.lf)
+        val, _ = dwell_score(m, self.opts, smooth_sign=_sign_surrogate(s, dds))
+        ok = jnp.all(sol.converged) & jnp.isfinite(val)
+        return jnp.where(ok, val, jnp.inf)
+
+    # -------------------------------------------------------------- reports
+    def parameters_si(self, u):
+        return np.asarray(self.params(jnp.asarray(u, float)))
+
+    def report(self, u, c: int = 0) -> dict:
+        """Exact objective and every metric of one design at `report_samples` positions."""
+        pr = self.problem
+        x = pr.to_file_units(np.asarray(u))
+        phis = pr.phis[0] + 2 * np.pi * np.arange(self.report_samples) / self.report_samples
+        j, ok, conv, _ = self.exact(np.asarray(u)[None], phis)
+        out = {"parameters": {n: float(v) for n, v in zip(pr.names, x)}, "feasible": bool(conv[0]),
+               "constraints_met": bool(ok[0]), "circuit": int(c)}
+        if not conv[0]:
+            return {**out, "objective": None, "metrics": {}}
+        scale = StrokeScale(length_to_mm=1e3)
+        met = needle_metrics(self.mech, self.parameters_si(u), samples=self.report_samples, scale=scale)
+        met.pop("converged", None)
+        out["objective"] = float(j[0])
+        out["metrics"] = met
+        return out
+
+
+def dwell_objective(problem):
+    """Factory of the registry objective `dwell` (`jaxlink.optimize` `OBJECTIVES`).
+
+    The generic evaluator hands an objective only the path of the `[optimize]` point (here the
+    needle B, whose y is the slider position s, file units) with exact φ-derivatives. From it this
+    objective computes the stroke, the dwell widths, the sign changes and amax = max|s''|/l2
+    (l2 = the file's crank, which must not be a variable), and J of `dwell_score` with those
+    constraints. The transmission, rod and toggle angles need the joint angles: they are
+    included when the path also carries the solved unknowns `q` (N, n) and the SI parameters `p`
+    (fields of `PathData`); otherwise use `DwellEvaluator`, which sees the whole configuration.
+    """
+    from .optimize._objectives import Objective
+
+    mech = problem.mech
+    if "l2" in problem.names:
+        raise problem.error("the dwell objective normalizes the acceleration by the crank l2: keep l2 fixed",
+                            "variables")
+    opts = {k: problem.option(k, d) for k, d in DWELL_OPTIONS.items()}
+    lf = mech.units.length
+    crank = float(mech.parameters[mech.parameter_index("l2")]) / lf  # file units, like the path
+
+    def metrics_of(path):
+        s, ds, dds = path.xy[:, 1], path.dxy[:, 1], path.ddxy[:, 1]
+        h = jnp.max(s) - jnp.min(s)
+        eps = jnp.stack([jnp.asarray(opts["abs_tol"], s.dtype), 0.01 * h])
+        w = jax.vmap(band_width, in_axes=(None, None, 0))(s, ds, eps) * (180.0 / math.pi)
+        m = {"stroke_file": h, "dwell_abs_deg": w[0], "dwell_1pct_deg": w[1],
+             "acc_sign_changes": sign_changes(dds), "amax_rel": jnp.max(jnp.abs(dds)) / crank,
+             # unknown without the configuration: neutral values that meet the constraints
+             "mu_min_deg": jnp.asarray(90.0), "rod_angle_max_deg": jnp.asarray(0.0),
+             "toggle_clear_deg": jnp.asarray(90.0), "grashof_margin_rel": jnp.asarray(1.0)}
+        fields = getattr(type(path), "_fields", ())
+        if "q" in fields and "p" in fields and path.q is not None and path.p is not None:
+            m.update(angle_metrics(*needle_angles(mech, path.q, path.p)))
+            m["grashof_margin_rel"] = grashof_margin(mech, path.p)
+        return m, s, dds
+
+    def value(path):
+        m, _, _ = metrics_of(path)
+        j, ok = dwell_score(m, opts)
+        return jnp.where(ok, j, j + 10.0)
+
+    def smooth(path):
+        m, s, dds = metrics_of(path)
+        return dwell_score(m, opts, smooth_sign=_sign_surrogate(s, dds))[0]
+
+    def metrics(path):
+        m, s, _ = metrics_of(path)
+        out = {"stroke_mm": m["stroke_file"] * lf * 1e3, "dwell_005mm_deg": m["dwell_abs_deg"],
+               "dwell_1pct_deg": m["dwell_1pct_deg"], "acc_sign_changes": m["acc_sign_changes"],
+               "amax_rel": m["amax_rel"]}
+        fields = getattr(type(path), "_fields", ())
+        if "q" in fields and getattr(path, "q", None) is not None:
+            out.update({k: m[k] for k in ("mu_min_deg", "rod_angle_max_deg", "toggle_clear_deg")})
+        out["constraints_met"] = dwell_score(m, opts)[1].astype(float)
+        return out
+
+    return Objective("dwell", 2, value, smooth, metrics, report_order=2)
+
+
+def _register():
+    from .optimize._objectives import OBJECTIVES
+
+    if "dwell" not in OBJECTIVES:
+        OBJECTIVES.register("dwell", keys=tuple(DWELL_OPTIONS))(dwell_objective)
+
+
+_register()

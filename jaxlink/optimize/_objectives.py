@@ -318,3 +318,6 @@ def to_python(tree) -> Any:
         return v if math.isfinite(v) else None
 
     return {k: conv(v) for k, v in tree.items()}
+
+
+from .. import _dwell  # noqa: E402, F401  (registers the needle objective "dwell", jaxlink/_dwell.py)
