@@ -100,6 +100,10 @@ point = "P"
 objective = "points"
 samples = 360
 circuits = "all"
+placement = {{ x = "p1x", y = "p1y", angle = "a" }}   # gradient starts: presampled shapes placed by ICP
+starts = 48
+presample = 8192
+iterations = 200
 variables = {{ p1x = [{f(c[0] - 4 * D)}, {f(c[0] + 4 * D)}], p1y = [{f(c[1] - 4 * D)}, {f(c[1] + 4 * D)}], a = [-3.14159265, 3.14159265], l1 = [{f(0.02 * D)}, {f(4 * D)}], l2 = [{f(0.02 * D)}, {f(4 * D)}], l3 = [{f(0.02 * D)}, {f(4 * D)}], l4 = [{f(0.02 * D)}, {f(4 * D)}], l5 = [0.0, {f(4 * D)}], g = [-3.14159265, 3.14159265] }}
 targets = [
     {targets},

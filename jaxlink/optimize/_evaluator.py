@@ -193,6 +193,28 @@ class Evaluator:
             out["metrics"] = {}
         return out
 
+    @functools.cached_property
+    def _paths_batch(self):
+        def one(u, c):
+            path, feas = self.path(u, c, jnp.asarray(self.problem.phis, u.dtype), 0)
+            return path.xy, feas
+
+        return jax.jit(jax.vmap(one))
+
+    def paths(self, U, circuits) -> tuple[np.ndarray, np.ndarray]:
+        """(B, N, 2) paths at the search samples (file units) and (B,) feasibility; counts B
+        evaluations."""
+        U = np.asarray(U, dtype=float)
+        xs, oks = [], []
+        for s in range(0, len(U), self.chunk):
+            part, n = pad_rows(U[s:s + self.chunk], self.chunk)
+            cc, _ = pad_rows(np.asarray(circuits[s:s + self.chunk]), self.chunk)
+            xy, ok = self._paths_batch(*put((jnp.asarray(part), jnp.asarray(cc)), self.sharding))
+            xs.append(np.asarray(xy)[:n])
+            oks.append(np.asarray(ok)[:n])
+            self.evaluations += n
+        return np.concatenate(xs), np.concatenate(oks)
+
     def path_points(self, u, c: int = 0, samples: int | None = None) -> np.ndarray:
         """(N, 2) path of the point (file units) for plots."""
         n = samples or self.report_samples

@@ -109,7 +109,7 @@ def points_objective(problem) -> Objective:
     each segment by projection), so the error of the true curve is O(h²·curvature) — the report
     re-solves with `report_samples` (default 7200) positions. Smooth value: the min over segments
     replaced by a soft-min with temperature τ = (smoothing · D)², D the targets' bounding-box
-    diagonal (smoothing default 1e-3): SSE_τ = Σ_t −τ log Σ_k exp(−d²_tk/τ) (shifted by the min,
+    diagonal (smoothing default 1e-5): SSE_τ = Σ_t −τ log Σ_k exp(−d²_tk/τ) (shifted by the min,
     so it never overflows); SSE_τ → SSE as τ → 0 and SSE − T·τ·log N ≤ SSE_τ ≤ SSE.
     """
     raw = problem.option("targets")
@@ -121,7 +121,7 @@ def points_objective(problem) -> Objective:
             np.isfinite(targets)):
         raise problem.error("'targets' must be a list of [x, y] points (file length units)", "targets")
     diag = float(np.hypot(*(targets.max(0) - targets.min(0)))) or 1.0
-    tau = (_number(problem, "smoothing", 1e-3, positive=True) * diag) ** 2
+    tau = (_number(problem, "smoothing", 1e-5, positive=True) * diag) ** 2
     tg = jnp.asarray(targets)
 
     def value(path):
@@ -149,8 +149,11 @@ def feed_metrics(path, *, omega=None, length_factor=1e-3):
     - `two_a`, `two_b`: x and y extent (xmax − xmin, ymax − ymin), the seed's 2a, 2b;
     - `sx`, `sy`: centre of the bounding box (the seed's s_x, s_y);
     - `dx`: tilt Δx = x(y_max) − x(y_min) at the samples (the seed's `os`);
-    - `sag`: straightness of the working part — the points with y ≥ (ymax+ymin)/2 (above the
-      needle plate, the half that feeds the cloth): max distance from their least-squares line;
+    - working part: the points with y ≥ ȳ (the mean height; above the needle plate, the half of
+      the path that feeds the cloth);
+    - `sag`: max distance of the working part from its total-least-squares line;
+    - `flatness`: RMS of the working part's heights about their mean — its deviation from a
+      horizontal straight line (0 for a flat top moving parallel to the plate);
     - `peak_acceleration_m_s2`: max |d²P/dt²| over the revolution at input speed `omega` (rad/s),
       if the path has second derivatives.
     """
@@ -162,14 +165,22 @@ def feed_metrics(path, *, omega=None, length_factor=1e-3):
         "sy": 0.5 * (jnp.max(y) + jnp.min(y)),
         "dx": x[jnp.argmax(y)] - x[jnp.argmin(y)],
     }
-    w = (y >= out["sy"]).astype(x.dtype)
+    w = (y >= jnp.mean(y)).astype(x.dtype)
     out["sag"] = _line_deviation(x, y, w, hard=True)
-    out["sag_rms"] = _line_deviation(x, y, w, hard=False)
+    out["flatness"] = _flatness(y, w)
     if path.ddxy is not None and omega is not None:
         acc = jnp.sqrt(jnp.sum(path.ddxy**2, axis=-1)) * omega**2 * length_factor
         out["peak_acceleration_m_s2"] = jnp.max(acc)
         out["peak_acceleration_y_m_s2"] = jnp.max(jnp.abs(path.ddxy[:, 1])) * omega**2 * length_factor
     return out
+
+
+def _flatness(y, w):
+    """Weighted RMS of y about its weighted mean: how far the working part is from a horizontal
+    (parallel to the needle plate) straight line."""
+    sw = jnp.maximum(jnp.sum(w), 1e-12)
+    m = jnp.sum(w * y) / sw
+    return jnp.sqrt(jnp.sum(w * (y - m) ** 2) / sw)
 
 
 def _line_deviation(x, y, w, *, hard: bool):
@@ -264,46 +275,37 @@ def ellipse_objective(problem) -> Objective:
 def feed_objective(problem) -> Objective:
     """Beyond the seed: a straight working part and a low peak acceleration at a given stroke.
 
-    With the working part W = {k : y_k ≥ n} (n the centroid height; logistic weights of width
-    0.05·lift/2 for gradients), its total-least-squares line and the RMS normal distance s_W of
-    its points from it (`sag_rms`), the stroke 2a = extent of x, the lift 2b = extent of y
-    (soft extents by log-sum-exp in the smooth version), the acceleration A_k = |d²P/dt²| at
-    `rpm` (default 5490 rpm = 575 rad/s) and A_p = (mean_k A_k^8)^{1/8} (a smooth peak):
+    With the working part W = {k : y_k ≥ ȳ} (ȳ the mean height: the half of the path above the
+    needle plate; logistic weights of width 0.025·lift in the smooth version), s_W the RMS of its
+    heights about their mean (`flatness`, mm: the deviation from a straight line parallel to the
+    plate — a tilted or degenerate back-and-forth path scores badly), the stroke
+    2a = max x − min x and lift 2b = max y − min y at the samples, A_k = |d²P/dt²| at `rpm`
+    (default 5490 rpm = 575 rad/s) and A_p its peak ((mean_k A_k^8)^{1/8} in the smooth version):
 
-        J = (s_W / (lift/2))² + acceleration_weight · (A_p / acceleration_ref)²
-            + 100 · [(stroke − 2a)₊ / stroke]² + 100 · [(|2b − lift|) / lift]²
+        J = s_W² / (lift/2)² + acceleration_weight · (A_p / acceleration_ref)²
+            + 100 · [((stroke − 2a)₊ / stroke)² + ((lift − 2b)₊ / lift)²]
 
-    (`stroke` default 5 mm, `lift` default 2 mm, `acceleration_weight` 0.1, `acceleration_ref`
-    600 m/s²). The exact value uses hard extents, hard working-part weights and the true max A.
+    (`stroke` default 5 mm, `lift` 2 mm, `acceleration_weight` 0.1, `acceleration_ref` 1000 m/s²):
+    stroke and lift are lower bounds, enforced by quadratic penalties.
     """
     stroke = _number(problem, "stroke", 5.0, positive=True)
     lift = _number(problem, "lift", 2.0, positive=True)
     wacc = _number(problem, "acceleration_weight", 0.1)
-    aref = _number(problem, "acceleration_ref", 600.0, positive=True)
+    aref = _number(problem, "acceleration_ref", 1000.0, positive=True)
     omega = _omega(problem)
     lf = problem.mech.units.length
 
     def j(path, soft: bool):
         x, y = path.xy[:, 0], path.xy[:, 1]
         n = jnp.mean(y)
-        if soft:
-            w = jax.nn.sigmoid((y - n) / (0.025 * lift))
-            t = 0.01 * stroke
-
-            def ext(v):
-                return t * (jax.nn.logsumexp(v / t) + jax.nn.logsumexp(-v / t)) - 2 * t * jnp.log(len(v))
-        else:
-            w = (y >= n).astype(x.dtype)
-
-            def ext(v):
-                return jnp.max(v) - jnp.min(v)
-        sag = _line_deviation(x, y, w, hard=False)
+        w = jax.nn.sigmoid((y - n) / (0.025 * lift)) if soft else (y >= n).astype(x.dtype)
+        sag = _flatness(y, w)
         acc = jnp.sqrt(jnp.sum(path.ddxy**2, axis=-1) + 1e-30) * omega**2 * lf
         peak = jnp.mean(acc**8) ** (1 / 8) if soft else jnp.max(acc)
-        two_a, two_b = ext(x), ext(y)
+        two_a, two_b = jnp.max(x) - jnp.min(x), jnp.max(y) - jnp.min(y)
         return ((sag / (0.5 * lift)) ** 2 + wacc * (peak / aref) ** 2
                 + 100 * (jnp.maximum(stroke - two_a, 0.0) / stroke) ** 2
-                + 100 * ((two_b - lift) / lift) ** 2)
+                + 100 * (jnp.maximum(lift - two_b, 0.0) / lift) ** 2)
 
     def metrics(path):
         return feed_metrics(path, omega=omega, length_factor=lf)

@@ -29,7 +29,7 @@ from .._mechanism import Mechanism
 KNOWN_KEYS = {
     # problem
     "point", "variables", "samples", "objective", "start", "circuits", "start_method",
-    "report_samples",
+    "report_samples", "placement",
     # searches
     "starts", "presample", "iterations", "uniform", "chunk", "budget", "seed",
 }

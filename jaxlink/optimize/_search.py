@@ -205,6 +205,9 @@ class Gradient:
         self.chunk_iterations = int(chunk_iterations)
         self.memory = int(memory)
         self.lbfgs = optax.scale_by_lbfgs(memory_size=self.memory)
+        from ._align import placement_of
+
+        self.placement = placement_of(pr) if pr.objective == "points" else None
 
     # ------------------------------------------------------------------ jitted pieces
     @property
@@ -269,6 +272,8 @@ class Gradient:
             res = _evaluate(ev, U)
             _count(st, ev, res, n)
             _update_best(st, U, res)
+            if self.placement is not None:
+                U, res = self._aligned(st, U, res)
             # keep the S best (stable order: by value, then by arrival)
             vals = np.concatenate([st["pool_value"], res["value"]])
             us = np.concatenate([st["pool_u"], U])
@@ -280,6 +285,27 @@ class Gradient:
         if int(st["pool_n"]) >= self.presample or n == 0:
             self._start_lbfgs(st)
         return st
+
+    def _aligned(self, st, U, res):
+        """Presampled feasible designs moved to their best similarity placement (`_align.py`),
+        evaluated, and pooled with the originals. Costs 2 evaluations per feasible design."""
+        from ._align import apply_similarity, icp_similarity
+
+        ev, pr = self.ev, self.ev.problem
+        ok = np.flatnonzero(res["feasible"])
+        if len(ok) == 0:
+            return U, res
+        xy, _ = ev.paths(U[ok], res["circuit"][ok])
+        st["evaluations"] += np.int64(len(ok))
+        targets = jnp.asarray(np.asarray(pr.option("targets"), dtype=float))
+        s, th, t, _ = (np.asarray(a) for a in icp_similarity(jnp.asarray(xy), targets))
+        X = apply_similarity(pr, pr.to_file_units(U[ok]), s, th, t)
+        U2 = np.clip(pr.to_unit(X), 0.0, 1.0)
+        res2 = _evaluate(ev, U2, res["circuit"][ok])
+        _count(st, ev, res2, len(U2))
+        _update_best(st, U2, res2)
+        both = {k: np.concatenate([res[k], res2[k]]) for k in ("value", "feasible", "circuit")}
+        return np.concatenate([U, U2]), both
 
     def _start_lbfgs(self, st):
         ok = np.isfinite(st["pool_value"])
