@@ -362,8 +362,15 @@ def dwell_score(m, opts, *, smooth_sign=None):
     return j, ok
 
 
-def _design_metrics(mech, q, s, ds, dds, p, crank, abs_tol_si, length_factor):
-    """The metrics the objective needs (jax, one design; file units for the stroke)."""
+def _softmax(x, tau):
+    """τ log Σ exp(x/τ): a smooth maximum, max ≤ it ≤ max + τ log N (conservative)."""
+    return tau * jax.nn.logsumexp(x / tau)
+
+
+def _design_metrics(mech, q, s, ds, dds, p, crank, abs_tol_si, length_factor, *, soft=False):
+    """The metrics the objective needs (jax, one design; file units for the stroke). With `soft`,
+    the peak acceleration and the extreme angles are log-sum-exp soft maxima/minima (temperatures
+    0.002 l2ω² and 0.02°), so the gradient search sees a smooth function."""
     deg = 180.0 / math.pi
     h = jnp.max(s) - jnp.min(s)
     eps = jnp.stack([abs_tol_si, 0.01 * h])
@@ -371,7 +378,19 @@ def _design_metrics(mech, q, s, ds, dds, p, crank, abs_tol_si, length_factor):
     m = {"stroke_file": h / length_factor, "dwell_abs_deg": w[0], "dwell_1pct_deg": w[1],
          "acc_sign_changes": sign_changes(dds), "amax_rel": jnp.max(jnp.abs(dds)) / crank,
          "grashof_margin_rel": grashof_margin(mech, p)}
-    m.update(angle_metrics(*needle_angles(mech, q, p)))
+    phi3, psi, phi5, arm = needle_angles(mech, q, p)
+    m.update(angle_metrics(phi3, psi, phi5, arm))
+    if soft:
+        t = 0.02 / deg
+        m["amax_rel"] = _softmax(jnp.abs(dds) / crank, 0.002)
+        mu = jnp.abs(_wrap(phi3 - psi))
+        m["mu_min_deg"] = -_softmax(-jnp.minimum(mu, jnp.pi - mu), t) * deg
+        rod = jnp.abs(_wrap(phi5 - 0.5 * jnp.pi))
+        m["rod_angle_max_deg"] = _softmax(jnp.minimum(rod, jnp.pi - rod), t) * deg
+        tog = _wrap(phi5 - arm)
+        # signed: a linkage that passes the stretched position has a negative clearance
+        side = jnp.sign(jnp.mean(tog))
+        m["toggle_clear_deg"] = -_softmax(-side * tog, t) * deg
     return m
 
 
@@ -474,7 +493,8 @@ class DwellEvaluator:
         t = jax.vmap(lambda q, ph: transfer_one(self.mech, q, ph, p, 2))(sol.q, phis)
         j = self.mech.unknown_names.index("s")
         s, ds, dds = sol.q[:, j], t.mu[:, j], t.nu[:, j]
-        m = _design_metrics(self.mech, sol.q, s, ds, dds, p, p[self.crank_index], self.abs_tol_si, self.lf)
+        m = _design_metrics(self.mech, sol.q, s, ds, dds, p, p[self.crank_index], self.abs_tol_si, self.lf,
+                            soft=True)
         val, _ = dwell_score(m, self.opts, smooth_sign=_sign_surrogate(s, dds))
         ok = jnp.all(sol.converged) & jnp.isfinite(val)
         return jnp.where(ok, val, jnp.inf)

@@ -64,10 +64,49 @@ def test_original():
     _check_row(_dwell.needle_metrics(mech), SPEC["original"], stroke="stroke_mm", stroke_tol=0.005)
 
 
+# spec §4, "a longer search": the optimum with crank 12.5 mm, stroke 20 mm and every constraint
+OPTIMUM = dict(l1=44.39, l3=25.00, l4r=39.09, l4a=40.06, l5=14.84, l7=30.47, beta=108.36)
+
+
 @pytest.fixture(scope="module")
-def chosen():
+def both():
+    """The chosen design and the spec's optimum in one batch (one compilation)."""
     mech = jaxlink.load("needle-arachne")
-    return mech, _dwell.needle_metrics(mech)
+    P = np.stack([np.asarray(mech.parameters), mech.with_parameters(**OPTIMUM)])
+    return mech, _dwell.needle_metrics(mech, P)
+
+
+@pytest.fixture(scope="module")
+def chosen(both):
+    return both[0], both[1][0]
+
+
+def test_spec_optimum(both):
+    """55.45° within 0.05 mm and 82.25° within 1 %, peak acceleration and toggle clearance at
+    their limits (spec §4; its dimensions are printed to 0.01 mm, hence the tolerances)."""
+    got = both[1][1]
+    assert got["stroke_mm"] == pytest.approx(20.0, abs=0.02)
+    assert got["dwell_005mm_deg"] == pytest.approx(55.45, abs=0.15)
+    assert got["dwell_1pct_deg"] == pytest.approx(82.25, abs=0.15)
+    assert got["acc_sign_changes"] == 2 and got["sag_mm"] == 0.0
+    assert got["amax_rel"] == pytest.approx(1.95, abs=0.005)
+    assert got["toggle_clear_deg"] == pytest.approx(1.0, abs=0.03)
+    assert got["mu_min_deg"] >= 40 and got["rod_angle_max_deg"] <= 45
+
+
+def test_dwell_score():
+    """The objective's exact constraint check and penalty (spec §4 constraints)."""
+    opts = dict(_dwell.DWELL_OPTIONS)
+    good = {"stroke_file": 20.005, "dwell_abs_deg": 55.0, "dwell_1pct_deg": 80.0, "acc_sign_changes": 2,
+            "amax_rel": 1.95, "mu_min_deg": 40.0, "rod_angle_max_deg": 45.0, "toggle_clear_deg": 1.0,
+            "grashof_margin_rel": 0.5}
+    j, ok = _dwell.dwell_score({k: jnp.asarray(v) for k, v in good.items()}, opts)
+    assert bool(ok) and float(j) == pytest.approx(-(55.0 + 0.3 * 80.0) / 100)
+    for key, bad in (("stroke_file", 20.02), ("acc_sign_changes", 4), ("amax_rel", 1.96), ("mu_min_deg", 39.9),
+                     ("rod_angle_max_deg", 45.1), ("toggle_clear_deg", 0.9), ("grashof_margin_rel", -0.1)):
+        jb, okb = _dwell.dwell_score({k: jnp.asarray(bad if k == key else v) for k, v in good.items()}, opts)
+        assert not bool(okb), key
+        assert float(jb) > float(j), key
 
 
 def test_chosen(chosen):
