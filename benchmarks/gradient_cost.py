@@ -1,0 +1,100 @@
+"""Cost of an exact gradient against a forward solve, in the same run.
+
+Path objective of the feed six-bar (spread of the feed-dog path, 72 angles) as a function of all
+11 parameters, for B designs at once (vmap): forward value; `jax.grad` by jaxlink's implicit
+differentiation (`solve_path`, custom JVP); central finite differences (2 × 11 forward solves) as
+the baseline. Reports seconds, the ratio gradient/forward and the gradient's agreement with the
+finite differences. Run:
+
+    python benchmarks/gradient_cost.py [--quick] [--json OUT]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import time
+
+import jax
+
+jax.config.update("jax_enable_x64", True)
+import jax.numpy as jnp  # noqa: E402
+import numpy as np  # noqa: E402
+
+import jaxlink as jl  # noqa: E402
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+
+
+def best_of(f, repeats):
+    best, out = math.inf, None
+    for _ in range(repeats):
+        t = time.perf_counter()
+        out = jax.block_until_ready(f())
+        best = min(best, time.perf_counter() - t)
+    return best, out
+
+
+def main(argv=None) -> dict:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--quick", action="store_true")
+    ap.add_argument("--json", default=os.path.join(HERE, "results", "gradient_cost.json"))
+    args = ap.parse_args(argv)
+    B = 64 if args.quick else 512
+    repeats = 3 if args.quick else 7
+    mech = jl.load("sewing-feed")
+    phis = jnp.asarray(mech.input_start + 2 * np.pi * np.arange(72) / 72)
+    rng = np.random.default_rng(0)
+    P = jnp.asarray(mech.parameters[None] * (1 + 0.005 * rng.uniform(-1, 1, (B, len(mech.parameters)))))
+
+    def spread(p):
+        s = jl.solve_path(mech, p, phis)
+        xy = jl.transfer(mech, s.q, phis, p, order=0).points[:, 0]
+        return jnp.sum((xy - xy.mean(0)) ** 2)
+
+    fwd = jax.jit(jax.vmap(spread))
+    grad = jax.jit(jax.vmap(jax.grad(spread)))
+    h = 1e-7
+    eye = jnp.eye(P.shape[1])
+
+    @jax.jit
+    def fd(P):
+        scale = jnp.abs(P) + 1e-3
+        return jnp.stack([(jax.vmap(spread)(P + h * scale[:, i:i + 1] * eye[i])
+                           - jax.vmap(spread)(P - h * scale[:, i:i + 1] * eye[i])) / (2 * h * scale[:, i])
+                          for i in range(P.shape[1])], 1)
+
+    out = {}
+    for name, f in (("forward", fwd), ("grad_implicit", grad), ("finite_differences", fd)):
+        t = time.perf_counter()
+        jax.block_until_ready(f(P))
+        first = time.perf_counter() - t
+        tb, val = best_of(lambda: f(P), repeats)
+        out[name] = {"seconds": tb, "compile_s": first - tb}
+        out[f"_{name}"] = val
+    g, gfd = np.asarray(out.pop("_grad_implicit")), np.asarray(out.pop("_finite_differences"))
+    out.pop("_forward")
+    rel = float(np.max(np.abs(g - gfd)) / np.max(np.abs(g)))
+    res = {"designs": B, "angles": 72, "parameters": int(P.shape[1]),
+           "forward_s": out["forward"]["seconds"], "grad_s": out["grad_implicit"]["seconds"],
+           "fd_s": out["finite_differences"]["seconds"],
+           "grad_over_forward": out["grad_implicit"]["seconds"] / out["forward"]["seconds"],
+           "fd_over_forward": out["finite_differences"]["seconds"] / out["forward"]["seconds"],
+           "grad_vs_fd_max_rel_diff": rel, "compile_s": {k: v["compile_s"] for k, v in out.items()}}
+    print(f"gradient cost, feed six-bar path spread, {B} designs x 72 angles, 11 parameters")
+    print(f"{'':22s} {'seconds':>10s} {'x forward':>10s}")
+    print(f"{'forward':22s} {res['forward_s']:10.4g} {1.0:10.2f}")
+    print(f"{'grad (implicit)':22s} {res['grad_s']:10.4g} {res['grad_over_forward']:10.2f}")
+    print(f"{'central FD (22 solves)':22s} {res['fd_s']:10.4g} {res['fd_over_forward']:10.2f}")
+    print(f"grad vs FD: max rel diff {rel:.2e}")
+    if args.json:
+        os.makedirs(os.path.dirname(os.path.abspath(args.json)), exist_ok=True)
+        with open(args.json, "w") as fh:
+            json.dump(res, fh, indent=1)
+    return res
+
+
+if __name__ == "__main__":
+    main()
