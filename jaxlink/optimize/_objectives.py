@@ -271,7 +271,7 @@ def ellipse_objective(problem) -> Objective:
     return Objective("ellipse", 0, lambda p: j(p, False), lambda p: j(p, True), metrics, report_order=2)
 
 
-@OBJECTIVES.register("feed", keys=("stroke", "lift", "acceleration_weight", "acceleration_ref", "rpm"))
+@OBJECTIVES.register("feed", keys=("stroke", "lift", "acceleration_weight", "acceleration_ref", "rpm", "penalty"))
 def feed_objective(problem) -> Objective:
     """Beyond the seed: a straight working part and a low peak acceleration at a given stroke.
 
@@ -283,15 +283,16 @@ def feed_objective(problem) -> Objective:
     (default 5490 rpm = 575 rad/s) and A_p its peak ((mean_k A_k^8)^{1/8} in the smooth version):
 
         J = s_W² / (lift/2)² + acceleration_weight · (A_p / acceleration_ref)²
-            + 100 · [((stroke − 2a)₊ / stroke)² + ((lift − 2b)₊ / lift)²]
+            + penalty · [((stroke − 2a)₊ / stroke)² + ((lift − 2b)₊ / lift)²]
 
-    (`stroke` default 5 mm, `lift` 2 mm, `acceleration_weight` 0.1, `acceleration_ref` 1000 m/s²):
-    stroke and lift are lower bounds, enforced by quadratic penalties.
+    (`stroke` default 5 mm, `lift` 2 mm, `acceleration_weight` 1, `acceleration_ref` 1000 m/s²,
+    `penalty` 10⁴): stroke and lift are lower bounds, enforced by quadratic penalties.
     """
     stroke = _number(problem, "stroke", 5.0, positive=True)
     lift = _number(problem, "lift", 2.0, positive=True)
-    wacc = _number(problem, "acceleration_weight", 0.1)
+    wacc = _number(problem, "acceleration_weight", 1.0)
     aref = _number(problem, "acceleration_ref", 1000.0, positive=True)
+    pen = _number(problem, "penalty", 1e4, positive=True)
     omega = _omega(problem)
     lf = problem.mech.units.length
 
@@ -304,8 +305,8 @@ def feed_objective(problem) -> Objective:
         peak = jnp.mean(acc**8) ** (1 / 8) if soft else jnp.max(acc)
         two_a, two_b = jnp.max(x) - jnp.min(x), jnp.max(y) - jnp.min(y)
         return ((sag / (0.5 * lift)) ** 2 + wacc * (peak / aref) ** 2
-                + 100 * (jnp.maximum(stroke - two_a, 0.0) / stroke) ** 2
-                + 100 * (jnp.maximum(lift - two_b, 0.0) / lift) ** 2)
+                + pen * (jnp.maximum(stroke - two_a, 0.0) / stroke) ** 2
+                + pen * (jnp.maximum(lift - two_b, 0.0) / lift) ** 2)
 
     def metrics(path):
         return feed_metrics(path, omega=omega, length_factor=lf)

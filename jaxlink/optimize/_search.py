@@ -199,7 +199,9 @@ class Gradient:
         pr = ev.problem
         s = int(starts or pr.option("starts", 16))
         self.S = -(-s // ev.n_devices) * ev.n_devices
-        self.presample = int(presample or pr.option("presample", 8 * self.S))
+        # at most a quarter of the budget goes to the presample
+        self.presample = min(int(presample or pr.option("presample", 8 * self.S)),
+                             max(self.S, self.budget // (4 * ev.n_circuits)))
         self.iterations = int(iterations or pr.option("iterations", 200))
         self.linesearch_steps = int(linesearch_steps)
         self.chunk_iterations = int(chunk_iterations)
