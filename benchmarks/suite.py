@@ -15,7 +15,8 @@ for timing and memory):
 
     python benchmarks/suite.py [--quick] [--only NAME,...]
 
-`--quick` (smaller batches, fewer repeats and settings) finishes in under 5 minutes on 2 cores.
+`--quick` (smaller batches, fewer repeats and settings) finishes in under 5 minutes on 2 cores and
+writes to `benchmarks/results/quick/` instead.
 """
 
 from __future__ import annotations
@@ -95,6 +96,9 @@ def main(argv=None):
     ap.add_argument("--quick", action="store_true", help="under 5 minutes on 2 cores")
     ap.add_argument("--only", default=None, help="comma-separated: throughput,gradient,optimizer,fourbar,error,scaling")
     args = ap.parse_args(argv)
+    global RES
+    if args.quick:  # quick results go to their own folder: they never overwrite the full ones
+        RES = os.path.join(RES, "quick")
     os.makedirs(RES, exist_ok=True)
     q = ["--quick"] if args.quick else []
     want = set((args.only or "throughput,gradient,optimizer,fourbar,error,scaling").split(","))
@@ -193,11 +197,11 @@ def main(argv=None):
         L.append("")
     L += ["## Runs", "", "| benchmark | exit | wall s |", "|---|---|---|"]
     L += [f"| {k} | {v['returncode']} | {v['wall_s']:.0f} |" for k, v in status.items()]
-    name = "SUMMARY_quick.md" if args.quick else "SUMMARY.md"
+    name = "SUMMARY.md"
     with open(os.path.join(RES, name), "w") as fh:
         fh.write("\n".join(L) + "\n")
     json.dump({"status": status, "wall_s": wall, "quick": args.quick},
-              open(os.path.join(RES, "suite_quick.json" if args.quick else "suite.json"), "w"), indent=1)
+              open(os.path.join(RES, "suite.json"), "w"), indent=1)
     print(f"suite done in {wall:.0f} s; wrote {os.path.join(RES, name)}")
     return 0 if all(v["returncode"] == 0 for v in status.values()) else 1
 
