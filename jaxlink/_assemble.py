@@ -31,8 +31,10 @@ import jax.numpy as jnp
 import numpy as np
 
 from . import _dyads, _structure
+from ._fusion import materialize
 from ._linalg import solve_block_lower, solve_small
 from ._mechanism import Mechanism
+from ._sharding import design_sharding
 from ._solution import RESULTS, Solution
 
 
@@ -163,13 +165,14 @@ def method_for(mech: Mechanism, opts: "NewtonOptions") -> str:
     return opts.method
 
 
-def _closed_form_path(mech, opts, p, phis, q_ref, ref_code, tol, dtype):
+def _closed_form_path(mech, p, phis, q_ref, ref_code, tol, trig_in, trig_p):
+    """Every position of one design in closed form, on the branches of the reference q_ref."""
     ref_ok = ref_code == RESULTS.converged
     dyads = _dyads.classify(mech)
     sigma = _dyads.branches(mech, dyads, q_ref, phis[0], p)
 
-    def one(phi):
-        q, ok, rn = _dyads.solve(mech, dyads, sigma, q_ref, phi, p)
+    def one(phi, t_in):
+        q, ok, rn = _dyads.solve(mech, dyads, sigma, q_ref, phi, p, {**t_in, **trig_p})
         conv = ok & (rn <= tol) & ref_ok
         code = jnp.where(conv, RESULTS.converged,
                          jnp.where(~ref_ok, ref_code,
@@ -178,7 +181,7 @@ def _closed_form_path(mech, opts, p, phis, q_ref, ref_code, tol, dtype):
         q = jnp.where(jnp.all(jnp.isfinite(q)), q, q_ref)
         return q, rn, code.astype(jnp.int8), jnp.zeros((), jnp.int32)
 
-    return jax.vmap(one)(phis)
+    return jax.vmap(one)(phis, trig_in)
 
 
 def _extrapolate(hist_q, hist_phi, n_good, phi, order: int):
@@ -206,67 +209,86 @@ def _extrapolate(hist_q, hist_phi, n_good, phi, order: int):
     return jnp.where((n_good >= 3) & ok, quad, jnp.where(n_good >= 2, lin, q1))
 
 
-def _solve_path_impl(mech: Mechanism, opts: NewtonOptions, p, phis, q0):
-    dtype = jnp.result_type(q0)
-    rtol = opts.rtol if opts.rtol is not None else default_rtol(dtype)
-    tol = rtol * mech.length_scale(p)
-    kw = dict(tol=tol, singular_ratio=opts.singular_ratio)
+def _first_positions(mech, opts, P, phi0, Q0, tol):
+    """Newton from the guesses at the first input, one per design (step-limited)."""
+    return jax.vmap(lambda p, q0, t, f: newton(mech, q0, f, p, tol=t, max_steps=opts.max_steps_first,
+                                               limit_step=True, singular_ratio=opts.singular_ratio))(
+        P, Q0, tol, phi0)
 
-    method = method_for(mech, opts)
-    q_first, r_first, c_first, k_first = newton(
-        mech, q0, phis[0], p, max_steps=opts.max_steps_first, limit_step=True, **kw
-    )
-    if method == "closed_form":
-        # the branches (circuits) are those of the configuration solved at the first input
-        q, r, c, k = _closed_form_path(mech, opts, p, phis, q_first, c_first, tol, dtype)
-        return q, r, c, k.at[0].set(k_first)
-    if phis.shape[0] == 1:
-        return q_first[None], r_first[None], c_first[None], k_first[None]
 
-    if method == "independent":
-        solve_one = lambda phi: newton(mech, q0, phi, p, max_steps=opts.max_steps_first,  # noqa: E731
-                                       limit_step=True, **kw)
-        q, r, c, k = jax.vmap(solve_one)(phis[1:])
-        return (jnp.concatenate([q_first[None], q]), jnp.concatenate([r_first[None], r]),
-                jnp.concatenate([c_first[None], c]), jnp.concatenate([k_first[None], k]))
-
-    good0 = c_first == RESULTS.converged
+def _continuation_one(mech, opts, p, phis, q_first, ok_first, tol):
+    """Newton + continuation along phis[1:] for one design, from its solved first position."""
     hist_q = (q_first, q_first, q_first)
     hist_phi = (phis[0], phis[0], phis[0])
-    n_good = good0.astype(jnp.int32)
+    n_good = ok_first.astype(jnp.int32)
 
     def step(carry, phi):
         hist_q, hist_phi, n_good = carry
         guess = _extrapolate(hist_q, hist_phi, n_good, phi, opts.predictor_order)
-        q, rn, code, k = newton(mech, guess, phi, p, max_steps=opts.max_steps, limit_step=False, **kw)
+        q, rn, code, k = newton(mech, guess, phi, p, tol=tol, max_steps=opts.max_steps, limit_step=False,
+                                singular_ratio=opts.singular_ratio)
         good = code == RESULTS.converged
         new_q = tuple(jnp.where(good, a, b) for a, b in zip((q,) + hist_q[:2], hist_q))
         new_phi = tuple(jnp.where(good, a, b) for a, b in zip((phi,) + hist_phi[:2], hist_phi))
         return (new_q, new_phi, n_good + good.astype(jnp.int32)), (q, rn, code, k)
 
-    _, (q, r, c, k) = jax.lax.scan(step, (hist_q, hist_phi, n_good), phis[1:])
-    return (jnp.concatenate([q_first[None], q]), jnp.concatenate([r_first[None], r]),
-            jnp.concatenate([c_first[None], c]), jnp.concatenate([k_first[None], k]))
+    return jax.lax.scan(step, (hist_q, hist_phi, n_good), phis[1:])[1]
+
+
+def _solve_batch_impl(mech: Mechanism, opts: NewtonOptions, P, phis, Q0):
+    """P (B, P), phis (N,) shared by all designs or (B, N), Q0 (B, n)
+    -> q (B, N, n), rnorm, result, steps (B, N)."""
+    dtype = jnp.result_type(Q0)
+    B = P.shape[0]
+    shared = phis.ndim == 1
+    N = phis.shape[-1]
+    ax = None if shared else 0  # vmap axis of phis over the designs
+    rtol = opts.rtol if opts.rtol is not None else default_rtol(dtype)
+    tol = rtol * jax.vmap(mech.length_scale)(P)
+    method = method_for(mech, opts)
+    phi0 = jnp.broadcast_to(phis[0], (B,)) if shared else phis[:, 0]
+    q1, r1, c1, k1 = _first_positions(mech, opts, P, phi0, Q0, tol)
+
+    def join(first, rest):
+        return jax.tree_util.tree_map(lambda a, b: jnp.concatenate([a[:, None], b], axis=1), first, rest)
+
+    if method == "closed_form":
+        # the branches (circuits) are those of the configuration solved at the first input; all
+        # (design, input) pairs are then independent. The trigonometry of the inputs (N values)
+        # and of the angle parameters (B) is computed once, not inside every fused kernel.
+        trig_in, trig_p = materialize((_dyads.input_trig(mech, phis), _dyads.parameter_trig(mech, P)))
+        out = jax.vmap(lambda p, ph, q, c, t, ti, tp: _closed_form_path(mech, p, ph, q, c, t, ti, tp),
+                       in_axes=(0, ax, 0, 0, 0, ax, 0))(P, phis, q1, c1, tol, trig_in, trig_p)
+        return out[0], out[1], out[2], out[3].at[:, 0].set(k1)
+    if N == 1:
+        return q1[:, None], r1[:, None], c1[:, None], k1[:, None]
+    if method == "independent":
+        rest = jax.vmap(lambda p, ph, q0, t: jax.vmap(
+            lambda f: newton(mech, q0, f, p, tol=t, max_steps=opts.max_steps_first, limit_step=True,
+                             singular_ratio=opts.singular_ratio))(ph[1:]), in_axes=(0, ax, 0, 0))(P, phis, Q0, tol)
+        return join((q1, r1, c1, k1), rest)
+    rest = jax.vmap(lambda p, ph, q, c, t: _continuation_one(mech, opts, p, ph, q, c == RESULTS.converged, t),
+                    in_axes=(0, ax, 0, 0, 0))(P, phis, q1, c1, tol)
+    return join((q1, r1, c1, k1), rest)
 
 
 @functools.lru_cache(maxsize=64)
-def _path_solver(mech: Mechanism, opts: NewtonOptions):
-    """The differentiable path solve for one design: (p, phis, q0) -> (q, rnorm, result, steps)."""
+def _batch_solver(mech: Mechanism, opts: NewtonOptions):
+    """The differentiable batched solve: (P (B,P), phis (N,) or (B,N), Q0 (B,n)) -> (q, rnorm, result, steps)."""
 
     @jax.custom_jvp
-    def solve_path(p, phis, q0):
-        return _solve_path_impl(mech, opts, p, phis, q0)
+    def solve_batch(P, phis, Q0):
+        return _solve_batch_impl(mech, opts, P, phis, Q0)
 
-    @solve_path.defjvp
+    @solve_batch.defjvp
     def _jvp(primals, tangents):
-        p, phis, q0 = primals
-        dp, dphis, _ = tangents
-        out = solve_path(p, phis, q0)
+        P, phis, Q0 = primals
+        dP, dphis, _ = tangents
+        out = solve_batch(P, phis, Q0)
         q, rn, code, k = out
-
         lin = _linear_solve(mech)
 
-        def one(qk, phik, dphik, ok):
+        def one(p, dp, qk, phik, dphik, ok):
             rhs = jax.jvp(lambda pp, ph: mech.residual(qk, ph, pp), (p, phik), (dp, dphik))[1]
             jac = jax.jacfwd(mech.residual)(qk, phik, p)
             # where not converged the sensitivity is undefined: solve a harmless identity system
@@ -276,14 +298,21 @@ def _path_solver(mech: Mechanism, opts: NewtonOptions):
             dq, _ = lin(jnp.where(ok, jac, eye), jnp.where(ok, rhs, 0.0))
             return jnp.where(ok, -dq, 0.0)
 
-        dq = jax.vmap(one)(q, phis, dphis, code == RESULTS.converged)
+        per_pos = jax.vmap(one, in_axes=(None, None, 0, 0, 0, 0))
+        ax = None if phis.ndim == 1 else 0
+        dq = jax.vmap(per_pos, in_axes=(0, 0, 0, ax, ax, 0))(P, dP, q, phis, dphis, code == RESULTS.converged)
         return out, (dq, jnp.zeros_like(rn), _float0(code), _float0(k))
 
-    return solve_path
+    return solve_batch
 
 
 def _float0(x):
     return np.zeros(np.shape(x), dtype=jax.dtypes.float0)
+
+
+def _solve_batch(mech, options, P, phis, Q0) -> Solution:
+    q, rn, code, k = _batch_solver(mech, options)(P, phis, Q0)
+    return Solution(q=q, converged=code == RESULTS.converged, residual=rn, result=code, steps=k)
 
 
 def solve_path(mech: Mechanism, p, phis, q0=None, *, options: NewtonOptions = NewtonOptions()) -> Solution:
@@ -303,16 +332,24 @@ def solve_path(mech: Mechanism, p, phis, q0=None, *, options: NewtonOptions = Ne
     dtype = jnp.result_type(p)
     phis = jnp.asarray(phis, dtype=dtype)
     q0 = jnp.asarray(mech.guess if q0 is None else q0, dtype=dtype)
-    q, rn, code, k = _path_solver(mech, options)(p, phis, q0)
-    return Solution(q=q, converged=code == RESULTS.converged, residual=rn, result=code, steps=k)
+    sol = _solve_batch(mech, options, p[None], phis, q0[None])
+    return jax.tree_util.tree_map(lambda x: x[0], sol)
 
 
-def solve(mech: Mechanism, phis, p=None, q0=None, *, options: NewtonOptions = NewtonOptions()) -> Solution:
+def solve(mech: Mechanism, phis, p=None, q0=None, *, options: NewtonOptions = NewtonOptions(),
+          devices=None) -> Solution:
     """Solve positions for one design or a batch of designs, jitted.
 
     `p` of shape (P,) gives a `Solution` with leading axis N; `p` of shape (B, P) gives leading
-    axes (B, N) (designs × positions), `vmap`ped over designs. `phis` is (N,) (shared by all
-    designs) or (B, N); `q0` is (n,) or (B, n).
+    axes (B, N) (designs × positions). `phis` is (N,) (shared by all designs) or (B, N); `q0` is
+    (n,) or (B, n). With the default `q0` the solve starts at the file's `[input] start`, where its
+    guesses hold, and continues to `phis[0]` first (a lead-in, dropped from the result).
+
+    A batch of designs is split over `devices` (default: every device of the default backend,
+    `jax.devices()`): each device solves its share of the designs, the results do not depend on
+    the split. On a CPU, `XLA_FLAGS=--xla_force_host_platform_device_count=N` (set before JAX is
+    imported) makes N host devices, one per core: XLA runs each compiled kernel on one thread, so
+    this is how a batch uses every core (`benchmarks/scaling.py`).
     """
     p = jnp.asarray(mech.parameters if p is None else p)
     if not jnp.issubdtype(p.dtype, jnp.floating):
@@ -326,7 +363,9 @@ def solve(mech: Mechanism, phis, p=None, q0=None, *, options: NewtonOptions = Ne
             phis = np.concatenate([lead_in, np.asarray(phis, dtype=float)])
     phis = jnp.asarray(phis, dtype=p.dtype)
     q0 = jnp.asarray(mech.guess if q0 is None else q0, dtype=p.dtype)
-    sol = _jitted_solve(mech, options, p.ndim == 2, phis.ndim == 2, q0.ndim == 2)(p, phis, q0)
+    devs = tuple(jax.devices() if devices is None else devices) if p.ndim == 2 else ()
+    devs = devs if len(devs) > 1 else ()
+    sol = _jitted_solve(mech, options, p.ndim == 2, phis.ndim == 2, q0.ndim == 2, devs)(p, phis, q0)
     if lead:
         sol = jax.tree_util.tree_map(lambda x: x[..., lead:, :] if x.ndim == p.ndim + 1 else x[..., lead:], sol)
     return sol
@@ -347,10 +386,18 @@ def lead_in_path(mech: Mechanism, phi0: float, max_step: float = np.deg2rad(5.0)
 
 
 @functools.lru_cache(maxsize=64)
-def _jitted_solve(mech, options, batch_p, batch_phi, batch_q0):
-    def single(p, phis, q0):
-        return solve_path(mech, p, phis, q0, options=options)
+def _jitted_solve(mech, options, batch_p, batch_phi, batch_q0, devices=()):
+    shard = design_sharding(devices) if devices else None
 
-    if batch_p:
-        single = jax.vmap(single, in_axes=(0, 0 if batch_phi else None, 0 if batch_q0 else None))
-    return jax.jit(single)
+    def run(p, phis, q0):
+        P = p if batch_p else p[None]
+        B = P.shape[0]
+        Q0 = q0 if batch_q0 else jnp.broadcast_to(q0, (B,) + q0.shape)
+        if shard is not None:  # designs split over the devices (uneven splits are padded by XLA)
+            P, Q0 = (jax.lax.with_sharding_constraint(x, shard) for x in (P, Q0))
+            if batch_phi:
+                phis = jax.lax.with_sharding_constraint(phis, shard)
+        sol = _solve_batch(mech, options, P, phis, Q0)
+        return sol if batch_p else jax.tree_util.tree_map(lambda x: x[0], sol)
+
+    return jax.jit(run)

@@ -5,7 +5,6 @@ See `docs/sinker.md` for the scene format and the model.
 
 from __future__ import annotations
 
-import argparse
 import csv
 import json
 import math

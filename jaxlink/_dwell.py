@@ -406,7 +406,7 @@ class DwellEvaluator:
     """
 
     def __init__(self, problem, *, chunk: int = 256):
-        from .optimize._sharding import design_sharding
+        from ._sharding import design_sharding
 
         self.problem = problem
         self.mech = mech = problem.mech

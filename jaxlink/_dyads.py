@@ -21,7 +21,6 @@ from __future__ import annotations
 
 import dataclasses
 
-import jax
 import jax.numpy as jnp
 
 from . import _expr
@@ -141,13 +140,18 @@ def _radius_and_offset(mech, term, offset, env, trig):
 
 
 def _angle_from(ux, uy, L, cs):
-    """θ with L e(θ + c) = u, and (cos θ, sin θ), from u, L and (cos c, sin c) — one atan2."""
-    n = jnp.sqrt(ux * ux + uy * uy)
-    n = jnp.where(n > 0, n, 1.0) * jnp.sign(L)
-    ex, ey = ux / n, uy / n  # e(θ + c)
+    """θ with L e(θ + c) = u, and (cos θ, sin θ), from u, L and (cos c, sin c) — one atan2.
+
+    The closed form constructs u with |u| = |L| (to rounding), so e(θ + c) = u / L needs no
+    square root; atan2 is scale-free, so θ is exact whatever |u|. Also returns what the term
+    L e(θ + c) misses of u, ||u| − |L|| = ||u|² − L²| / (|u| + |L|) ≈ ||u|² − L²| / (2|L|)
+    (its share of the loop residual), again without a square root."""
+    inv_L = 1.0 / jnp.where(L != 0, L, 1.0)
+    ex, ey = ux * inv_L, uy * inv_L  # e(θ + c)
     cc, sc = cs
     ct, st = ex * cc + ey * sc, ey * cc - ex * sc  # rotate by −c
-    return jnp.arctan2(st, ct), (ct, st)
+    miss = jnp.abs((ux * ux + uy * uy) - L * L) * (0.5 * jnp.abs(inv_L))
+    return jnp.arctan2(st, ct), (ct, st), miss
 
 
 def branches(mech: Mechanism, dyads, q, phi, p):
@@ -172,25 +176,45 @@ def branches(mech: Mechanism, dyads, q, phi, p):
 
 
 def _wrap_near(theta, ref):
-    return ref + jnp.remainder(theta - ref + jnp.pi, 2 * jnp.pi) - jnp.pi
+    """θ + 2πk closest to ref (round, not fmod: several times cheaper on CPU)."""
+    two_pi = 2 * jnp.pi
+    return theta + two_pi * jnp.round((ref - theta) / two_pi)
 
 
-def solve(mech: Mechanism, dyads, sigma, q_ref, phi, p):
+def input_trig(mech: Mechanism, phis):
+    """(cos, sin) of the input values (any shape), keyed by the input's name; {} for a length input."""
+    if mech.input_kind != "angle":
+        return {}
+    return {mech.input_name: (jnp.cos(phis), jnp.sin(phis))}
+
+
+def parameter_trig(mech: Mechanism, P):
+    """(cos, sin) of every angle parameter, keyed by name; `P` is (..., n_parameters). With these
+    known, angles like `phi2 + gamma` cost no trigonometry at a position (angle addition)."""
+    return {n: (jnp.cos(P[..., i]), jnp.sin(P[..., i]))
+            for i, (n, k) in enumerate(zip(mech.parameter_names, mech.parameter_kinds)) if k == "angle"}
+
+
+def solve(mech: Mechanism, dyads, sigma, q_ref, phi, p, trig=None):
     """All unknowns in closed form at input φ, on the branches σ.
 
-    Returns `(q, assemblable, residual)`: the residual max|Φ| is evaluated with the unit vectors
-    of the solved angles (no further trigonometry), so it measures what the closed form got
-    wrong (e.g. the loss of accuracy next to a dead centre). Angle values come from one atan2
-    each; (cos, sin) of solved angles are reused by later dyads and by the residual.
+    Returns `(q, assemblable, residual)`. Each dyad's loop closes exactly in the vectors u, v it
+    constructs; the unit vectors of the solved angles are u/L_a and v/L_b, so the loop residual
+    with the solved angles is (|L_a| − |u|) û + (|L_b| − |v|) v̂. `residual` is the largest
+    ||L_a| − |u|| + ||L_b| − |v|| over the dyads: an upper bound of max|Φ| at the solution, exact
+    to rounding, computed without further trigonometry (it exposes the loss of accuracy next to a
+    dead centre). Angle values come from one atan2 each; (cos, sin) of solved angles are reused by
+    later dyads. `trig` optionally gives (cos, sin) of the input and of angle parameters
+    (`input_trig`, `parameter_trig`), computed once outside the per-position kernel.
     """
     ok_all = jnp.asarray(True)
-    trig = {mech.input_name: (jnp.cos(phi), jnp.sin(phi))} if mech.input_kind == "angle" else {}
+    resid = None
+    trig = dict(trig) if trig else {}
+    if mech.input_kind == "angle" and mech.input_name not in trig:
+        trig[mech.input_name] = (jnp.cos(phi), jnp.sin(phi))
     env = {n: p[i] for i, n in enumerate(mech.parameter_names)}
     env[mech.input_name] = phi
     for k, d in enumerate(dyads):
-        # materialize what the earlier dyads computed: otherwise XLA may duplicate their
-        # trigonometry into every fused kernel that uses it
-        env, trig = jax.lax.optimization_barrier((env, trig))
         terms = mech.loops[d.loop][1]
         ta, tb = terms[d.terms[0]], terms[d.terms[1]]
         wx, wy = _known_parts(mech, d, env, trig)
@@ -201,14 +225,14 @@ def solve(mech: Mechanism, dyads, sigma, q_ref, phi, p):
             La, csa = _radius_and_offset(mech, ta, d.offsets[0], env, trig)
             Lb, csb = _radius_and_offset(mech, tb, d.offsets[1], env, trig)
             w2 = wx * wx + wy * wy
-            wn, _ = _safe_sqrt(w2)
-            wn = jnp.where(wn > 0, wn, 1.0)
-            x = (w2 + La * La - Lb * Lb) / (2 * wn)
+            inv_w = 1.0 / jnp.sqrt(jnp.where(w2 > 0, w2, 1.0))
+            x = 0.5 * (w2 + La * La - Lb * Lb) * inv_w
             h, ok = _safe_sqrt(La * La - x * x)
-            ux = (x * wx - s * h * wy) / wn
-            uy = (x * wy + s * h * wx) / wn
-            env[na], trig[na] = _angle_from(ux, uy, La, csa)
-            env[nb], trig[nb] = _angle_from(wx - ux, wy - uy, Lb, csb)
+            ux = (x * wx - s * h * wy) * inv_w
+            uy = (x * wy + s * h * wx) * inv_w
+            env[na], trig[na], miss_a = _angle_from(ux, uy, La, csa)
+            env[nb], trig[nb], miss_b = _angle_from(wx - ux, wy - uy, Lb, csb)
+            miss = miss_a + miss_b
         elif d.kind == "RRP":
             La, csa = _radius_and_offset(mech, ta, d.offsets[0], env, trig)
             ca, sa = mech.unit_vector(tb.angle, env, trig)
@@ -217,7 +241,7 @@ def solve(mech: Mechanism, dyads, sigma, q_ref, phi, p):
             across = wx * ey - wy * ex
             h, ok = _safe_sqrt(La * La - across * across)
             ell = along + s * h
-            env[na], trig[na] = _angle_from(wx - ell * ex, wy - ell * ey, La, csa)
+            env[na], trig[na], miss = _angle_from(wx - ell * ex, wy - ell * ey, La, csa)
             env[nb] = ell
         else:  # PP: ℓa ea + ℓb eb = w
             ca, sa = mech.unit_vector(ta.angle, env, trig)
@@ -229,10 +253,11 @@ def solve(mech: Mechanism, dyads, sigma, q_ref, phi, p):
             det = jnp.where(ok, det, 1.0)
             env[na] = _cross((wx, wy), eb) / det
             env[nb] = _cross(ea, (wx, wy)) / det
+            miss = jnp.zeros_like(det)
         ok_all = ok_all & ok
+        resid = miss if resid is None else jnp.maximum(resid, miss)
     q = jnp.stack([
         _wrap_near(env[n], q_ref[i]) if k == "angle" else jnp.asarray(env[n], dtype=q_ref.dtype)
         for i, (n, k) in enumerate(zip(mech.unknown_names, mech.unknown_kinds))
     ])
-    resid = jnp.max(jnp.abs(mech.residual_trig(q, phi, p, trig)))
     return q, ok_all, resid

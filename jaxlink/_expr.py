@@ -30,7 +30,6 @@ from typing import Callable, Mapping, Union
 
 import jax.numpy as jnp
 
-from ._errors import MechanismError
 
 # ----------------------------------------------------------------------------- tokens
 

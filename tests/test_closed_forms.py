@@ -2,7 +2,6 @@
 over a full revolution, float32 to its precision; velocities/accelerations against finite
 differences of the closed forms."""
 
-import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest

@@ -1,6 +1,5 @@
 """Unreachable positions are flagged with a result code; the rest of the batch is unaffected."""
 
-import jax.numpy as jnp
 import numpy as np
 
 import jaxlink as jl

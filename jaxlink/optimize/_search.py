@@ -31,7 +31,7 @@ import optax
 
 from . import _checkpoint
 from ._evaluator import Evaluator
-from ._sharding import pad_rows, put
+from ._sharding import put
 
 METHODS = ("uniform", "montecarlo", "gradient")
 

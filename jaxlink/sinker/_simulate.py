@@ -21,7 +21,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ._cam import CamTrack, cam_eval, cam_segment
-from ._integrate import RESULTS, DormandPrince5, RadauIIA5, Stats, dense_eval, integrate_hybrid
+from ._integrate import DormandPrince5, RadauIIA5, Stats, dense_eval, integrate_hybrid
 from ._model import SinkerParams, acceleration, lag, vector_field
 
 SOLVERS = {"explicit": DormandPrince5(), "implicit": RadauIIA5()}

@@ -1,0 +1,37 @@
+"""Control over what XLA recomputes: `materialize`.
+
+XLA fuses elementwise producers into each of their consumers, and on the CPU backend it
+recomputes a fused producer for every element of every consumer kernel. A `sin` of the (N,)
+input angles read by ten (designs × angles) kernels is then evaluated ten times per position
+(`jax.lax.optimization_barrier` does not prevent this on CPU: it is removed before fusion).
+`materialize` routes values through a one-trip `while_loop` whose trip count XLA cannot know at
+compile time, so they are computed once, stored, and read by every consumer — measured 2.6× on the
+feed six-bar's closed-form solve (benchmarks/throughput.py, docs/numbers.md).
+
+The loop runs exactly once (its trip count is 1 unless the probe value is NaN, when it runs zero
+times) and multiplies by exactly 1, so the values are unchanged bit for bit. Use it on values
+that are cheap to store and expensive to recompute (trigonometry of inputs and parameters).
+Reverse-mode differentiation cannot pass through a `while_loop`: use it only where no gradient
+flows (the primal of a `custom_jvp`, as in the solver).
+"""
+
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+
+
+def materialize(tree):
+    """`tree` unchanged, but computed once and stored (not fused into its consumers)."""
+    leaves = [x for x in jax.tree_util.tree_leaves(tree) if jnp.size(x) > 0]
+    if not leaves:
+        return tree
+    probe = jnp.ravel(leaves[0])[0]
+    trips = (probe == probe).astype(jnp.int32)  # 1 (0 for NaN): unknown to the compiler
+
+    def body(state):
+        i, t = state
+        one = jnp.where(i >= 0, 1, 2)  # 1 at run time; not provably 1 at compile time
+        return i + 1, jax.tree_util.tree_map(lambda v: v * one.astype(v.dtype), t)
+
+    return jax.lax.while_loop(lambda s: s[0] < trips, body, (jnp.zeros((), jnp.int32), tree))[1]
