@@ -165,19 +165,23 @@ def method_for(mech: Mechanism, opts: "NewtonOptions") -> str:
     return opts.method
 
 
-def _closed_form_path(mech, p, phis, q_ref, ref_code, tol, trig_in, trig_p):
-    """Every position of one design in closed form, on the branches of the reference q_ref."""
-    ref_ok = ref_code == RESULTS.converged
+def _closed_form_path(mech, p, phis, q0, tol, trig_in, trig_p):
+    """Every position of one design in closed form, on the branches nearest to the guess q0 at
+    the first input (`_dyads.solve_nearest`): no Newton, no continuation."""
     dyads = _dyads.classify(mech)
-    sigma = _dyads.branches(mech, dyads, q_ref, phis[0], p)
+    t_first = jax.tree_util.tree_map(lambda x: x[0], trig_in)
+    _, _, _, sigma = _dyads.solve_nearest(mech, dyads, q0, phis[0], p, {**t_first, **trig_p})
+    # a guess that selects no branch (NaN), or parameters that allow no check (a NaN or infinite
+    # tolerance, e.g. from a NaN length that no loop uses): nothing here can be verified
+    ref_ok = jnp.all(jnp.isfinite(q0)) & jnp.isfinite(tol)
+    q_ref = jnp.where(jnp.isfinite(q0), q0, 0.0)
 
     def one(phi, t_in):
         q, ok, rn = _dyads.solve(mech, dyads, sigma, q_ref, phi, p, {**t_in, **trig_p})
         conv = ok & (rn <= tol) & ref_ok
         code = jnp.where(conv, RESULTS.converged,
-                         jnp.where(~ref_ok, ref_code,
-                                   jnp.where(~jnp.isfinite(rn), RESULTS.nonfinite,
-                                             jnp.where(ok, RESULTS.max_steps, RESULTS.cannot_assemble))))
+                         jnp.where(~ref_ok | ~jnp.isfinite(rn), RESULTS.nonfinite,
+                                   jnp.where(ok, RESULTS.max_steps, RESULTS.cannot_assemble)))
         q = jnp.where(jnp.all(jnp.isfinite(q)), q, q_ref)
         return q, rn, code.astype(jnp.int8), jnp.zeros((), jnp.int32)
 
@@ -246,20 +250,19 @@ def _solve_batch_impl(mech: Mechanism, opts: NewtonOptions, P, phis, Q0):
     rtol = opts.rtol if opts.rtol is not None else default_rtol(dtype)
     tol = rtol * jax.vmap(mech.length_scale)(P)
     method = method_for(mech, opts)
+    if method == "closed_form":
+        # every (design, input) pair is independent, on the branches (circuits) of the guess. The
+        # trigonometry of the inputs (N values) and of the angle parameters (B) is computed once,
+        # not inside every fused kernel.
+        trig_in, trig_p = materialize((_dyads.input_trig(mech, phis), _dyads.parameter_trig(mech, P)))
+        return jax.vmap(lambda p, ph, q0, t, ti, tp: _closed_form_path(mech, p, ph, q0, t, ti, tp),
+                        in_axes=(0, ax, 0, 0, ax, 0))(P, phis, Q0, tol, trig_in, trig_p)
     phi0 = jnp.broadcast_to(phis[0], (B,)) if shared else phis[:, 0]
     q1, r1, c1, k1 = _first_positions(mech, opts, P, phi0, Q0, tol)
 
     def join(first, rest):
         return jax.tree_util.tree_map(lambda a, b: jnp.concatenate([a[:, None], b], axis=1), first, rest)
 
-    if method == "closed_form":
-        # the branches (circuits) are those of the configuration solved at the first input; all
-        # (design, input) pairs are then independent. The trigonometry of the inputs (N values)
-        # and of the angle parameters (B) is computed once, not inside every fused kernel.
-        trig_in, trig_p = materialize((_dyads.input_trig(mech, phis), _dyads.parameter_trig(mech, P)))
-        out = jax.vmap(lambda p, ph, q, c, t, ti, tp: _closed_form_path(mech, p, ph, q, c, t, ti, tp),
-                       in_axes=(0, ax, 0, 0, 0, ax, 0))(P, phis, q1, c1, tol, trig_in, trig_p)
-        return out[0], out[1], out[2], out[3].at[:, 0].set(k1)
     if N == 1:
         return q1[:, None], r1[:, None], c1[:, None], k1[:, None]
     if method == "independent":

@@ -205,8 +205,26 @@ def solve(mech: Mechanism, dyads, sigma, q_ref, phi, p, trig=None):
     to rounding, computed without further trigonometry (it exposes the loss of accuracy next to a
     dead centre). Angle values come from one atan2 each; (cos, sin) of solved angles are reused by
     later dyads. `trig` optionally gives (cos, sin) of the input and of angle parameters
-    (`input_trig`, `parameter_trig`), computed once outside the per-position kernel.
+    (`input_trig`, `parameter_trig`), computed once outside the per-position kernel. Angles are
+    returned within ±π of `q_ref`.
     """
+    q, ok, resid, _ = _solve(mech, dyads, sigma, q_ref, phi, p, trig)
+    return q, ok, resid
+
+
+def solve_nearest(mech: Mechanism, dyads, q_guess, phi, p, trig=None):
+    """The closed-form configuration nearest to a guess, and its branches.
+
+    Dyad by dyad (in solve order, each with the exact solution of the earlier ones), σ is the side
+    of the guess: of the two mirror-image solutions of a dyad the one nearer to the guessed
+    vector (RRR: the side of the known vector w that the guessed first link lies on; RRP: the
+    guessed slider position's side of the foot of the perpendicular). Returns
+    `(q, assemblable, residual, sigma)`; q within ±π of the guess.
+    """
+    return _solve(mech, dyads, None, q_guess, phi, p, trig)
+
+
+def _solve(mech, dyads, sigma, q_ref, phi, p, trig):
     ok_all = jnp.asarray(True)
     resid = None
     trig = dict(trig) if trig else {}
@@ -214,16 +232,21 @@ def solve(mech: Mechanism, dyads, sigma, q_ref, phi, p, trig=None):
         trig[mech.input_name] = (jnp.cos(phi), jnp.sin(phi))
     env = {n: p[i] for i, n in enumerate(mech.parameter_names)}
     env[mech.input_name] = phi
+    sig_used = []
     for k, d in enumerate(dyads):
         terms = mech.loops[d.loop][1]
         ta, tb = terms[d.terms[0]], terms[d.terms[1]]
         wx, wy = _known_parts(mech, d, env, trig)
-        s = sigma[k]
         ia, ib = d.unknowns
         na, nb = mech.unknown_names[ia], mech.unknown_names[ib]
         if d.kind == "RRR":
             La, csa = _radius_and_offset(mech, ta, d.offsets[0], env, trig)
             Lb, csb = _radius_and_offset(mech, tb, d.offsets[1], env, trig)
+            if sigma is None:  # the side of w that the guessed first vector lies on
+                ca, sa = mech.unit_vector(ta.angle, {**env, na: q_ref[ia]})
+                s = jnp.where(_cross((wx, wy), (La * ca, La * sa)) >= 0, 1.0, -1.0)
+            else:
+                s = sigma[k]
             w2 = wx * wx + wy * wy
             inv_w = 1.0 / jnp.sqrt(jnp.where(w2 > 0, w2, 1.0))
             x = 0.5 * (w2 + La * La - Lb * Lb) * inv_w
@@ -239,11 +262,13 @@ def solve(mech: Mechanism, dyads, sigma, q_ref, phi, p, trig=None):
             ex, ey = ca * tb.sign, sa * tb.sign  # the slider term is ℓ·(ex, ey)
             along = wx * ex + wy * ey
             across = wx * ey - wy * ex
+            s = jnp.where(q_ref[ib] - along >= 0, 1.0, -1.0) if sigma is None else sigma[k]
             h, ok = _safe_sqrt(La * La - across * across)
             ell = along + s * h
             env[na], trig[na], miss = _angle_from(wx - ell * ex, wy - ell * ey, La, csa)
             env[nb] = ell
         else:  # PP: ℓa ea + ℓb eb = w
+            s = jnp.ones_like(jnp.asarray(wx))
             ca, sa = mech.unit_vector(ta.angle, env, trig)
             cb, sb = mech.unit_vector(tb.angle, env, trig)
             ea = (ta.sign * ca, ta.sign * sa)
@@ -254,10 +279,12 @@ def solve(mech: Mechanism, dyads, sigma, q_ref, phi, p, trig=None):
             env[na] = _cross((wx, wy), eb) / det
             env[nb] = _cross(ea, (wx, wy)) / det
             miss = jnp.zeros_like(det)
+        sig_used.append(jnp.asarray(s, dtype=q_ref.dtype))
         ok_all = ok_all & ok
         resid = miss if resid is None else jnp.maximum(resid, miss)
     q = jnp.stack([
         _wrap_near(env[n], q_ref[i]) if k == "angle" else jnp.asarray(env[n], dtype=q_ref.dtype)
         for i, (n, k) in enumerate(zip(mech.unknown_names, mech.unknown_kinds))
     ])
-    return q, ok_all, resid
+    sig = jnp.stack(sig_used) if sig_used else jnp.zeros((0,), q_ref.dtype)
+    return q, ok_all, resid, sig
