@@ -30,7 +30,11 @@ import platform
 import sys
 import time
 
-import jax
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from _cores import cores, pin_from_argv, run_pinned  # noqa: E402
+
+pin_from_argv()  # --cores N: before JAX starts its threads
+import jax  # noqa: E402
 
 jax.config.update("jax_enable_x64", True)
 import jax.numpy as jnp  # noqa: E402
@@ -151,6 +155,10 @@ def main(argv=None) -> dict:
     ap.add_argument("--quick", action="store_true", help="fewer designs and repeats (< 1 minute)")
     ap.add_argument("--designs", type=int, default=None, help="designs (default 5000; quick 1000)")
     ap.add_argument("--json", default=os.path.join(HERE, "results", "fourbar_vs_pylinkage.json"))
+    ap.add_argument("--cores", type=int, default=None,
+                    help="pin this run to N cores (default: all; without it, jaxlink is also measured "
+                         "pinned to one core in a subprocess: pylinkage's numba loop runs on one)")
+    ap.add_argument("--jaxlink-only", action="store_true", help="skip pylinkage")
     args = ap.parse_args(argv)
     B = args.designs or (1000 if args.quick else 5000)
     repeats = 3 if args.quick else 7
@@ -172,7 +180,7 @@ def main(argv=None) -> dict:
         print(f"  {name:48s} {dtype:8s} {rate:12.4g} pos/s {e}", flush=True)
 
     results = {"designs": B, "steps": STEPS, "branch": branch}
-    if pylinkage_available():
+    if pylinkage_available() and not args.jaxlink_only:
         import pylinkage
 
         # rocker pin B at φ = 0 on the start branch, the nearest-point seed of pylinkage
@@ -213,13 +221,24 @@ def main(argv=None) -> dict:
         results[f"jaxlink_{name}_compile_s"] = compile_s - tbest
         results[f"jaxlink_{name}_converged_fraction"] = float(np.mean(np.asarray(conv)))
 
+    if args.cores is None:  # jaxlink pinned to one core, like pylinkage's numba loop
+        extra = ["--jaxlink-only", "--designs", str(B)] + (["--quick"] if args.quick else [])
+        one = run_pinned(os.path.abspath(__file__), extra, 1)
+        if one:
+            for k in ("float64", "float32"):
+                rate = one[f"jaxlink_{k}_positions_per_s"]
+                results[f"jaxlink_{k}_positions_per_s_1core"] = rate
+                log("jaxlink solve + coupler point, 1 core", k, rate, one[f"jaxlink_{k}_max_abs_error_m"])
     if "pylinkage_core_positions_per_s" in results:
         for k in ("float64", "float32"):
+            if f"jaxlink_{k}_positions_per_s_1core" in results:
+                results[f"ratio_{k}_1core_vs_pylinkage_core"] = (results[f"jaxlink_{k}_positions_per_s_1core"]
+                                                                 / results["pylinkage_core_positions_per_s"])
             results[f"ratio_{k}_vs_pylinkage_core"] = (results[f"jaxlink_{k}_positions_per_s"]
                                                       / results["pylinkage_core_positions_per_s"])
             results[f"ratio_{k}_vs_pylinkage_step_fast"] = (results[f"jaxlink_{k}_positions_per_s"]
                                                            / results["pylinkage_step_fast_positions_per_s"])
-    print(f"\nfour-bar + coupler point, {B} designs x {STEPS} steps; {os.cpu_count()} cores, jax {jax.__version__}")
+    print(f"\nfour-bar + coupler point, {B} designs x {STEPS} steps; {cores()} cores, jax {jax.__version__}")
     print(f"{'method':48s} {'dtype':8s} {'positions/s':>12s} {'max|ΔP| m':>10s}")
     for name, dt, rate, err in rows:
         print(f"{name:48s} {dt:8s} {rate:12.4g} {'' if err is None else f'{err:10.2e}'}")
@@ -227,6 +246,10 @@ def main(argv=None) -> dict:
         print(f"jaxlink float64 = {results['ratio_float64_vs_pylinkage_core']:.2f}x pylinkage's numba core over designs "
               f"({results['ratio_float64_vs_pylinkage_step_fast']:.2f}x its step_fast); float32 "
               f"{results['ratio_float32_vs_pylinkage_core']:.2f}x")
+    if "ratio_float64_1core_vs_pylinkage_core" in results:
+        print(f"pinned to 1 core (as pylinkage): jaxlink float64 = "
+              f"{results['ratio_float64_1core_vs_pylinkage_core']:.2f}x pylinkage's numba core")
+    results["cores"] = cores()
     results["machine"] = {"cpus": os.cpu_count(), "platform": platform.platform(), "jax": jax.__version__}
     if args.json:
         os.makedirs(os.path.dirname(os.path.abspath(args.json)), exist_ok=True)

@@ -108,7 +108,7 @@ def main(argv=None):
     q = ["--quick"] if args.quick else []
     want = set((args.only or "throughput,gradient,optimizer,fourbar,error,scaling").split(","))
     t0 = time.perf_counter()
-    status, summary = {}, {}
+    status = {}
 
     def script(name, file, extra):
         if name not in want:
@@ -152,9 +152,16 @@ def main(argv=None):
               f"| jaxlink continuation float64 | {tp['continuation_positions_per_s']:.3g} | "
               f"{tp['continuation_max_abs_error_m']:.1e} |",
               f"| numpy batched Newton | {tp['numpy_positions_per_s']:.3g} | {tp['numpy_max_abs_error_m']:.1e} |",
-              f"| scipy fsolve loop | {tp['fsolve_positions_per_s']:.3g} | {tp['fsolve_max_abs_error_m']:.1e} |", "",
-              f"float64 = **{tp['ratio_vs_numpy']:.1f}×** numpy batched Newton (goal ≥ 15×), "
-              f"{tp['ratio_vs_fsolve']:.0f}× fsolve.", ""]
+              f"| scipy fsolve loop | {tp['fsolve_positions_per_s']:.3g} | {tp['fsolve_max_abs_error_m']:.1e} |",
+              f"| hand-written JAX kernel (feed only) | {tp['handwritten_positions_per_s']:.3g} | |"]
+        if "positions_per_s_1core" in tp:
+            L += [f"| jaxlink float64 (auto), pinned to 1 core | {tp['positions_per_s_1core']:.3g} | |",
+                  f"| jaxlink float32 (auto), pinned to 1 core | {tp['positions_per_s_f32_1core']:.3g} | |",
+                  f"| hand-written JAX kernel, pinned to 1 core | {tp['handwritten_positions_per_s_1core']:.3g} | |"]
+        L += ["", f"float64 = **{tp['ratio_vs_numpy']:.1f}×** numpy batched Newton (goal ≥ 15×), "
+              f"{tp['ratio_vs_fsolve']:.0f}× fsolve, {tp['ratio_vs_handwritten']:.2f}× the hand-written kernel"
+              + (f"; pinned to one core (numpy and fsolve use one) {tp['ratio_vs_numpy_1core']:.1f}× numpy"
+                 if "ratio_vs_numpy_1core" in tp else "") + ".", ""]
     if fb:
         L += ["## Four-bar + coupler point vs pylinkage (`fourbar_vs_pylinkage.json`)", ""]
         if "pylinkage_core_positions_per_s" in fb:
@@ -168,7 +175,9 @@ def main(argv=None):
                   f"| jaxlink float32 | {fb['jaxlink_float32_positions_per_s']:.3g} | "
                   f"{fb['jaxlink_float32_max_abs_error_m']:.1e} |", "",
                   f"jaxlink float64 = **{fb['ratio_float64_vs_pylinkage_core']:.2f}×** pylinkage's numba core "
-                  f"(goal ≥ 2×).", ""]
+                  f"(goal ≥ 2×)"
+                  + (f"; pinned to one core like pylinkage: **{fb['ratio_float64_1core_vs_pylinkage_core']:.2f}×**"
+                     if "ratio_float64_1core_vs_pylinkage_core" in fb else "") + ".", ""]
         else:
             L += ["pylinkage not installed.", ""]
     if gc:

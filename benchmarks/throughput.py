@@ -26,9 +26,14 @@ import argparse
 import json
 import os
 import platform
+import sys
 import time
 
-import jax
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from _cores import cores, pin_from_argv, run_pinned  # noqa: E402
+
+pin_from_argv()  # --cores N: before JAX starts its threads
+import jax  # noqa: E402
 
 jax.config.update("jax_enable_x64", True)
 import jax.numpy as jnp  # noqa: E402
@@ -160,6 +165,10 @@ def main(argv=None) -> dict:
     ap.add_argument("--angles", type=int, default=72, help="crank angles per design (default 72)")
     ap.add_argument("--fsolve-designs", type=int, default=None, help="designs for the fsolve loop (default 4; quick 1)")
     ap.add_argument("--json", metavar="OUT", help="write the results as JSON")
+    ap.add_argument("--cores", type=int, default=None,
+                    help="pin this run to N cores (default: all; without it, jaxlink is also measured "
+                         "pinned to one core in a subprocess, like the single-threaded baselines)")
+    ap.add_argument("--jaxlink-only", action="store_true", help="skip the numpy and fsolve baselines")
     args = ap.parse_args(argv)
 
     B = args.designs or (2000 if args.quick else 10000)
@@ -184,14 +193,17 @@ def main(argv=None) -> dict:
     ref_xy = ref_xy.reshape(B, len(phis), 2)
     import scipy.optimize  # noqa: F401  (imported before timing)
 
-    # numpy batched Newton at the working tolerance, timed
-    t_np, q_np = best_of(lambda: numpy_newton(P, phis, q0, tol=1e-13), 1 if args.quick else 2)
-    rows.append(("numpy batched Newton (continuation)", "float64", t_np, pos, z_error(q_np, phis, P, ref_xy), None))
-
-    # fsolve loop on a few designs
-    t_fs, q_fs = best_of(lambda: fsolve_loop(P[:n_fs], phis, q0), 1)
-    rows.append(("scipy fsolve per angle (loop)", "float64", t_fs, n_fs * len(phis),
-                 z_error(q_fs, phis, P[:n_fs], ref_xy[:n_fs]), None))
+    if args.jaxlink_only:
+        t_np = t_fs = float("nan")
+    else:
+        # numpy batched Newton at the working tolerance, timed
+        t_np, q_np = best_of(lambda: numpy_newton(P, phis, q0, tol=1e-13), 1 if args.quick else 2)
+        rows.append(("numpy batched Newton (continuation)", "float64", t_np, pos, z_error(q_np, phis, P, ref_xy),
+                     None))
+        # fsolve loop on a few designs
+        t_fs, q_fs = best_of(lambda: fsolve_loop(P[:n_fs], phis, q0), 1)
+        rows.append(("scipy fsolve per angle (loop)", "float64", t_fs, n_fs * len(phis),
+                     z_error(q_fs, phis, P[:n_fs], ref_xy[:n_fs]), None))
 
     results = {}
     for method in ("auto", "continuation"):
@@ -227,8 +239,19 @@ def main(argv=None) -> dict:
 
     np_rate = pos / t_np
     fs_rate = n_fs * len(phis) / t_fs
+    one_core = None
+    if args.cores is None:  # jaxlink pinned to one core, in a subprocess (the baselines use one)
+        extra = ["--jaxlink-only", "--designs", str(B), "--angles", str(args.angles)] + (["--quick"] if args.quick else [])
+        one_core = run_pinned(os.path.abspath(__file__), extra, 1)
+        if one_core:
+            rows.append(("jaxlink closed-form dyads (auto), 1 core", "float64", pos / one_core["positions_per_s"], pos,
+                         one_core["max_abs_error_m"], None))
+            rows.append(("jaxlink closed-form dyads (auto), 1 core", "float32",
+                         pos / one_core["positions_per_s_f32"], pos, one_core["max_abs_error_m_f32"], None))
+            rows.append(("hand-written JAX closed form, 1 core", "float64",
+                         pos / one_core["handwritten_positions_per_s"], pos, float("nan"), None))
     print(f"feed six-bar, {B} designs x {args.angles} angles = {pos} positions; "
-          f"{os.cpu_count()} cores, jax {jax.__version__} on {jax.devices()[0].platform}")
+          f"{cores()} cores, jax {jax.__version__} on {jax.devices()[0].platform}")
     print(f"{'method':44s} {'dtype':8s} {'positions/s':>12s} {'× numpy':>8s} {'× fsolve':>9s} "
           f"{'max|ΔZ| m':>10s} {'compile s':>9s}")
     for name, dt, t, n, err, comp in rows:
@@ -250,14 +273,23 @@ def main(argv=None) -> dict:
         "ratio_vs_numpy": results[("auto", "float64")][0] / np_rate,
         "ratio_vs_fsolve": results[("auto", "float64")][0] / fs_rate,
         "ratio_vs_handwritten": results[("auto", "float64")][0] / (pos / t_hw),
-        "numpy_max_abs_error_m": rows[0][4],
-        "fsolve_max_abs_error_m": rows[1][4],
+        "numpy_max_abs_error_m": None if args.jaxlink_only else rows[0][4],
+        "fsolve_max_abs_error_m": None if args.jaxlink_only else rows[1][4],
+        "cores": cores(),
         "designs": B,
         "angles": args.angles,
         "machine": {"cpus": os.cpu_count(), "platform": platform.platform(), "jax": jax.__version__},
     }
+    if one_core:
+        out["positions_per_s_1core"] = one_core["positions_per_s"]
+        out["positions_per_s_f32_1core"] = one_core["positions_per_s_f32"]
+        out["handwritten_positions_per_s_1core"] = one_core["handwritten_positions_per_s"]
+        out["ratio_vs_numpy_1core"] = one_core["positions_per_s"] / np_rate
     print(f"jaxlink float64: {out['ratio_vs_fsolve']:.0f}× the fsolve loop, {out['ratio_vs_numpy']:.1f}× numpy, "
           f"{out['ratio_vs_handwritten']:.2f}× the hand-written kernel")
+    if one_core:
+        print(f"pinned to 1 core: {out['positions_per_s_1core']:.3g} positions/s = "
+              f"{out['ratio_vs_numpy_1core']:.1f}× numpy (numpy and fsolve run on one core)")
     if args.json:
         with open(args.json, "w") as fh:
             json.dump(out, fh, indent=2)
