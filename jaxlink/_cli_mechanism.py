@@ -155,7 +155,7 @@ def cmd_check(args) -> int:
     enable_dtype(args.dtype)
     import jax.numpy as jnp
 
-    from ._assemble import solve
+    from ._assemble import NewtonOptions, method_for, solve
     from ._linalg import solve_small
     from ._solution import RESULTS
     from . import _structure
@@ -192,8 +192,10 @@ def cmd_check(args) -> int:
                                                              jnp.asarray(mech.parameters)))
     _, ratio = solve_small(jnp.asarray(jac), jnp.zeros(jac.shape[0]))
     cond = np.linalg.cond(jac)
+    how = ("closed-form dyads" if method_for(mech, NewtonOptions()) == "closed_form"
+           else f"{int(sol.steps[0])} Newton steps")
     print(f"assembly    at the start: {RESULTS.names[code]} (residual {float(sol.residual[0]):.2e} m, "
-          f"{int(sol.steps[0])} Newton steps, Jacobian condition number {cond:.3g})")
+          f"{how}, Jacobian condition number {cond:.3g})")
     if code == RESULTS.converged:
         print("            start configuration: " + ", ".join(
             f"{n} = {mech.from_si(n, float(v)):.6g}" for n, v in zip(mech.unknown_names, sol.q[0])))
@@ -216,11 +218,10 @@ def cmd_kinematics(args) -> int:
 
     table = _report.kinematics_table(mech, phis, omega=omega, order=order, dtype=dtype)
     bad = int((~table.converged).sum())
+    _report.print_summary(table, sys.stdout, every_row_hint=not args.csv)
     if args.csv:
         _report.write_csv(args.csv, table)
         print(f"wrote {args.csv}: {len(phis)} rows, {len(table.columns)} columns")
-    else:
-        _report.print_summary(table, sys.stdout)
     if args.plot:
         _report.plot_kinematics(args.plot, mech, table)
         print(f"wrote {args.plot}")

@@ -10,6 +10,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from . import _expr
 from ._assemble import solve
 from ._kinematics import time_derivatives, transfer
 from ._mechanism import Mechanism
@@ -100,16 +101,18 @@ def failure_summary(table: KinematicsTable) -> str:
     return "; ".join(parts)
 
 
-def print_summary(table: KinematicsTable, out: TextIO) -> None:
+def print_summary(table: KinematicsTable, out: TextIO, every_row_hint: bool = True) -> None:
     n = len(table.data)
-    out.write(f"{n} positions, {int(table.converged.sum())} converged, "
+    speed = f" at ω = {table.omega:g} rad/s" if table.velocities is not None else ""
+    out.write(f"{n} positions{speed}, {int(table.converged.sum())} converged, "
               f"max residual {np.nanmax(table.column('residual_m')):.2e} m\n")
     width = max(len(c) for c in table.columns)
     out.write(f"{'column':<{width}}  {'min':>14} {'max':>14}\n")
     for j, c in enumerate(table.columns[:-2]):
         col = table.data[:, j]
         out.write(f"{c:<{width}}  {np.nanmin(col):14.6g} {np.nanmax(col):14.6g}\n")
-    out.write("(use --csv OUT to write every row)\n")
+    if every_row_hint:
+        out.write("(use --csv OUT to write every row)\n")
 
 
 # ----------------------------------------------------------------------------- drawing
@@ -117,8 +120,8 @@ def print_summary(table: KinematicsTable, out: TextIO) -> None:
 
 def chains(mech: Mechanism, q, phis, p):
     """Polylines of every loop and point sum (partial sums of their vectors), shape
-    (N, n_chains, max_len + 1, 2), and per chain the number of vertices. A loop's polyline
-    starts at the origin and closes on itself; its vertices are the joints."""
+    (N, n_chains, max_len + 1, 2), per chain the number of vertices and its name. A loop's
+    polyline starts at the origin and closes on itself; its vertices are the joints."""
     groups = list(mech.loops) + list(mech.points)
     max_len = max(len(t) for _, t in groups)
 
@@ -138,6 +141,32 @@ def chains(mech: Mechanism, q, phis, p):
     return np.asarray(arr), [len(t) + 1 for _, t in groups], [n for n, _ in groups]
 
 
+def ground_terms(mech: Mechanism):
+    """Per loop, per term: True when the vector is fixed (no input, no unknown): a frame vector."""
+    moving = set(mech.unknown_names) | {mech.input_name}
+    return [[not any(n.name in moving for node in t.nodes() for n in _expr.names_in(node)) for t in terms]
+            for _, terms in mech.loops]
+
+
+def _draw_linkage(ax, mech, ch, lens, k, color="0.45"):
+    """The linkage at position k: moving links solid with joints, frame vectors dashed, and thin
+    lines from the last joint of each point's chain to the point."""
+    ground = ground_terms(mech)
+    for c in range(len(mech.loops)):
+        poly = ch[k, c, : lens[c]]
+        for j, fixed in enumerate(ground[c]):
+            seg = poly[j: j + 2]
+            if fixed:
+                ax.plot(seg[:, 0], seg[:, 1], "--", color="0.7", lw=1.0)
+            else:
+                ax.plot(seg[:, 0], seg[:, 1], "-o", color=color, lw=1.6, ms=3)
+    for i in range(len(mech.points)):
+        c = len(mech.loops) + i
+        poly = ch[k, c, : lens[c]]
+        ax.plot(poly[-2:, 0], poly[-2:, 1], "-", color=color, lw=0.8)
+        ax.plot(poly[-1, 0], poly[-1, 1], "s", color=f"C{i}", ms=5)
+
+
 def plot_kinematics(path: str, mech: Mechanism, table: KinematicsTable) -> None:
     import matplotlib
 
@@ -152,9 +181,7 @@ def plot_kinematics(path: str, mech: Mechanism, table: KinematicsTable) -> None:
     ax_path = fig.add_subplot(1, 2, 1)
     ch, lens, _ = chains(mech, table.q, table.inputs, table.parameters)
     k0 = int(np.argmax(table.converged)) if table.converged.any() else 0
-    for c, n in enumerate(lens[: len(mech.loops)]):
-        poly = ch[k0, c, :n] * 1e3
-        ax_path.plot(poly[:, 0], poly[:, 1], "-o", color="0.6", lw=1.2, ms=3)
+    _draw_linkage(ax_path, mech, ch * 1e3, lens, k0)
     for i, pn in enumerate(mech.point_names):
         xy = table.points[:, i] * 1e3
         ok = table.converged
