@@ -247,8 +247,8 @@ def sinker_cases(repeats, log):
     cases = []
     for rt in ((1e-3, 1e-6, 1e-10) if QUICK else (1e-3, 1e-4, 1e-5, 1e-6, 1e-8, 1e-10)):
         cases.append(run("sinker_rtol", f"{rt:g}", rt == 1e-6, method="explicit", rtol=rt))
-    for ms in ((math.inf, 2e-5) if QUICK else (math.inf, 1e-4, 2e-5, 5e-6)):
-        cases.append(run("sinker_max_step", "inf" if ms == math.inf else f"{ms:g} s", ms == math.inf,
+    for ms in ((math.inf, 1e-4, 2e-5) if QUICK else (math.inf, 3e-4, 1e-4, 2e-5, 5e-6)):
+        cases.append(run("sinker_max_step", "inf" if ms == math.inf else f"{ms:g} s", ms == 1e-4,
                          method="explicit", max_step=ms))
     for m in ("explicit", "implicit"):
         cases.append(run("sinker_method", m, m == sk.auto_method(C), method=m))

@@ -123,7 +123,7 @@ def _simulate_vmap(params, cam, knobs, **kw):
 
 
 def _kwargs(n_out=1001, method="explicit", rtol=1e-6, atol=1e-10, max_steps=10000,
-            max_step=math.inf, event_samples=16, stop_on_jam=False, lag_limit=0.02, h0=1e-7):
+            max_step=1e-4, event_samples=16, stop_on_jam=False, lag_limit=0.02, h0=1e-7):
     """Split the keyword arguments into traced knobs and static settings."""
     if method not in SOLVERS:
         raise ValueError(f"method must be one of {sorted(SOLVERS)}, not {method!r}")
