@@ -10,11 +10,16 @@ appears in exactly one vector of the loop, as follows (s = ±1 the term's sign; 
   known unit vector:  |w − s_b ℓ e_b| = r_a  gives  s_b ℓ = w·e_b + σ √(r_a² − (w × e_b)²).
 - **PP** — two lengths along known directions: a 2×2 linear system (Cramer).
 
-σ = ±1 is the *assembly branch* (circuit) of the dyad. It is read off a reference configuration
-(the file's guess solved by Newton) and kept: the closed form then stays on that branch for every
-input and every design, with no continuation. Where the square root's argument is negative the
-dyad cannot be assembled (result code), and the output stays finite (the double-`where` trick
-keeps gradients NaN-free). Angles are returned within ±π of the reference configuration.
+σ = ±1 is the *assembly branch* (circuit) of the dyad. It is chosen once, at the first input, as
+the side of the guess (`solve_nearest`: dyad by dyad, the mirror image nearer to the guessed
+configuration) and kept: the closed form then stays on that branch for every input and every
+design, with no Newton and no continuation. Where the square root's argument h² is ≤ 0 the dyad
+is put in its collinear configuration (h = 0, the least-squares closest) and the returned residual
+says by how much its loop misses: rounding at the exact toggle (assembled, within the tolerance),
+more past it (cannot be assembled). The output stays finite (the double-`where` trick keeps
+gradients NaN-free). `solve_checked` also returns the sine of the angle between the columns of
+each dyad's block of Φ_q (≈ 0: dead centre, toggle or change point, a singular position). Angles
+are returned within ±π of the reference configuration.
 """
 
 from __future__ import annotations
@@ -119,8 +124,13 @@ def _cross(a, b):
 
 
 def _safe_sqrt(x):
+    """√x and x > 0; 0 where x ≤ 0 (the collinear configuration h = 0: its miss is in the residual)."""
     ok = x > 0
     return jnp.where(ok, jnp.sqrt(jnp.where(ok, x, 1.0)), 0.0), ok
+
+
+def _inverse(L):
+    return 1.0 / jnp.where(L != 0, L, 1.0)
 
 
 def _known_parts(mech: Mechanism, dyad: Dyad, env, trig=None):
@@ -139,14 +149,13 @@ def _radius_and_offset(mech, term, offset, env, trig):
     return term.sign * L, mech.unit_vector(offset, env, trig)
 
 
-def _angle_from(ux, uy, L, cs):
-    """θ with L e(θ + c) = u, and (cos θ, sin θ), from u, L and (cos c, sin c) — one atan2.
+def _angle_from(ux, uy, L, inv_L, cs):
+    """θ with L e(θ + c) = u, and (cos θ, sin θ), from u, L, 1/L and (cos c, sin c) — one atan2.
 
     The closed form constructs u with |u| = |L| (to rounding), so e(θ + c) = u / L needs no
     square root; atan2 is scale-free, so θ is exact whatever |u|. Also returns what the term
     L e(θ + c) misses of u, ||u| − |L|| = ||u|² − L²| / (|u| + |L|) ≈ ||u|² − L²| / (2|L|)
     (its share of the loop residual), again without a square root."""
-    inv_L = 1.0 / jnp.where(L != 0, L, 1.0)
     ex, ey = ux * inv_L, uy * inv_L  # e(θ + c)
     cc, sc = cs
     ct, st = ex * cc + ey * sc, ey * cc - ex * sc  # rotate by −c
@@ -198,7 +207,11 @@ def parameter_trig(mech: Mechanism, P):
 def solve(mech: Mechanism, dyads, sigma, q_ref, phi, p, trig=None):
     """All unknowns in closed form at input φ, on the branches σ.
 
-    Returns `(q, assemblable, residual)`. Each dyad's loop closes exactly in the vectors u, v it
+    Returns `(q, assemblable, residual)`. `assemblable` is False where a dyad's h² = r_a² − x² (or
+    r_a² − (w × e_b)²) is ≤ 0: that dyad is then put in its collinear configuration (h = 0), the
+    least-squares closest one, and `residual` says by how much its loop misses — rounding at the
+    exact toggle (h² negative by rounding), so that `residual ≤ tol` decides whether the position
+    is assembled (`solve_checked`). Each dyad's loop closes exactly in the vectors u, v it
     constructs; the unit vectors of the solved angles are u/L_a and v/L_b, so the loop residual
     with the solved angles is (|L_a| − |u|) û + (|L_b| − |v|) v̂. `residual` is the largest
     ||L_a| − |u|| + ||L_b| − |v|| over the dyads: an upper bound of max|Φ| at the solution, exact
@@ -208,8 +221,19 @@ def solve(mech: Mechanism, dyads, sigma, q_ref, phi, p, trig=None):
     (`input_trig`, `parameter_trig`), computed once outside the per-position kernel. Angles are
     returned within ±π of `q_ref`.
     """
-    q, ok, resid, _ = _solve(mech, dyads, sigma, q_ref, phi, p, trig)
+    q, ok, resid, _, _ = _solve(mech, dyads, sigma, q_ref, phi, p, trig)
     return q, ok, resid
+
+
+def solve_checked(mech: Mechanism, dyads, sigma, q_ref, phi, p, trig=None):
+    """`solve`, also returning the smallest over the dyads of the sine of the angle between the
+    columns of the dyad's block of Φ_q: `(q, assemblable, residual, sine)`. RRR: the sine of the
+    angle between the two links, h |w| / (|L_a| |L_b|); RRP: the link against the slider's normal,
+    h / |L_a|; PP: the sine between the two directions. It is 0 at a dead centre, a toggle or a
+    change point (h = 0, where the two branches meet and the solution is not unique), and costs a
+    few multiplies (no trigonometry, no square root)."""
+    q, ok, resid, _, sine = _solve(mech, dyads, sigma, q_ref, phi, p, trig)
+    return q, ok, resid, sine
 
 
 def solve_nearest(mech: Mechanism, dyads, q_guess, phi, p, trig=None):
@@ -221,12 +245,14 @@ def solve_nearest(mech: Mechanism, dyads, q_guess, phi, p, trig=None):
     guessed slider position's side of the foot of the perpendicular). Returns
     `(q, assemblable, residual, sigma)`; q within ±π of the guess.
     """
-    return _solve(mech, dyads, None, q_guess, phi, p, trig)
+    q, ok, resid, sig, _ = _solve(mech, dyads, None, q_guess, phi, p, trig)
+    return q, ok, resid, sig
 
 
 def _solve(mech, dyads, sigma, q_ref, phi, p, trig):
     ok_all = jnp.asarray(True)
     resid = None
+    sine = None
     trig = dict(trig) if trig else {}
     if mech.input_kind == "angle" and mech.input_name not in trig:
         trig[mech.input_name] = (jnp.cos(phi), jnp.sin(phi))
@@ -253,9 +279,12 @@ def _solve(mech, dyads, sigma, q_ref, phi, p, trig):
             h, ok = _safe_sqrt(La * La - x * x)
             ux = (x * wx - s * h * wy) * inv_w
             uy = (x * wy + s * h * wx) * inv_w
-            env[na], trig[na], miss_a = _angle_from(ux, uy, La, csa)
-            env[nb], trig[nb], miss_b = _angle_from(wx - ux, wy - uy, Lb, csb)
+            inv_a, inv_b = _inverse(La), _inverse(Lb)
+            env[na], trig[na], miss_a = _angle_from(ux, uy, La, inv_a, csa)
+            env[nb], trig[nb], miss_b = _angle_from(wx - ux, wy - uy, Lb, inv_b, csb)
             miss = miss_a + miss_b
+            # |u × v| / (|La| |Lb|) with v = w − u: |u × w| = h |w|
+            sin_d = h * (w2 * inv_w) * jnp.abs(inv_a * inv_b)
         elif d.kind == "RRP":
             La, csa = _radius_and_offset(mech, ta, d.offsets[0], env, trig)
             ca, sa = mech.unit_vector(tb.angle, env, trig)
@@ -265,8 +294,10 @@ def _solve(mech, dyads, sigma, q_ref, phi, p, trig):
             s = jnp.where(q_ref[ib] - along >= 0, 1.0, -1.0) if sigma is None else sigma[k]
             h, ok = _safe_sqrt(La * La - across * across)
             ell = along + s * h
-            env[na], trig[na], miss = _angle_from(wx - ell * ex, wy - ell * ey, La, csa)
+            inv_a = _inverse(La)
+            env[na], trig[na], miss = _angle_from(wx - ell * ex, wy - ell * ey, La, inv_a, csa)
             env[nb] = ell
+            sin_d = h * jnp.abs(inv_a)  # the link's component along the slider, over its length
         else:  # PP: ℓa ea + ℓb eb = w
             s = jnp.ones_like(jnp.asarray(wx))
             ca, sa = mech.unit_vector(ta.angle, env, trig)
@@ -275,16 +306,19 @@ def _solve(mech, dyads, sigma, q_ref, phi, p, trig):
             eb = (tb.sign * cb, tb.sign * sb)
             det = _cross(ea, eb)
             ok = jnp.abs(det) > 1e-12
+            sin_d = jnp.abs(det)
             det = jnp.where(ok, det, 1.0)
-            env[na] = _cross((wx, wy), eb) / det
-            env[nb] = _cross(ea, (wx, wy)) / det
-            miss = jnp.zeros_like(det)
+            la, lb = _cross((wx, wy), eb) / det, _cross(ea, (wx, wy)) / det
+            env[na], env[nb] = la, lb
+            # zero to rounding, but honest where the directions are parallel (no solution)
+            miss = jnp.maximum(jnp.abs(la * ea[0] + lb * eb[0] - wx), jnp.abs(la * ea[1] + lb * eb[1] - wy))
         sig_used.append(jnp.asarray(s, dtype=q_ref.dtype))
         ok_all = ok_all & ok
         resid = miss if resid is None else jnp.maximum(resid, miss)
+        sine = sin_d if sine is None else jnp.minimum(sine, sin_d)
     q = jnp.stack([
         _wrap_near(env[n], q_ref[i]) if k == "angle" else jnp.asarray(env[n], dtype=q_ref.dtype)
         for i, (n, k) in enumerate(zip(mech.unknown_names, mech.unknown_kinds))
     ])
     sig = jnp.stack(sig_used) if sig_used else jnp.zeros((0,), q_ref.dtype)
-    return q, ok_all, resid, sig
+    return q, ok_all, resid, sig, sine

@@ -5,6 +5,13 @@ Batched `jnp.linalg.solve` on tiny systems calls LAPACK per system and breaks XL
 loop closure (2 equations per loop) we unroll Gaussian elimination with partial pivoting in
 Python: every operation is elementwise, so a `vmap` over positions and designs becomes one
 fused kernel.
+
+Each solve also returns a pivot ratio, a cheap singularity indicator. `solve_small` normalizes it
+by the largest entry by default (kinetostatics, whose system is scaled to O(1)) or, with
+`scaling="columns"`, by each pivot's column norm (the pivots of the column-equilibrated matrix):
+invariant under the units of the unknowns, as the assembly solve needs (an angle's column of Φ_q
+is ~ a length, a slider length's ~ 1). `solve_2x2` and `solve_block_lower` use the column-scaled
+ratio; `block_lower_signs` also returns the sign of det of each diagonal block (a dyad's circuit).
 """
 
 from __future__ import annotations
@@ -14,27 +21,46 @@ import jax.numpy as jnp
 UNROLL_MAX = 8
 
 
-def solve_small(a, b):
+def solve_small(a, b, *, scaling: str = "matrix"):
     """Solve `a x = b` for one small system (vmap for batches).
 
     **Arguments:**
 
     - `a`: (n, n) matrix.
     - `b`: (n,) right-hand side.
+    - `scaling`: how the pivot ratio is normalized (static). `"matrix"`: min |pivot| / max |a_ij|
+      (≈ 1/condition number when the entries share a unit). `"columns"`: min_k |pivot_k| /
+      ‖column k‖∞, the pivots of the column-equilibrated matrix (partial pivoting by rows is
+      unchanged by column scaling): invariant under a scaling of the unknowns, so columns of
+      different units (an angle's column ~ a length, a slider length's ~ 1) do not make a healthy
+      matrix look singular. For n = 2 it is |det| / (‖col 0‖∞ ‖col 1‖∞), within a factor 2 of
+      the sine of the angle between the columns.
 
-    **Returns:** `(x, pivot_ratio)`: the solution and min |pivot| / max |a_ij|, a cheap
-    singularity indicator (≈ 1/condition number; 0 for a singular matrix, in which case `x`
-    holds non-finite values).
+    **Returns:** `(x, pivot_ratio)`: the solution and the pivot ratio, a cheap singularity
+    indicator (0 for a singular matrix, in which case `x` holds non-finite values).
     """
+    x, ratio, _ = _solve_small(a, b, scaling)
+    return x, ratio
+
+
+def _solve_small(a, b, scaling: str = "matrix"):
+    """`solve_small`, also returning the sign of det a (from the pivots and the row swaps)."""
     n = a.shape[-1]
+    tiny = jnp.finfo(a.dtype).tiny
     if n > UNROLL_MAX:
         x = jnp.linalg.solve(a, b)
+        if scaling == "columns":
+            a = a / jnp.maximum(jnp.max(jnp.abs(a), axis=0), tiny)
         s = jnp.linalg.svd(a, compute_uv=False)
-        return x, s[-1] / jnp.maximum(s[0], jnp.finfo(a.dtype).tiny)
+        return x, s[-1] / jnp.maximum(s[0], tiny), jnp.sign(jnp.linalg.det(a))
     rows = [[a[i, j] for j in range(n)] for i in range(n)]
     rhs = [b[i] for i in range(n)]
-    scale = jnp.max(jnp.abs(a))
+    if scaling == "columns":
+        col_norm = [jnp.maximum(jnp.max(jnp.abs(a[:, j])), tiny) for j in range(n)]
+    else:
+        scale = jnp.maximum(jnp.max(jnp.abs(a)), tiny)
     min_piv = None
+    sign = None
     for k in range(n):
         # partial pivoting: bring the largest |a_ik| (i >= k) to row k, by selects
         if k < n - 1:
@@ -55,8 +81,10 @@ def solve_small(a, b):
             for j in range(k, n):
                 rows[k][j] = new_k[j - k]
             rhs[k] = new_b_k
+            flip = jnp.where(best_i == k, 1.0, -1.0)
+            sign = flip if sign is None else sign * flip
         piv = rows[k][k]
-        apiv = jnp.abs(piv)
+        apiv = jnp.abs(piv) / col_norm[k] if scaling == "columns" else jnp.abs(piv)
         min_piv = apiv if min_piv is None else jnp.minimum(min_piv, apiv)
         inv = 1.0 / piv
         for i in range(k + 1, n):
@@ -70,7 +98,11 @@ def solve_small(a, b):
         for j in range(i + 1, n):
             s = s - rows[i][j] * x[j]
         x[i] = s / rows[i][i]
-    return jnp.stack(x), min_piv / jnp.maximum(scale, jnp.finfo(a.dtype).tiny)
+    det_sign = jnp.sign(rows[0][0]) if sign is None else sign * jnp.sign(rows[0][0])
+    for k in range(1, n):
+        det_sign = det_sign * jnp.sign(rows[k][k])
+    ratio = min_piv if scaling == "columns" else min_piv / scale
+    return jnp.stack(x), ratio, det_sign.astype(a.dtype)
 
 
 def _pick(rows, idx, j, k, n):
@@ -88,12 +120,19 @@ def _pick_vec(v, idx, k, n):
 
 
 def solve_2x2(a00, a01, a10, a11, b0, b1):
-    """Cramer's rule for one 2×2 system; returns (x0, x1, |det| / max|a_ij|²)."""
+    """Cramer's rule for one 2×2 system; returns (x0, x1, ratio) with the column-scaled pivot ratio
+    ratio = |det| / (‖col 0‖∞ ‖col 1‖∞) (see `solve_small`, `scaling="columns"`)."""
+    x0, x1, ratio, _ = _solve_2x2(a00, a01, a10, a11, b0, b1)
+    return x0, x1, ratio
+
+
+def _solve_2x2(a00, a01, a10, a11, b0, b1):
     det = a00 * a11 - a01 * a10
-    scale = jnp.maximum(jnp.maximum(jnp.abs(a00), jnp.abs(a01)), jnp.maximum(jnp.abs(a10), jnp.abs(a11)))
+    c0 = jnp.maximum(jnp.abs(a00), jnp.abs(a10))
+    c1 = jnp.maximum(jnp.abs(a01), jnp.abs(a11))
     inv = 1.0 / det
-    return (a11 * b0 - a01 * b1) * inv, (a00 * b1 - a10 * b0) * inv, jnp.abs(det) / jnp.maximum(
-        scale * scale, jnp.finfo(jnp.result_type(det)).tiny)
+    ratio = jnp.abs(det) / jnp.maximum(c0 * c1, jnp.finfo(jnp.result_type(det)).tiny)
+    return (a11 * b0 - a01 * b1) * inv, (a00 * b1 - a10 * b0) * inv, ratio, jnp.sign(det)
 
 
 def solve_block_lower(a, b, blocks):
@@ -102,11 +141,20 @@ def solve_block_lower(a, b, blocks):
     `blocks` is a tuple of `(row_indices, col_indices)` (as from `_structure.blocks`, with loop ℓ
     giving rows 2ℓ, 2ℓ+1): rows of block i involve only the columns of blocks ≤ i. Forward
     substitution with Cramer's rule on 2×2 diagonal blocks and `solve_small` on larger ones.
-    Returns `(x, pivot_ratio)` like `solve_small`.
+    Returns `(x, pivot_ratio)`, the pivot ratio column-scaled (`solve_small`, `scaling="columns"`)
+    and the smallest over the diagonal blocks.
     """
+    x, ratio, _ = block_lower_signs(a, b, blocks)
+    return x, ratio
+
+
+def block_lower_signs(a, b, blocks):
+    """`solve_block_lower`, also returning the sign of det of every diagonal block, shape
+    (n_blocks,): for a dyad, which of its two assembly branches (circuits) the matrix belongs to."""
     n = a.shape[-1]
     x = [None] * n
     ratio = None
+    signs = []
     done: list = []
     for rows, cols in blocks:
         rhs = []
@@ -117,13 +165,14 @@ def solve_block_lower(a, b, blocks):
             rhs.append(s)
         if len(cols) == 2 and len(rows) == 2:
             (r0, r1), (c0, c1) = rows, cols
-            x0, x1, rr = solve_2x2(a[r0, c0], a[r0, c1], a[r1, c0], a[r1, c1], rhs[0], rhs[1])
+            x0, x1, rr, sg = _solve_2x2(a[r0, c0], a[r0, c1], a[r1, c0], a[r1, c1], rhs[0], rhs[1])
             x[c0], x[c1] = x0, x1
         else:
             sub = jnp.stack([jnp.stack([a[r, c] for c in cols]) for r in rows])
-            xs, rr = solve_small(sub, jnp.stack(rhs))
+            xs, rr, sg = _solve_small(sub, jnp.stack(rhs), "columns")
             for k, c in enumerate(cols):
                 x[c] = xs[k]
         ratio = rr if ratio is None else jnp.minimum(ratio, rr)
+        signs.append(sg)
         done.extend(cols)
-    return jnp.stack(x), ratio
+    return jnp.stack(x), ratio, jnp.stack(signs)

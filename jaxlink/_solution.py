@@ -18,8 +18,10 @@ class RESULTS:
 
     messages = {
         0: "converged",
-        1: "max steps: Newton did not reach the tolerance; raise max_steps or refine the step",
-        2: "singular Jacobian: a dead-centre/toggle position; the solution is not unique here",
+        1: "max steps: Newton did not reach the tolerance (or only on another assembly branch); "
+           "raise max_steps or refine the input step",
+        2: "singular Jacobian: a dead-centre/toggle/change-point position, assembled (to about "
+           "√eps near a double root); the solution is not unique here",
         3: "cannot assemble: the loops cannot close at this input (a link is too short to reach)",
         4: "non-finite values: check the parameters (NaN/inf) and the expressions",
     }
@@ -33,8 +35,8 @@ class Solution(NamedTuple):
 
     - `q`: (N, n) unknowns, SI. Where not converged: the last finite iterate (never NaN).
     - `converged`: (N,) bool.
-    - `residual`: (N,) max-norm of the loop residual before the final Newton correction, metres
-      (the correction squares it, so the residual at `q` is far smaller when converged).
+    - `residual`: (N,) max-norm of the loop residual at `q`, metres (after Newton's final
+      correction; for the closed form, the miss of the constructed loops, exact to rounding).
     - `result`: (N,) int8 code, see `RESULTS`.
     - `steps`: (N,) Newton iterations used.
     """
