@@ -51,26 +51,36 @@ SIGN_IGNORE = 1e-3
 # ----------------------------------------------------------------------------- stroke metrics (jax)
 
 
+def _hermite(t, s_a, s_b, d_a, d_b):
+    t2, t3 = t * t, t * t * t
+    return (2 * t3 - 3 * t2 + 1) * s_a + (t3 - 2 * t2 + t) * d_a + (-2 * t3 + 3 * t2) * s_b + (t3 - t2) * d_b
+
+
+def _hermite_slope(t, s_a, s_b, d_a, d_b):
+    t2 = t * t
+    return (6 * t2 - 6 * t) * s_a + (3 * t2 - 4 * t + 1) * d_a + (-6 * t2 + 6 * t) * s_b + (3 * t2 - 2 * t) * d_b
+
+
+def _newton_step(t, s_a, s_b, d_a, d_b, level):
+    g = _hermite_slope(t, s_a, s_b, d_a, d_b)
+    ok = jnp.abs(g) > 0
+    step = (_hermite(t, s_a, s_b, d_a, d_b) - level) / jnp.where(ok, g, 1.0)
+    return jnp.clip(t - jnp.where(ok, step, 0.0), 0.0, 1.0)
+
+
 def _hermite_root(s_a, s_b, d_a, d_b, level):
     """t ∈ [0, 1] with H(t) = level on the cubic Hermite H(0) = s_a, H(1) = s_b, H'(0) = d_a,
-    H'(1) = d_b (derivatives per unit t), assuming s_a ≥ level > s_b (else the clipped chord)."""
-    den = s_a - s_b
-    t = jnp.clip((s_a - level) / jnp.where(den > 0, den, 1.0), 0.0, 1.0)
+    H'(1) = d_b (derivatives per unit t), assuming s_a ≥ level > s_b (else the clipped chord).
 
-    def h(t):
-        t2, t3 = t * t, t * t * t
-        return ((2 * t3 - 3 * t2 + 1) * s_a + (t3 - 2 * t2 + t) * d_a + (-2 * t3 + 3 * t2) * s_b
-                + (t3 - t2) * d_b)
-
-    def dh(t):
-        t2 = t * t
-        return (6 * t2 - 6 * t) * s_a + (3 * t2 - 4 * t + 1) * d_a + (-6 * t2 + 6 * t) * s_b + (3 * t2 - 2 * t) * d_b
-
-    for _ in range(6):
-        g = dh(t)
-        step = (h(t) - level) / jnp.where(jnp.abs(g) > 0, g, 1.0)
-        t = jnp.clip(t - jnp.where(jnp.abs(g) > 0, step, 0.0), 0.0, 1.0)
-    return t
+    Newton from the chord's root (6 iterations, no derivatives traced), then one more Newton step
+    with derivatives: at the root it carries the exact derivative of t (implicit function
+    theorem), so reverse mode differentiates one step instead of the iterations."""
+    args = (s_a, s_b, d_a, d_b, level)
+    c = [jax.lax.stop_gradient(a) for a in args]
+    den = c[0] - c[1]
+    t = jnp.clip((c[0] - c[4]) / jnp.where(den > 0, den, 1.0), 0.0, 1.0)
+    t = jax.lax.fori_loop(0, 6, lambda _, tt: _newton_step(tt, *c), t)
+    return _newton_step(jax.lax.stop_gradient(t), *args)
 
 
 def band_width(s, ds, eps):
@@ -82,20 +92,20 @@ def band_width(s, ds, eps):
     dphi = 2 * jnp.pi / n
     k0 = jnp.argmax(s)
     level = s[k0] - eps
-    steps = jnp.arange(n)
+    k = jnp.arange(n)
+    out = s < level  # the samples outside the band
+    # consecutive samples in the band from k0 (k0 included), forward and backward around the cycle
+    m_f = jnp.min(jnp.where(out, (k - k0) % n, n))
+    m_b = jnp.min(jnp.where(out, (k0 - k) % n, n))
 
-    def side(direction):
-        idx = (k0 + direction * steps) % n
-        inside = jnp.cumprod((s[idx] >= level).astype(jnp.int32))
-        m = jnp.sum(inside)  # consecutive samples in the band from k0 (k0 included)
-        a = idx[jnp.clip(m - 1, 0, n - 1)]
-        b = idx[m % n]
+    def side(direction, m):
+        a = (k0 + direction * (m - 1)) % n
+        b = (k0 + direction * m) % n
         t = _hermite_root(s[a], s[b], direction * ds[a] * dphi, direction * ds[b] * dphi, level)
-        return (m - 1 + t) * dphi, m
+        return (m - 1 + t) * dphi
 
-    fwd, m = side(1)
-    bwd, _ = side(-1)
-    return jnp.where(m >= n, 2 * jnp.pi, jnp.minimum(fwd + bwd, 2 * jnp.pi))
+    width = side(1, m_f) + side(-1, m_b)
+    return jnp.where(m_f >= n, 2 * jnp.pi, jnp.minimum(width, 2 * jnp.pi))
 
 
 def sign_changes(a, ignore=SIGN_IGNORE):
@@ -170,6 +180,29 @@ def sag(s, ds):
         return 0.0
     lo = s[arc[maxima[0]:maxima[-1] + 1]].min()
     return float(s[k0] - lo)
+
+
+def sag_traced(s, ds):
+    """`sag` in jax (traceable, for jitted reports): the same arc, maxima and minimum."""
+    n = s.shape[0]
+    half = n // 2
+    lo, hi = jnp.min(s), jnp.max(s)
+    level = lo + 0.75 * (hi - lo)
+    k0 = jnp.argmax(s)
+    idx = (k0 + jnp.arange(-half, n - half)) % n  # cyclic order with the TDC at position `half`
+    ss, dd = s[idx], ds[idx]
+    top = ss >= level
+    fwd = jnp.cumprod(top[half:].astype(jnp.int32))
+    bwd = jnp.cumprod(top[:half + 1][::-1].astype(jnp.int32))[::-1]
+    arc = jnp.concatenate([bwd[:-1], fwd]).astype(bool)  # contiguous with the TDC
+    pair = arc[:-1] & arc[1:] & (dd[:-1] > 0) & (dd[1:] <= 0)
+    j = jnp.arange(n - 1)
+    m = jnp.where(ss[:-1] >= ss[1:], j, j + 1)
+    first = jnp.min(jnp.where(pair, m, n))
+    last = jnp.max(jnp.where(pair, m, -1))
+    pos = jnp.arange(n)
+    low = jnp.min(jnp.where((pos >= first) & (pos <= last), ss, jnp.inf))
+    return jnp.where(jnp.sum(pair) >= 2, ss[half] - low, 0.0)
 
 
 # ----------------------------------------------------------------------------- linkage angles
@@ -311,10 +344,12 @@ DWELL_OPTIONS = {
     "sign_changes": 2,         # acceleration sign changes per revolution (exactly)
     "penalty": 10.0,           # weight ρ of the squared, normalized constraint violations
 }
-# normalization of each constraint violation in the penalty, and the margin the smooth search
-# keeps inside each inequality so that the quadratic penalty's optimum is exactly feasible
+#: the constraints, in the order of `dwell_constraints` (the stroke is the one equality)
+CONSTRAINTS = ("stroke", "mu", "rod", "toggle", "amax", "grashof", "sign")
+# normalization of each constraint violation, and the margin the smooth search keeps inside each
+# inequality (the exact check has none) so that its optimum meets the exact constraints
 _SCALE = {"stroke": 2.0, "mu": 10.0, "rod": 10.0, "toggle": 1.0, "amax": 0.1, "grashof": 0.1, "sign": 1.0}
-_MARGIN = {"mu": 0.05, "rod": 0.05, "toggle": 0.01, "amax": 0.002, "grashof": 0.0}
+_MARGIN = {"mu": 0.01, "rod": 0.01, "toggle": 0.002, "amax": 0.0005, "grashof": 0.0}
 
 
 def _relu(x):
@@ -340,7 +375,8 @@ def dwell_score(m, opts, *, smooth_sign=None):
     J = −(dwell_abs + w · dwell_1%)/100 + ρ Σ_i (violation_i / scale_i)², the violations of
     |h − stroke| ≤ stroke_tol, μ_min ≥ mu_min, rod ≤ rod_max, toggle ≥ toggle_min, amax ≤ amax_max,
     Grashof crank-rocker (crank shortest) and the sign-change count (`smooth_sign`: the surrogate
-    violation instead of |count − 2|). The smooth search keeps small margins (`_MARGIN`).
+    violation instead of |count − 2|, the stroke without its tolerance and the margins `_MARGIN`).
+    The flag is the exact check of every constraint.
     """
     margin = _MARGIN if smooth_sign is not None else dict.fromkeys(_MARGIN, 0.0)
     v = {
@@ -362,223 +398,174 @@ def dwell_score(m, opts, *, smooth_sign=None):
     return j, ok
 
 
-def _softmax(x, tau):
-    """τ log Σ exp(x/τ): a smooth maximum, max ≤ it ≤ max + τ log N (conservative)."""
-    return tau * jax.nn.logsumexp(x / tau)
+def dwell_constraints(m, opts, sign_violation):
+    """(f, c) for the constrained gradient search: f = −(dwell_abs + w · dwell_1%)/100 and the
+    normalized constraints c (7,) in the order of `CONSTRAINTS`: c[0] = (h − stroke)/2 mm = 0, and
+    c[1:] ≤ 0 for the transmission angle, rod angle, toggle clearance (signed), peak acceleration
+    and Grashof margin, each with its margin `_MARGIN`, and the sign-change surrogate."""
+    mg = _MARGIN
+    c = jnp.stack([
+        (m["stroke_file"] - opts["stroke"]) / _SCALE["stroke"],
+        (opts["mu_min"] + mg["mu"] - m["mu_min_deg"]) / _SCALE["mu"],
+        (m["rod_angle_max_deg"] - opts["rod_max"] + mg["rod"]) / _SCALE["rod"],
+        (opts["toggle_min"] + mg["toggle"] - m["toggle_signed_deg"]) / _SCALE["toggle"],
+        (m["amax_rel"] - opts["amax_max"] + mg["amax"]) / _SCALE["amax"],
+        (mg["grashof"] - m["grashof_margin_rel"]) / _SCALE["grashof"],
+        sign_violation / _SCALE["sign"],
+    ])
+    f = -(m["dwell_abs_deg"] + opts["dwell_weight"] * m["dwell_1pct_deg"]) / 100.0
+    return f, c
 
 
-def _design_metrics(mech, q, s, ds, dds, p, crank, abs_tol_si, length_factor, *, soft=False):
-    """The metrics the objective needs (jax, one design; file units for the stroke). With `soft`,
-    the peak acceleration and the extreme angles are log-sum-exp soft maxima/minima (temperatures
-    0.002 l2ω² and 0.02°), so the gradient search sees a smooth function."""
+def spectral_derivatives(s):
+    """s'(φ), s''(φ) of a periodic signal sampled at N equally spaced φ over a revolution, by FFT
+    (exact for a trigonometric polynomial of degree < N/2; for a linkage's smooth stroke the error
+    is that of the truncated Fourier series: ~1e-10 relative at N = 720 for the needle designs,
+    `tests/test_dwell.py`). The spec's reference model computes its derivatives this way."""
+    n = s.shape[0]
+    k = jnp.fft.rfftfreq(n, 1.0 / n)
+    if n % 2 == 0:
+        k1 = k.at[-1].set(0.0)  # the Nyquist term of an odd derivative is not defined: drop it
+    else:
+        k1 = k
+    c = jnp.fft.rfft(s)
+    return jnp.fft.irfft(1j * k1 * c, n=n), jnp.fft.irfft(-(k * k) * c, n=n)
+
+
+def peak(x, *, refined: bool = True):
+    """Maximum of a periodic sampled signal x (N,): the largest sample, or (`refined`) the vertex
+    of the parabola through it and its two neighbours (error O(Δφ³) for a smooth peak; continuous
+    and almost everywhere differentiable in the samples)."""
+    if not refined:
+        return jnp.max(x)
+    n = x.shape[0]
+    k = jnp.argmax(x)
+    a, b, c = x[(k - 1) % n], x[k], x[(k + 1) % n]
+    den = 2.0 * b - a - c
+    ok = den > 0
+    return b + jnp.where(ok, (c - a) ** 2 / (8.0 * jnp.where(ok, den, 1.0)), 0.0)
+
+
+def design_metrics(mech, q, s, ds, dds, p, crank, abs_tol, *, refined: bool):
+    """The metrics the objective needs (jax, one design; s, crank and abs_tol in the same length
+    unit). `refined`: the peak acceleration and the extreme angles are parabola-refined extrema
+    (`peak`) instead of the extreme samples — what the search uses, so that a 0.5° search grid
+    sees the extremes that the 0.05° report grid measures, with a smooth dependence on the
+    design. `toggle_signed_deg` is the clearance with a sign (negative when the linkage passes
+    its stretched position); `toggle_clear_deg` is the spec's (0 then)."""
     deg = 180.0 / math.pi
     h = jnp.max(s) - jnp.min(s)
-    eps = jnp.stack([abs_tol_si, 0.01 * h])
+    eps = jnp.stack([jnp.asarray(abs_tol, s.dtype), 0.01 * h])
     w = jax.vmap(band_width, in_axes=(None, None, 0))(s, ds, eps) * deg
-    m = {"stroke_file": h / length_factor, "dwell_abs_deg": w[0], "dwell_1pct_deg": w[1],
-         "acc_sign_changes": sign_changes(dds), "amax_rel": jnp.max(jnp.abs(dds)) / crank,
-         "grashof_margin_rel": grashof_margin(mech, p)}
     phi3, psi, phi5, arm = needle_angles(mech, q, p)
-    m.update(angle_metrics(phi3, psi, phi5, arm))
-    if soft:
-        t = 0.02 / deg
-        m["amax_rel"] = _softmax(jnp.abs(dds) / crank, 0.002)
-        mu = jnp.abs(_wrap(phi3 - psi))
-        m["mu_min_deg"] = -_softmax(-jnp.minimum(mu, jnp.pi - mu), t) * deg
-        rod = jnp.abs(_wrap(phi5 - 0.5 * jnp.pi))
-        m["rod_angle_max_deg"] = _softmax(jnp.minimum(rod, jnp.pi - rod), t) * deg
-        tog = _wrap(phi5 - arm)
-        # signed: a linkage that passes the stretched position has a negative clearance
-        side = jnp.sign(jnp.mean(tog))
-        m["toggle_clear_deg"] = -_softmax(-side * tog, t) * deg
-    return m
-
-
-class DwellEvaluator:
-    """Batched evaluation of needle designs for the `dwell` objective, with the interface of
-    `jaxlink.optimize.Evaluator` that the searches use (`evaluate`, `smooth_single`, `report`,
-    counters), so `jaxlink.optimize._search.run(ev, "uniform" | "montecarlo" | "gradient")` works
-    on it. Unlike the generic evaluator it sees the whole solved configuration (the transmission,
-    rod and toggle angles need the joint angles, not only the needle's path).
-
-    **Arguments:** `problem` (`jaxlink.optimize.problem_from` of a file whose `[optimize]` has
-    `objective = "dwell"`), `chunk` (designs per compiled batch).
-    """
-
-    def __init__(self, problem, *, chunk: int = 256):
-        from ._sharding import design_sharding
-
-        self.problem = problem
-        self.mech = mech = problem.mech
-        self.opts = {k: problem.option(k, d) for k, d in DWELL_OPTIONS.items()}
-        self.sharding = design_sharding(jax.devices()[:1])
-        self.n_devices = 1
-        self.n_circuits = 1
-        self.chunk = int(chunk)
-        self.evaluations = 0
-        self.infeasible = 0
-        self.lf = mech.units.length
-        self.abs_tol_si = self.opts["abs_tol"] * self.lf
-        self.crank_index = mech.parameter_index("l2")
-        self.report_samples = int(problem.option("report_samples", 7200))
-        self.phis = np.asarray(problem.phis)
-
-    # -------------------------------------------------------------- designs
-    def params(self, u):
-        pr = self.problem
-        x = jnp.asarray(pr.lower) + u * jnp.asarray(pr.upper - pr.lower)
-        p = jnp.asarray(self.mech.parameters, dtype=u.dtype)
-        return p.at[jnp.asarray(pr.index)].set(x * jnp.asarray(pr.factor))
-
-    def _metrics_batch(self, P, phis):
-        import jaxlink
-
-        sol = jaxlink.solve(self.mech, phis, P)
-        t = jaxlink.transfer(self.mech, sol.q, phis, P, order=2)
-        j = self.mech.unknown_names.index("s")
-        conv = jnp.all(sol.converged, axis=-1)
-        return sol.q, sol.q[..., j], t.mu[..., j], t.nu[..., j], conv
-
-    @functools.cached_property
-    def _score_batch(self):
-        mech, opts = self.mech, self.opts
-
-        def one(q, s, ds, dds, p):
-            m = _design_metrics(mech, q, s, ds, dds, p, p[self.crank_index], self.abs_tol_si, self.lf)
-            j, ok = dwell_score(m, opts)
-            return j, ok, m
-
-        return jax.jit(jax.vmap(one))
-
-    def exact(self, U, phis=None):
-        """Exact penalized objective J (B,), constraints met (B,), assemblable (B,) and metrics."""
-        phis = self.phis if phis is None else phis
-        U = np.atleast_2d(np.asarray(U, float))
-        P = np.asarray(jax.vmap(self.params)(jnp.asarray(U)))
-        q, s, ds, dds, conv = self._metrics_batch(P, phis)
-        j, ok, m = self._score_batch(q, s, ds, dds, jnp.asarray(P))
-        conv = np.asarray(conv)
-        j = np.where(conv & np.isfinite(np.asarray(j)), np.asarray(j), np.inf)
-        return j, np.asarray(ok) & conv, conv, {k: np.asarray(v) for k, v in m.items()}
-
-    def evaluate(self, U, circuits=None):
-        """Searches' ranking value: J, plus 10 when a constraint is not met (so feasible designs
-        always rank first while infeasible ones still guide the presample); +inf if unassemblable."""
-        del circuits  # unused: the file's circuit
-        U = np.asarray(U, float)
-        vals, feas = [], []
-        for a in range(0, len(U), self.chunk):
-            part = U[a:a + self.chunk]
-            n = len(part)
-            pad = np.concatenate([part, np.repeat(part[:1], self.chunk - n, 0)]) if n < self.chunk else part
-            j, ok, conv, _ = self.exact(pad)
-            vals.append(np.where(ok, j, j + 10.0)[:n])
-            feas.append(conv[:n])
-            self.evaluations += n
-        out = {"value": np.concatenate(vals), "feasible": np.concatenate(feas),
-               "circuit": np.zeros(len(U), int)}
-        self.infeasible += int((~out["feasible"]).sum())
-        return out
-
-    def smooth_single(self, u, c=0):
-        """Smooth objective of one design (traced; +inf if unassemblable): exact dwell widths
-        (differentiable crossings), hard max/min over the samples, the sign-change surrogate."""
-        del c  # unused
-        from ._assemble import solve_path
-        from ._kinematics import transfer_one
-
-        p = self.params(u)
-        phis = jnp.asarray(self.phis, u.dtype)
-        sol = solve_path(self.mech, p, phis)
-        t = jax.vmap(lambda q, ph: transfer_one(self.mech, q, ph, p, 2))(sol.q, phis)
-        j = self.mech.unknown_names.index("s")
-        s, ds, dds = sol.q[:, j], t.mu[:, j], t.nu[:, j]
-        m = _design_metrics(self.mech, sol.q, s, ds, dds, p, p[self.crank_index], self.abs_tol_si, self.lf,
-                            soft=True)
-        val, _ = dwell_score(m, self.opts, smooth_sign=_sign_surrogate(s, dds))
-        ok = jnp.all(sol.converged) & jnp.isfinite(val)
-        return jnp.where(ok, val, jnp.inf)
-
-    # -------------------------------------------------------------- reports
-    def parameters_si(self, u):
-        return np.asarray(self.params(jnp.asarray(u, float)))
-
-    def report(self, u, c: int = 0) -> dict:
-        """Exact objective and every metric of one design at `report_samples` positions."""
-        pr = self.problem
-        x = pr.to_file_units(np.asarray(u))
-        phis = pr.phis[0] + 2 * np.pi * np.arange(self.report_samples) / self.report_samples
-        j, ok, conv, _ = self.exact(np.asarray(u)[None], phis)
-        out = {"parameters": {n: float(v) for n, v in zip(pr.names, x)}, "feasible": bool(conv[0]),
-               "constraints_met": bool(ok[0]), "circuit": int(c)}
-        if not conv[0]:
-            return {**out, "objective": None, "metrics": {}}
-        scale = StrokeScale(length_to_mm=1e3)
-        met = needle_metrics(self.mech, self.parameters_si(u), samples=self.report_samples, scale=scale)
-        met.pop("converged", None)
-        out["objective"] = float(j[0])
-        out["metrics"] = met
-        return out
+    mu = jnp.abs(_wrap(phi3 - psi))
+    mu = jnp.minimum(mu, jnp.pi - mu)
+    rod = jnp.abs(_wrap(phi5 - 0.5 * jnp.pi))
+    rod = jnp.minimum(rod, jnp.pi - rod)
+    tog = _wrap(phi5 - arm)
+    crosses = (jnp.max(tog) > 0) & (jnp.min(tog) < 0)
+    side = jnp.where(jnp.mean(tog) >= 0, 1.0, -1.0)
+    signed = -peak(-side * tog, refined=refined) * deg
+    return {
+        "stroke_file": h, "dwell_abs_deg": w[0], "dwell_1pct_deg": w[1],
+        "acc_sign_changes": sign_changes(dds),
+        "amax_rel": peak(jnp.abs(dds), refined=refined) / crank,
+        "mu_min_deg": -peak(-mu, refined=refined) * deg,
+        "rod_angle_max_deg": peak(rod, refined=refined) * deg,
+        "toggle_signed_deg": signed,
+        "toggle_clear_deg": jnp.where(crosses, 0.0, signed),
+        "grashof_margin_rel": grashof_margin(mech, p),
+    }
 
 
 def dwell_objective(problem):
     """Factory of the registry objective `dwell` (`jaxlink.optimize` `OBJECTIVES`).
 
-    The generic evaluator hands an objective only the path of the `[optimize]` point (here the
-    needle B, whose y is the slider position s, file units) with exact φ-derivatives. From it this
-    objective computes the stroke, the dwell widths, the sign changes and amax = max|s''|/l2
-    (l2 = the file's crank, which must not be a variable), and J of `dwell_score` with those
-    constraints. The transmission, rod and toggle angles need the joint angles: they are
-    included when the path also carries the solved unknowns `q` (N, n) and the SI parameters `p`
-    (fields of `PathData`); otherwise use `DwellEvaluator`, which sees the whole configuration.
+    The design search hands it the path of the `[optimize]` point (the needle B, whose y is the
+    slider position s, file units), the solved unknowns q and the parameters p (`PathData`). The
+    search solves positions only and takes s', s'' spectrally from the samples
+    (`spectral_derivatives`, agreeing with the exact transfer functions to ~1e-10: the gradient
+    call is ~10× cheaper than through the second-order transfer functions); the report re-solves
+    at `report_samples` with the exact transfer functions. From them:
+
+    - `value`: the exact J of `dwell_score` (+10 when a constraint is missed, so every design
+      that meets the constraints ranks first), with parabola-refined extremes (`design_metrics`);
+    - `rank` (picks the gradient search's starts): (value, the same J without the +10: a long
+      dwell at the wrong stroke is a good start);
+    - `smooth`: the quadratic-penalty J with the sign-change surrogate and the margins;
+    - `constraints`: (f, c) of `dwell_constraints` for the augmented-Lagrangian gradient search;
+    - `metrics` (the report): stroke, all dwell widths, sign changes, peaks and angles exactly as
+      `needle_metrics` measures them (extreme samples of the report grid), the Grashof margin,
+      the sag and `constraints_met` (1/0), the exact check of every constraint on those numbers.
+
+    The crank is the parameter `l2`; amax is max|s''|/l2.
     """
     from .optimize._objectives import Objective
 
     mech = problem.mech
-    if "l2" in problem.names:
-        raise problem.error("the dwell objective normalizes the acceleration by the crank l2: keep l2 fixed",
-                            "variables")
+    for name in ("l2", "beta") if "beta" in mech.parameter_names else ("l2",):
+        if name not in mech.parameter_names:
+            raise problem.error(f"the dwell objective needs the parameter '{name}' (the crank l2; "
+                                "the bell crank's arm angle beta)", "objective")
+    for name in ("phi3", "psi", "phi5"):
+        if name not in mech.unknown_names:
+            raise problem.error(f"the dwell objective needs the unknown '{name}' (coupler phi3, rocker psi, "
+                                "rod phi5: spec/needle-six-bar.md)", "objective")
     opts = {k: problem.option(k, d) for k, d in DWELL_OPTIONS.items()}
+    for k, v in opts.items():
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
+            raise problem.error(f"'{k}' must be a finite number, got {v!r}", k)
     lf = mech.units.length
-    crank = float(mech.parameters[mech.parameter_index("l2")]) / lf  # file units, like the path
+    crank_index = mech.parameter_index("l2")
 
-    def metrics_of(path):
-        s, ds, dds = path.xy[:, 1], path.dxy[:, 1], path.ddxy[:, 1]
-        h = jnp.max(s) - jnp.min(s)
-        eps = jnp.stack([jnp.asarray(opts["abs_tol"], s.dtype), 0.01 * h])
-        w = jax.vmap(band_width, in_axes=(None, None, 0))(s, ds, eps) * (180.0 / math.pi)
-        m = {"stroke_file": h, "dwell_abs_deg": w[0], "dwell_1pct_deg": w[1],
-             "acc_sign_changes": sign_changes(dds), "amax_rel": jnp.max(jnp.abs(dds)) / crank,
-             # unknown without the configuration: neutral values that meet the constraints
-             "mu_min_deg": jnp.asarray(90.0), "rod_angle_max_deg": jnp.asarray(0.0),
-             "toggle_clear_deg": jnp.asarray(90.0), "grashof_margin_rel": jnp.asarray(1.0)}
-        fields = getattr(type(path), "_fields", ())
-        if "q" in fields and "p" in fields and path.q is not None and path.p is not None:
-            m.update(angle_metrics(*needle_angles(mech, path.q, path.p)))
-            m["grashof_margin_rel"] = grashof_margin(mech, path.p)
-        return m, s, dds
+    def measured(path, refined):
+        if path.q is None or path.p is None:
+            raise ValueError("the dwell objective needs the solved configuration q and the parameters p (PathData)")
+        s = path.xy[:, 1]
+        if path.dxy is None or path.ddxy is None:  # the search: spectral derivatives of the samples
+            ds, dds = spectral_derivatives(s)
+        else:  # the report: the exact transfer functions
+            ds, dds = path.dxy[:, 1], path.ddxy[:, 1]
+        crank = path.p[crank_index] / lf
+        return design_metrics(mech, path.q, s, ds, dds, path.p, crank, opts["abs_tol"], refined=refined), s, ds, dds
+
+    def score(path):
+        m, _, _, _ = measured(path, True)
+        return dwell_score(m, opts)
 
     def value(path):
-        m, _, _ = metrics_of(path)
-        j, ok = dwell_score(m, opts)
+        j, ok = score(path)
         return jnp.where(ok, j, j + 10.0)
 
+    def rank(path):
+        j, ok = score(path)
+        return jnp.where(ok, j, j + 10.0), j
+
     def smooth(path):
-        m, s, dds = metrics_of(path)
+        m, s, _, dds = measured(path, True)
+        m = dict(m, toggle_clear_deg=m["toggle_signed_deg"])
         return dwell_score(m, opts, smooth_sign=_sign_surrogate(s, dds))[0]
 
+    def constraints(path):
+        m, s, _, dds = measured(path, True)
+        f, c = dwell_constraints(m, opts, _sign_surrogate(s, dds))
+        j, ok = dwell_score(m, opts)
+        return f, c, jnp.where(ok, j, j + 10.0)
+
     def metrics(path):
-        m, s, _ = metrics_of(path)
-        out = {"stroke_mm": m["stroke_file"] * lf * 1e3, "dwell_005mm_deg": m["dwell_abs_deg"],
-               "dwell_1pct_deg": m["dwell_1pct_deg"], "acc_sign_changes": m["acc_sign_changes"],
-               "amax_rel": m["amax_rel"]}
-        fields = getattr(type(path), "_fields", ())
-        if "q" in fields and getattr(path, "q", None) is not None:
-            out.update({k: m[k] for k in ("mu_min_deg", "rod_angle_max_deg", "toggle_clear_deg")})
+        m, s, ds, dds = measured(path, False)
+        crank = path.p[crank_index] / lf
+        out = stroke_metrics(s, ds, dds, crank, scale=StrokeScale(length_to_mm=lf * 1e3))
+        out.pop("stroke_rel")
+        out.update({k: m[k] for k in ("mu_min_deg", "rod_angle_max_deg", "toggle_clear_deg", "grashof_margin_rel")})
+        out["sag_mm"] = sag_traced(s, ds) * lf * 1e3
         out["constraints_met"] = dwell_score(m, opts)[1].astype(float)
         return out
 
-    return Objective("dwell", 2, value, smooth, metrics, report_order=2)
+    # the search solves positions only (order 0: s', s'' spectral); the report adds the exact
+    # transfer functions (report_order 2)
+    return Objective("dwell", 0, value, smooth, metrics, report_order=2, constraints=constraints, equalities=1,
+                     rank=rank)
 
 
 def _register():
@@ -589,137 +576,3 @@ def _register():
 
 
 _register()
-
-
-# ----------------------------------------------------------------------------- multistart search
-
-
-def _u_of_v(v):
-    return 0.5 - 0.5 * jnp.cos(jnp.pi * v)
-
-
-def _v_of_u(u):
-    return np.arccos(np.clip(1.0 - 2.0 * np.asarray(u), -1.0, 1.0)) / np.pi
-
-
-def _lbfgs_direction(g, S, Y):
-    """Two-loop recursion: −H g from the pairs (s_i, y_i) (oldest first)."""
-    q = g.copy()
-    alphas = []
-    for s, y in reversed(list(zip(S, Y))):
-        rho = 1.0 / np.dot(y, s)
-        a = rho * np.dot(s, q)
-        alphas.append((rho, a, s, y))
-        q -= a * y
-    if S:
-        q *= np.dot(S[-1], Y[-1]) / np.dot(Y[-1], Y[-1])
-    for rho, a, s, y in reversed(alphas):
-        q += (a - rho * np.dot(y, q)) * s
-    return -q
-
-
-def multistart(ev: DwellEvaluator, *, seed: int = 0, presample: int = 4096, starts: int = 16, iterations: int = 150,
-               memory: int = 10, linesearch_steps: int = 8, budget: int | None = None, callback=None) -> dict:
-    """Gradient search for the dwell: a Monte Carlo presample ranked by the penalized objective J
-    (without the +10 of a missed constraint: a design with a long dwell but the wrong stroke is a
-    good start), then L-BFGS (memory 10, Armijo backtracking; bounds by u = (1 − cos πv)/2) from
-    the `starts` best in one batch, on the smooth objective with exact implicit gradients. A start
-    whose line search fails restarts its memory from the gradient direction instead of stopping.
-    The exact objective of every accepted iterate decides the result.
-
-    Counts evaluations as the design search does: one design solved = 1, a value and gradient = 2.
-    `callback(evaluations, wall_s, metrics_of_best)` is called after every iteration.
-    **Returns:** dict with `best_u`, `best` (report), `evaluations`, `wall_s`, `history`.
-    """
-    import time
-
-    t0 = time.perf_counter()
-    V = ev.problem.n_variables
-    rng = np.random.default_rng([seed, 4])
-    U = rng.random((presample, V))
-    js, oks = [], []
-    for a in range(0, presample, ev.chunk):
-        part = U[a:a + ev.chunk]
-        n = len(part)
-        pad = np.concatenate([part, np.repeat(part[:1], ev.chunk - n, 0)]) if n < ev.chunk else part
-        j, ok, conv, _ = ev.exact(pad)
-        js.append(j[:n])
-        oks.append(ok[:n])
-    evaluations = presample
-    j, ok = np.concatenate(js), np.concatenate(oks)
-    best = {"value": np.inf, "u": None}
-
-    def consider(Uc, jc, okc):
-        val = np.where(okc, jc, jc + 10.0)
-        i = int(np.argmin(val))
-        if val[i] < best["value"]:
-            best["value"], best["u"] = float(val[i]), np.asarray(Uc[i]).copy()
-
-    consider(U, j, ok)
-    order = np.argsort(j, kind="stable")[:starts]
-    v = _v_of_u(U[order])
-    vg = ev.__dict__.get("_vg_batch")
-    if vg is None:
-        vg = jax.jit(jax.vmap(jax.value_and_grad(lambda vv: ev.smooth_single(_u_of_v(vv)))))
-        ev.__dict__["_vg_batch"] = vg
-
-    def value_grad(vv):
-        f, g = vg(jnp.asarray(vv))
-        f, g = np.asarray(f), np.asarray(g)
-        good = np.isfinite(f) & np.all(np.isfinite(g), axis=1)
-        return np.where(good, f, np.inf), np.where(good[:, None], g, 0.0)
-
-    f, g = value_grad(v)
-    evaluations += 2 * starts
-    mem = [([], []) for _ in range(starts)]
-    history = []
-    for it in range(iterations):
-        if budget is not None and evaluations + 2 * starts * linesearch_steps + starts > budget:
-            break
-        d = np.stack([_lbfgs_direction(g[i], *mem[i]) for i in range(starts)])
-        slope = np.sum(d * g, axis=1)
-        bad = ~(slope < 0)
-        d[bad] = -g[bad]
-        slope[bad] = -np.sum(g[bad] ** 2, axis=1)
-        fresh = np.array([len(m[0]) == 0 for m in mem]) | bad
-        dn = np.max(np.abs(d), axis=1)
-        t = np.where(fresh, np.minimum(1.0, 0.02 / np.maximum(dn, 1e-300)), 1.0)
-        searching = np.isfinite(f)
-        nv, nf, ng = v.copy(), f.copy(), g.copy()
-        for _ in range(linesearch_steps):
-            if not searching.any():
-                break
-            trial = np.where(searching[:, None], v + t[:, None] * d, v)
-            tf, tg = value_grad(trial)
-            evaluations += 2 * starts
-            acc = searching & np.isfinite(tf) & (tf <= f + 1e-4 * t * slope)
-            nv[acc], nf[acc], ng[acc] = trial[acc], tf[acc], tg[acc]
-            searching &= ~acc
-            t = np.where(searching, 0.5 * t, t)
-        for i in range(starts):
-            if np.any(nv[i] != v[i]):
-                s_, y_ = nv[i] - v[i], ng[i] - g[i]
-                if np.dot(s_, y_) > 1e-12 * np.linalg.norm(s_) * np.linalg.norm(y_):
-                    mem[i][0].append(s_)
-                    mem[i][1].append(y_)
-                    if len(mem[i][0]) > memory:
-                        mem[i][0].pop(0)
-                        mem[i][1].pop(0)
-            else:  # the line search failed: forget the curvature pairs
-                mem[i] = ([], [])
-        v, f, g = nv, nf, ng
-        Uc = np.asarray(_u_of_v(jnp.asarray(v)))
-        jc, okc, _, mc = ev.exact(Uc)
-        evaluations += starts
-        consider(Uc, jc, okc)
-        k = int(np.argmin(np.where(okc, jc, jc + 10.0)))
-        row = {"iteration": it, "evaluations": evaluations, "wall_s": time.perf_counter() - t0,
-               "best_value": best["value"], "dwell_abs_deg": float(mc["dwell_abs_deg"][k]),
-               "dwell_1pct_deg": float(mc["dwell_1pct_deg"][k]), "constraints_met": bool(okc[k])}
-        history.append(row)
-        if callback is not None:
-            callback(row)
-    ev.evaluations += evaluations
-    wall = time.perf_counter() - t0
-    return {"best_u": best["u"], "best_value": best["value"], "evaluations": evaluations, "wall_s": wall,
-            "history": history, "best": ev.report(best["u"]) if best["u"] is not None else None}

@@ -1,6 +1,7 @@
 """Dwell metrics of the ARACHNE needle six-bar against spec/needle-six-bar.md §3 (the table of
 metrics computed there by an independent numpy/scipy model) and the reference CSV."""
 
+import json
 import math
 import pathlib
 
@@ -124,6 +125,10 @@ def test_chosen_derivatives_vs_reference(chosen):
     np.testing.assert_allclose(s, ref[:, 2], atol=1e-10)
     np.testing.assert_allclose(ds, ref[:, 4], atol=1e-9 * np.abs(ref[:, 4]).max())
     np.testing.assert_allclose(dds, ref[:, 5], atol=1e-8 * np.abs(ref[:, 5]).max())
+    # the search's spectral derivatives of the 720 positions (0.5°) vs the exact transfer functions
+    sd, sdd = _dwell.spectral_derivatives(jnp.asarray(s))
+    np.testing.assert_allclose(sd, ds, atol=1e-9 * np.abs(ds).max())
+    np.testing.assert_allclose(sdd, dds, atol=1e-8 * np.abs(dds).max())
 
 
 @pytest.fixture(scope="module")
@@ -218,3 +223,72 @@ def test_sag_two_humps():
     ds = -np.sin(phi) + np.sin(2 * phi)
     smax = 0.5 + 0.25  # cos 60 - 0.5 cos 120 = 0.75
     assert _dwell.sag(s, ds) == pytest.approx(smax - (1 - 0.5), abs=1e-9)
+    # the traceable version (jitted reports) agrees, also with the top across the wrap
+    for shift in (0, 1234, n - 7):
+        sr, dr = np.roll(s, shift), np.roll(ds, shift)
+        assert float(_dwell.sag_traced(jnp.asarray(sr), jnp.asarray(dr))) == pytest.approx(_dwell.sag(sr, dr), abs=1e-12)
+    one, d_one = np.cos(phi) + 0.1 * np.cos(2 * phi), -np.sin(phi) - 0.2 * np.sin(2 * phi)
+    assert float(_dwell.sag_traced(jnp.asarray(one), jnp.asarray(d_one))) == 0.0
+
+
+def test_refined_peak():
+    """The parabola through the top three samples: exact for a parabola, O(Δ³) for a cosine."""
+    x = np.linspace(-1, 1, 41)
+    y = 3.0 - 2.0 * (x - 0.0123) ** 2
+    assert float(_dwell.peak(jnp.asarray(y))) == pytest.approx(3.0, abs=1e-12)
+    assert float(_dwell.peak(jnp.asarray(y), refined=False)) < 3.0
+    n = 720
+    phi = 2 * np.pi * np.arange(n) / n
+    c = jnp.cos(phi - 0.3 * 2 * np.pi / n)  # the peak between two samples
+    assert float(_dwell.peak(c)) == pytest.approx(1.0, abs=1e-9)
+    assert 1.0 - float(jnp.max(c)) > 1e-6
+
+
+# ----------------------------------------------------------------------------- the design search
+
+
+def _grashof_crank_rocker(par):
+    """Crank shortest and s + l < p + q for the four-bar l1, l2, l3, l4r (mm)."""
+    bars = [par["l1"], 12.5, par["l3"], par["l4r"]]
+    return min(par["l1"], par["l3"], par["l4r"]) > 12.5 and min(bars) + max(bars) < sum(bars) - min(bars) - max(bars)
+
+
+def test_cli_needle_dwell_reports_every_constraint(tmp_path, both):
+    """`jaxlink optimize needle-dwell --method gradient` (small budget): the spec's JSON, the eight
+    metrics of the issue, and `constraints_met` equal to the conjunction of the spec §4 constraints
+    recomputed from the reported metrics and parameters; the metrics equal `needle_metrics` of the
+    reported design."""
+    from jaxlink.cli import main
+
+    out = tmp_path / "r.json"
+    budget = 600
+    assert main(["optimize", "needle-dwell", "--method", "gradient", "--budget", str(budget), "--starts", "4",
+                 "--chunk", "64", "--out", str(out), "--progress", "off"]) == 0
+    data = json.loads(out.read_text())
+    for key in ("method", "best", "evaluations", "wall_s", "infeasible_fraction"):
+        assert key in data
+    assert data["method"] == "gradient" and 0 < data["evaluations"] <= budget
+    best = data["best"]
+    par, m = best["parameters"], best["metrics"]
+    assert set(par) == {"l1", "l3", "l4r", "l4a", "l5", "l7", "beta"}
+    for key in ("stroke_mm", "dwell_005mm_deg", "dwell_1pct_deg", "acc_sign_changes", "amax_rel", "mu_min_deg",
+                "rod_angle_max_deg", "toggle_clear_deg"):
+        assert isinstance(m[key], float), key
+    checks = {
+        "stroke": abs(m["stroke_mm"] - 20.0) <= 0.01,
+        "sign changes": m["acc_sign_changes"] == 2,
+        "amax": m["amax_rel"] <= 1.95,
+        "transmission": m["mu_min_deg"] >= 40.0,
+        "rod": m["rod_angle_max_deg"] <= 45.0,
+        "toggle": m["toggle_clear_deg"] >= 1.0,
+        "grashof": _grashof_crank_rocker(par),
+    }
+    assert bool(m["constraints_met"]) == all(checks.values()), checks
+    assert (m["grashof_margin_rel"] > 0) == checks["grashof"]
+    # the same design measured by the stand-alone metrics (batch of two: the compiled function of `both`)
+    mech = both[0]
+    got = _dwell.needle_metrics(mech, np.stack([np.asarray(mech.parameters), mech.with_parameters(**par)]))[1]
+    for key in ("stroke_mm", "dwell_005mm_deg", "dwell_1pct_deg", "amax_rel", "mu_min_deg", "rod_angle_max_deg",
+                "toggle_clear_deg", "grashof_margin_rel", "sag_mm"):
+        assert m[key] == pytest.approx(got[key], rel=1e-9, abs=1e-9), key
+    assert m["acc_sign_changes"] == got["acc_sign_changes"]

@@ -8,7 +8,8 @@ units) and a circuit index c (which branch signs of the dyads; 0 = the file's). 
 2. a starting configuration at the first input on the circuit (`_start.py`), gradient stopped;
 3. the path solve over the `samples` inputs (`jaxlink._assemble.solve_path`: closed-form dyads or
    Newton continuation; differentiable in p by implicit differentiation);
-4. the point's path (and its input derivatives if the objective needs them, `_kinematics`);
+4. the point's path (and its input derivatives if the objective needs them, `_kinematics`),
+   with the solved unknowns q and the parameters p (`PathData`);
 5. the objective. A design is *feasible* iff the start and every position converged; an
    infeasible design gets the value +inf (never NaN), and it is counted.
 
@@ -18,6 +19,7 @@ One *mechanism evaluation* = one design solved over its revolution (on one circu
 
 from __future__ import annotations
 
+import copy
 import functools
 import math
 
@@ -103,7 +105,7 @@ class Evaluator:
         xy = t.points[:, k] / lf
         dxy = None if t.dpoints is None else t.dpoints[:, k] / lf
         ddxy = None if t.ddpoints is None else t.ddpoints[:, k] / lf
-        return PathData(xy, dxy, ddxy), feasible
+        return PathData(xy, dxy, ddxy, sol.q, p), feasible
 
     def value_single(self, u, c):
         """Exact objective of one design (+inf if infeasible) and its feasibility."""
@@ -121,6 +123,26 @@ class Evaluator:
         ok = feas & jnp.isfinite(v)
         return jnp.where(ok, v, jnp.inf)
 
+    def constrained_single(self, u, c):
+        """For the constrained gradient solver: (f, constraint values (K,), exact value, feasible)
+        of one design from one path solve (`Objective.constraints`)."""
+        phis = jnp.asarray(self.problem.phis, u.dtype)
+        path, feas = self.path(u, c, phis, self.objective.order)
+        f, cons, v = self.objective.constraints(path)
+        return f, cons, jnp.where(feas & jnp.isfinite(v), v, jnp.inf), feas
+
+    def rank_single(self, u, c):
+        """Exact objective, feasibility and the objective's start-ranking value (`Objective.rank`,
+        default the value) of one design."""
+        phis = jnp.asarray(self.problem.phis, u.dtype)
+        path, feas = self.path(u, c, phis, self.objective.order)
+        if self.objective.rank is None:
+            v = r = self.objective.value(path)
+        else:
+            v, r = self.objective.rank(path)
+        ok = feas & jnp.isfinite(v)
+        return jnp.where(ok, v, jnp.inf), ok, jnp.where(feas & jnp.isfinite(r), r, jnp.inf)
+
     # ------------------------------------------------------------------ batched (jitted)
     @functools.cached_property
     def _values_all_circuits(self):
@@ -136,49 +158,87 @@ class Evaluator:
     def _values_given_circuit(self):
         return jax.jit(jax.vmap(self.value_single))
 
-    def evaluate(self, U, circuits=None):
+    @functools.cached_property
+    def _ranks_all_circuits(self):
+        def one(u):
+            cs = jnp.arange(self.n_circuits)
+            v, ok, r = jax.vmap(lambda c: self.rank_single(u, c))(cs)
+            i = jnp.argmin(v)
+            return v[i], ok[i], i, r[i]
+
+        return jax.jit(jax.vmap(one))
+
+    @functools.cached_property
+    def _ranks_given_circuit(self):
+        return jax.jit(jax.vmap(self.rank_single))
+
+    def evaluate(self, U, circuits=None, *, rank: bool = False):
         """Objective of a batch of designs.
 
         **Arguments:** `U` (B, V) normalized designs; `circuits` (B,) circuit indices, or None:
-        the file's circuit, or with `circuits = "all"` the best circuit of each design.
+        the file's circuit, or with `circuits = "all"` the best circuit of each design; `rank`:
+        also return the objective's start-ranking value (`Objective.rank`; the gradient
+        search's presample).
 
         **Returns:** dict of numpy arrays `value` (B,) (+inf if infeasible), `feasible` (B,),
-        `circuit` (B,). Counts `B × circuits tried` mechanism evaluations.
+        `circuit` (B,) (and `rank` (B,)). Counts `B × circuits tried` mechanism evaluations.
         """
         U = np.asarray(U, dtype=float)
         B = len(U)
-        vals, oks, cs = [], [], []
+        vals, oks, cs, rs = [], [], [], []
         for s in range(0, B, self.chunk):
             part = U[s:s + self.chunk]
             padded, n = pad_rows(part, self.chunk)
+            r = None
             if circuits is None and self.n_circuits > 1:
-                v, ok, c = self._values_all_circuits(put(jnp.asarray(padded), self.sharding))
+                x = put(jnp.asarray(padded), self.sharding)
+                if rank:
+                    v, ok, c, r = self._ranks_all_circuits(x)
+                else:
+                    v, ok, c = self._values_all_circuits(x)
                 self.evaluations += n * self.n_circuits
             else:
                 cc = np.zeros(len(part), int) if circuits is None else np.asarray(circuits[s:s + self.chunk])
                 cc, _ = pad_rows(cc, self.chunk)
-                v, ok = self._values_given_circuit(*put((jnp.asarray(padded), jnp.asarray(cc)), self.sharding))
+                x = put((jnp.asarray(padded), jnp.asarray(cc)), self.sharding)
+                if rank:
+                    v, ok, r = self._ranks_given_circuit(*x)
+                else:
+                    v, ok = self._values_given_circuit(*x)
                 c = cc
                 self.evaluations += n
             vals.append(np.asarray(v)[:n])
             oks.append(np.asarray(ok)[:n])
             cs.append(np.asarray(c)[:n])
+            if r is not None:
+                rs.append(np.asarray(r)[:n])
         out = {
             "value": np.concatenate(vals) if vals else np.zeros(0),
             "feasible": np.concatenate(oks) if oks else np.zeros(0, bool),
             "circuit": np.concatenate(cs) if cs else np.zeros(0, int),
         }
+        if rank:
+            out["rank"] = np.concatenate(rs) if rs else np.zeros(0)
         self.infeasible += int((~out["feasible"]).sum())
         return out
 
     # ------------------------------------------------------------------ reports
     def report(self, u, c: int = 0) -> dict:
         """The exact objective and metrics of one design, re-solved with `report_samples` inputs
-        (the objective's own samples unless it is `points`)."""
+        (the objective's own samples unless it is `points`). Jitted; the last reports are cached
+        (a search's runner reports its best design after every chunk)."""
+        key = (np.asarray(u, dtype=float).tobytes(), int(c))
+        cache = self.__dict__.setdefault("_report_cache", {})
+        if key not in cache:
+            cache.clear() if len(cache) >= 64 else None
+            cache[key] = self._report(u, c)
+        return copy.deepcopy(cache[key])
+
+    def _report(self, u, c: int) -> dict:
         u = jnp.asarray(u, dtype=float)
         pr = self.problem
         order = max(self.objective.order, self.objective.report_order)
-        path, feas = self._path_fn(int(c), self.report_samples, order)(u)
+        feas, value, metrics = self._report_fn(int(c), self.report_samples, order)(u)
         x = pr.to_file_units(np.asarray(u))
         out = {
             "parameters": {n: float(v) for n, v in zip(pr.names, x)},
@@ -186,12 +246,22 @@ class Evaluator:
             "circuit": int(c),
         }
         if bool(feas):
-            out["objective"] = float(self.objective.value(path))
-            out["metrics"] = to_python(self.objective.metrics(path))
+            out["objective"] = float(value)
+            out["metrics"] = to_python(metrics)
         else:
             out["objective"] = None
             out["metrics"] = {}
         return out
+
+    @functools.lru_cache(maxsize=16)
+    def _report_fn(self, c: int, samples: int, order: int):
+        path_fn = self._path_fn(c, samples, order)
+
+        def one(uu):
+            path, feas = path_fn(uu)
+            return feas, self.objective.value(path), self.objective.metrics(path)
+
+        return jax.jit(one)
 
     @functools.cached_property
     def _paths_batch(self):

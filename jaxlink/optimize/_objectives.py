@@ -6,10 +6,18 @@ An objective is built from the `Problem` by a factory registered under its name
 - `order`: derivatives of the path the objective needs (0: positions; 2: + d/dφ, d²/dφ²),
 - `value(path)`: the objective evaluated exactly at the sampled path (ranking, reports),
 - `smooth(path)`: a smoothed version with useful gradients (the gradient search),
-- `metrics(path)`: named numbers for the report (2a, 2b, centre, …).
+- `metrics(path)`: named numbers for the report (2a, 2b, centre, …);
+- optionally `constraints(path) -> (f, c, value)`: a smooth objective f and constraint values
+  c (K,) with c[:equalities] = 0 and c[equalities:] ≤ 0 wanted (normalized), and the exact
+  `value(path)` from the same intermediates, for the constrained gradient solver
+  (`gradient_solver = "al-lbfgs"`, `_search.py`);
+- optionally `rank(path) -> (value, rank)`: the exact value and the value by which the
+  constrained gradient search picks its starts from the presample (default: `value` for both).
 
 `path` is a `PathData` in the file's units (lengths in `length_unit`, derivatives per radian of
-input). A later objective (the needle `dwell`) plugs in by registering a factory here.
+input), with the solved configuration `q` and the parameters `p` (SI) for objectives that need
+more than the point's path (the needle `dwell`: transmission, rod and toggle angles). A later
+objective plugs in by registering a factory here.
 """
 
 from __future__ import annotations
@@ -23,15 +31,19 @@ import numpy as np
 
 
 class PathData(NamedTuple):
-    """The traced path of the point, file length units.
+    """The traced path of the point, file length units, and the solved configuration.
 
     - `xy`: (N, 2) positions at the sampled inputs (a full revolution, equally spaced).
     - `dxy`, `ddxy`: (N, 2) first and second derivatives w.r.t. the input (per rad), or None.
+    - `q`: (N, n) the solved unknowns at the same inputs (SI: rad, m), or None.
+    - `p`: (P,) the design's parameters (SI), or None.
     """
 
     xy: jax.Array
     dxy: jax.Array | None = None
     ddxy: jax.Array | None = None
+    q: jax.Array | None = None
+    p: jax.Array | None = None
 
 
 class Objective(NamedTuple):
@@ -41,6 +53,9 @@ class Objective(NamedTuple):
     smooth: Callable
     metrics: Callable
     report_order: int = 0
+    constraints: Callable | None = None
+    equalities: int = 0
+    rank: Callable | None = None
 
 
 class _Registry:

@@ -32,6 +32,7 @@ KNOWN_KEYS = {
     "report_samples", "placement",
     # searches
     "starts", "presample", "iterations", "uniform", "chunk", "budget", "seed",
+    "gradient_solver", "memory", "al_rho", "al_every",
 }
 
 

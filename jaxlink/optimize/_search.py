@@ -16,12 +16,16 @@ search runs until its slowest start is done: every start is charged for every ex
 - `gradient`: a Monte Carlo presample picks the best `starts` feasible designs (each on its best
   circuit), then L-BFGS (optax, zoom line search) runs from all of them in parallel on the
   smoothed objective, with exact gradients by implicit differentiation through the path solve;
-  bounds by the smooth map u = (1 − cos πv)/2. The best start wins.
+  bounds by the smooth map u = (1 − cos πv)/2. The best start wins. With
+  `gradient_solver = "al-lbfgs"` (objectives with constraints, e.g. `dwell`): an augmented
+  Lagrangian with per-start line searches instead (`AugmentedLagrangian`).
 """
 
 from __future__ import annotations
 
+import functools
 import math
+import threading
 import time
 
 import jax
@@ -385,6 +389,279 @@ class Gradient:
         return st
 
 
+class AugmentedLagrangian:
+    """Gradient search for objectives with constraints (`Objective.constraints`), selected by
+    `[optimize] gradient_solver = "al-lbfgs"`: minimize f subject to c_E(x) = 0, c_I(x) ≤ 0
+    (normalized) from a batch of starts.
+
+    - **Starts**: a Monte Carlo presample (`presample` designs, numpy PCG64 seeded by (seed,
+      chunk)) ranked by the objective's `rank` value (default its value); the `starts` best.
+    - **Augmented Lagrangian** (per start, multipliers λ, weight ρ = `al_rho`):
+      Φ = f + λ_E·c_E + ρ/2 |c_E|² + ρ/2 Σ_I [max(0, c_I + λ_I/ρ)² − (λ_I/ρ)²]; every
+      `al_every` steps λ_E += ρ c_E, λ_I = max(0, λ_I + ρ c_I) and Φ, ∇Φ are re-evaluated at
+      the current points. With the multipliers the active constraints are met exactly at a
+      moderate ρ, instead of the ill-conditioned walls of a quadratic penalty.
+    - **L-BFGS** on Φ (memory `memory`), bounds by u = (1 − cos πv)/2, with a backtracking
+      (Armijo, quadratic interpolation) line search *per start*: every batched call evaluates
+      one trial point of every start (one value and gradient each, 2 evaluations), and each
+      start accepts its trial or shortens its own step, so no start waits for the others'
+      line searches. After `max_backtracks` failed trials a start forgets its curvature pairs
+      and steps along −∇Φ.
+    - The exact objective of every trial point comes with its gradient call (one path solve):
+      the best exact value seen decides the result, at no extra evaluations.
+    - The batched value-and-gradient is compiled in a background thread while the presample runs.
+
+    `iterations` counts batched calls (trial points per start). Knobs (keyword or `[optimize]`):
+    `starts` (16), `presample` (256 × starts, at most a quarter of the budget), `iterations`
+    (600), `memory` (20), `al_rho` (1), `al_every` (20), `chunk_iterations` (10 calls per
+    checkpoint).
+    """
+
+    name = "gradient"
+
+    def __init__(self, ev: Evaluator, *, budget: int, seed: int, starts: int | None = None,
+                 presample: int | None = None, iterations: int | None = None, memory: int | None = None,
+                 al_rho: float | None = None, al_every: int | None = None, max_backtracks: int = 8,
+                 chunk_iterations: int = 10, **_):
+        pr = ev.problem
+        if ev.objective.constraints is None:
+            raise pr.error(f"gradient_solver = \"al-lbfgs\" needs an objective with constraints; "
+                           f"'{pr.objective}' has none (use \"lbfgs\")", "gradient_solver")
+        self.ev, self.budget, self.seed = ev, int(budget), int(seed)
+        s = int(starts or pr.option("starts", 16))
+        self.S = -(-s // ev.n_devices) * ev.n_devices
+        self.presample = min(int(presample or pr.option("presample", 256 * self.S)),
+                             max(self.S, self.budget // (4 * ev.n_circuits)))
+        self.iterations = int(iterations or pr.option("iterations", 600))
+        self.memory = int(memory or pr.option("memory", 20))
+        self.rho = float(al_rho or pr.option("al_rho", 1.0))
+        self.every = int(al_every or pr.option("al_every", 20))
+        self.max_backtracks = int(max_backtracks)
+        self.chunk_iterations = int(chunk_iterations)
+        self.step0 = 0.02  # the first (and a restarted) step moves at most this far in v
+
+    @property
+    def _vg(self):
+        cache = self.ev.__dict__.setdefault("_jit_cache", {})
+        if "al_value_and_grad" not in cache:
+            ev = self.ev
+            E = ev.objective.equalities
+
+            def one(v, c, lam, rho):
+                def phi(vv):
+                    f, cons, exact, feas = ev.constrained_single(_u_of_v(vv), c)
+                    ce, ci = cons[:E], cons[E:]
+                    le, li = lam[:E], lam[E:]
+                    val = (f + jnp.sum(le * ce) + 0.5 * rho * jnp.sum(ce * ce)
+                           + 0.5 * rho * jnp.sum(jnp.maximum(0.0, ci + li / rho) ** 2 - (li / rho) ** 2))
+                    return jnp.where(feas & jnp.isfinite(val), val, jnp.inf), (cons, exact, feas)
+
+                (val, (cons, exact, feas)), grad = jax.value_and_grad(phi, has_aux=True)(v)
+                ok = jnp.isfinite(val) & jnp.all(jnp.isfinite(grad))
+                return jnp.where(ok, val, jnp.inf), jnp.where(ok, grad, 0.0), cons, exact, feas
+
+            cache["al_value_and_grad"] = jax.jit(jax.vmap(one, in_axes=(0, 0, 0, None)))
+        return cache["al_value_and_grad"]
+
+    @functools.cached_property
+    def n_constraints(self) -> int:
+        V = self.ev.problem.n_variables
+        return int(jax.eval_shape(lambda u: self.ev.constrained_single(u, 0)[1], jnp.zeros(V)).shape[0])
+
+    def _precompile(self):
+        """Compile the batched value-and-gradient ahead of its first call (run in a thread while
+        the presample is evaluated: XLA compiles without holding the GIL)."""
+        try:
+            S, V, K = self.S, self.ev.problem.n_variables, self.n_constraints
+            self._vg.lower(*self._args(np.zeros((S, V)), np.zeros(S, np.int64), np.zeros((S, K))), self.rho).compile()
+        except Exception:  # noqa: BLE001, S110 - the first real call compiles (and reports) instead
+            pass
+
+    def _args(self, *arrays):
+        if self.ev.n_devices == 1:
+            return arrays
+        return put(tuple(jnp.asarray(a) for a in arrays), self.ev.sharding)
+
+    def _call(self, st, v):
+        val, grad, cons, exact, feas = self._vg(*self._args(v, st["c"], st["lam"]), self.rho)
+        st["evaluations"] += np.int64(2 * self.S)
+        st["designs"] += np.int64(self.S)
+        feas = np.asarray(feas)
+        st["infeasible"] += np.int64((~feas).sum())
+        exact = np.asarray(exact)
+        _update_best(st, 0.5 - 0.5 * np.cos(np.pi * v), {"value": exact, "circuit": st["c"]})
+        return np.array(val), np.array(grad), np.array(cons)
+
+    # ------------------------------------------------------------------ state
+    def init(self):
+        st = _common_state()
+        V = self.ev.problem.n_variables
+        st["phase"] = np.int64(0)
+        st["pool_value"] = np.full(self.S, np.inf)
+        st["pool_u"] = np.zeros((self.S, V))
+        st["pool_circuit"] = np.zeros(self.S, np.int64)
+        st["pool_n"] = np.int64(0)
+        st["iteration"] = np.int64(0)
+        return st
+
+    def done(self, st):
+        return bool(st["done"])
+
+    def step(self, st):
+        if int(st["phase"]) == 0:
+            return self._presample_chunk(st)
+        return self._chunk(st)
+
+    def _presample_chunk(self, st):
+        ev = self.ev
+        if getattr(self, "_compiler", None) is None:
+            self._compiler = threading.Thread(target=self._precompile, daemon=True)
+            self._compiler.start()
+        left = self.presample - int(st["pool_n"])
+        n = min(ev.chunk, left, max(0, (self.budget - int(st["evaluations"])) // ev.n_circuits))
+        if n > 0:
+            rng = np.random.default_rng([self.seed, 1_000_003, int(st["chunk"])])
+            U = rng.random((ev.chunk, ev.problem.n_variables))[:n]
+            res = ev.evaluate(U, rank=True)
+            res["all_circuits"] = ev.n_circuits > 1
+            _count(st, ev, res, n)
+            _update_best(st, U, res)
+            vals = np.concatenate([st["pool_value"], res["rank"]])
+            us = np.concatenate([st["pool_u"], U])
+            cs = np.concatenate([st["pool_circuit"], res["circuit"]])
+            order = np.argsort(vals, kind="stable")[: self.S]
+            st["pool_value"], st["pool_u"], st["pool_circuit"] = vals[order], us[order], cs[order]
+            st["pool_n"] += np.int64(n)
+        st["chunk"] += 1
+        if int(st["pool_n"]) >= self.presample or n == 0:
+            self._start(st)
+        return st
+
+    def _start(self, st):
+        if getattr(self, "_compiler", None) is not None:
+            self._compiler.join()
+        ok = np.isfinite(st["pool_value"])
+        if not ok.any() or int(st["evaluations"]) + 2 * self.S > self.budget:
+            st["done"] = np.bool_(True)
+            return
+        S, V, M, K = self.S, self.ev.problem.n_variables, self.memory, self.n_constraints
+        idx = np.where(ok, np.arange(S), np.flatnonzero(ok)[np.arange(S) % ok.sum()])
+        st["c"] = np.asarray(st["pool_circuit"][idx], np.int64)
+        st["lam"] = np.zeros((S, K))
+        st["v"] = _v_of_u(st["pool_u"][idx])
+        st["F"], st["G"], st["C"] = self._call(st, st["v"])
+        st["mem_s"] = np.zeros((S, M, V))
+        st["mem_y"] = np.zeros((S, M, V))
+        st["mem_n"] = np.zeros(S, np.int64)
+        st["nback"] = np.zeros(S, np.int64)
+        st["since"] = np.int64(0)
+        self._directions(st, np.ones(S, bool))
+        st["phase"] = np.int64(1)
+
+    # ------------------------------------------------------------------ L-BFGS, per start
+    def _two_loop(self, st):
+        """−H∇Φ of every start from its curvature pairs (oldest first; vectorized)."""
+        Ss, Ys, n = st["mem_s"], st["mem_y"], st["mem_n"]
+        M = Ss.shape[1]
+        q = st["G"].copy()
+        alpha = np.zeros((len(q), M))
+        sy = np.einsum("imv,imv->im", Ss, Ys)
+        valid = np.arange(M)[None, :] < n[:, None]
+        rho = np.where(valid, 1.0 / np.where(valid, sy, 1.0), 0.0)
+        for j in reversed(range(M)):
+            a = rho[:, j] * np.einsum("iv,iv->i", Ss[:, j], q)
+            alpha[:, j] = a
+            q -= a[:, None] * Ys[:, j]
+        last = np.maximum(n - 1, 0)
+        ys, yy = Ys[np.arange(len(q)), last], Ys[np.arange(len(q)), last]
+        sl = Ss[np.arange(len(q)), last]
+        gamma = np.where(n > 0, np.einsum("iv,iv->i", sl, ys) / np.maximum(np.einsum("iv,iv->i", yy, yy), 1e-300),
+                         1.0)
+        r = gamma[:, None] * q
+        for j in range(M):
+            b = rho[:, j] * np.einsum("iv,iv->i", Ys[:, j], r)
+            r += (alpha[:, j] - b)[:, None] * Ss[:, j]
+        return -r
+
+    def _directions(self, st, which):
+        """New search directions and first trial steps for the starts `which`."""
+        G = st["G"]
+        d = self._two_loop(st)
+        slope = np.sum(d * G, axis=1)
+        bad = ~(slope < 0) | ~np.all(np.isfinite(d), axis=1) | (st["mem_n"] == 0)
+        reset = bad & (st["mem_n"] > 0)
+        st["mem_n"] = np.where(which & reset, 0, st["mem_n"])
+        d = np.where(bad[:, None], -G, d)
+        slope = np.where(bad, -np.sum(G * G, axis=1), slope)
+        t = np.where(bad, np.minimum(1.0, self.step0 / np.maximum(np.max(np.abs(d), axis=1), 1e-300)), 1.0)
+        for k, new in (("d", d), ("slope", slope), ("t", t)):
+            st[k] = np.where(which.reshape((-1,) + (1,) * (new.ndim - 1)), new, st[k]) if k in st else new
+        st["nback"] = np.where(which, 0, st["nback"])
+
+    def _iteration(self, st):
+        v, F, G, d, t, slope = st["v"], st["F"], st["G"], st["d"], st["t"], st["slope"]
+        alive = np.isfinite(F)
+        trial = np.where(alive[:, None], v + t[:, None] * d, v)
+        tF, tG, tC = self._call(st, trial)
+        acc = alive & np.isfinite(tF) & (tF <= F + 1e-4 * t * slope)
+        # curvature pairs of the accepted steps
+        s_, y_ = trial - v, tG - G
+        sy = np.sum(s_ * y_, axis=1)
+        good = acc & (sy > 1e-10 * np.linalg.norm(s_, axis=1) * np.linalg.norm(y_, axis=1))
+        M = self.memory
+        for i in np.flatnonzero(good):
+            n = int(st["mem_n"][i])
+            if n == M:
+                st["mem_s"][i, :-1], st["mem_y"][i, :-1] = st["mem_s"][i, 1:].copy(), st["mem_y"][i, 1:].copy()
+                n -= 1
+            st["mem_s"][i, n], st["mem_y"][i, n] = s_[i], y_[i]
+            st["mem_n"][i] = n + 1
+        st["v"] = np.where(acc[:, None], trial, v)
+        st["F"] = np.where(acc, tF, F)
+        st["G"] = np.where(acc[:, None], tG, G)
+        st["C"] = np.where(acc[:, None], tC, st["C"])
+        self._directions(st, acc)
+        # rejected: shorten the step (quadratic interpolation, within [0.1 t, 0.5 t]) or restart
+        rej = alive & ~acc
+        st["nback"] = np.where(rej, st["nback"] + 1, st["nback"])
+        restart = rej & (st["nback"] > self.max_backtracks)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            tq = -slope * t**2 / (2.0 * (tF - F - slope * t))
+        tq = np.where(np.isfinite(tq), np.clip(tq, 0.1 * t, 0.5 * t), 0.25 * t)
+        st["t"] = np.where(rej, tq, st["t"])
+        if restart.any():
+            st["mem_n"] = np.where(restart, 0, st["mem_n"])
+            self._directions(st, restart)
+            st["t"] = np.where(restart, 0.1 * st["t"], st["t"])
+        st["iteration"] += 1
+        st["since"] += 1
+        if st["since"] >= self.every:
+            self._multipliers(st)
+
+    def _multipliers(self, st):
+        E = self.ev.objective.equalities
+        C, lam = st["C"], st["lam"].copy()
+        lam[:, :E] = lam[:, :E] + self.rho * C[:, :E]
+        lam[:, E:] = np.maximum(0.0, lam[:, E:] + self.rho * C[:, E:])
+        st["lam"] = np.where(np.isfinite(st["F"])[:, None] & np.all(np.isfinite(C), axis=1)[:, None], lam, st["lam"])
+        st["since"] = np.int64(0)
+        if int(st["evaluations"]) + 2 * self.S > self.budget:
+            return
+        st["F"], st["G"], st["C"] = self._call(st, st["v"])
+        self._directions(st, np.ones(self.S, bool))
+        # keep the curvature pairs: Φ changed only by the multiplier terms
+
+    def _chunk(self, st):
+        for _ in range(self.chunk_iterations):
+            if (int(st["iteration"]) >= self.iterations or not np.isfinite(st["F"]).any()
+                    or int(st["evaluations"]) + 2 * self.S > self.budget):
+                st["done"] = np.bool_(True)
+                break
+            self._iteration(st)
+        st["chunk"] += 1
+        return st
+
+
 def searcher(ev: Evaluator, method: str, *, budget: int, seed: int, uniform: str = "grid", **knobs):
     if method == "montecarlo":
         return MonteCarlo(ev, budget=budget, seed=seed, **knobs)
@@ -392,6 +669,12 @@ def searcher(ev: Evaluator, method: str, *, budget: int, seed: int, uniform: str
         cls = {"grid": UniformGrid, "coordinate": UniformCoordinate}[uniform]
         return cls(ev, budget=budget, seed=seed, **knobs)
     if method == "gradient":
+        solver = knobs.pop("gradient_solver", None) or ev.problem.option("gradient_solver", "lbfgs")
+        if solver == "al-lbfgs":
+            return AugmentedLagrangian(ev, budget=budget, seed=seed, **knobs)
+        if solver != "lbfgs":
+            raise ev.problem.error(f"'gradient_solver' must be \"lbfgs\" or \"al-lbfgs\", got {solver!r}",
+                                   "gradient_solver")
         return Gradient(ev, budget=budget, seed=seed, **knobs)
     raise ValueError(f"unknown method {method!r}; use one of {METHODS}")
 

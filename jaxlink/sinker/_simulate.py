@@ -13,7 +13,6 @@ A *jam* ("vzpriceni", dynamic collapse) is flagged when, after the straight rise
 from __future__ import annotations
 
 import functools
-import math
 from typing import NamedTuple
 
 import jax
