@@ -242,7 +242,11 @@ def animate(path: str, mech: Mechanism, table: KinematicsTable, fps: int = 15) -
     ax.set_xlabel("x (mm)")
     ax.set_ylabel("y (mm)")
     nl = len(mech.loops)
-    loop_lines = [ax.plot([], [], "-o", lw=2, ms=4)[0] for _ in range(nl)]
+    ground = ground_terms(mech)
+    # one line per vector of every loop: moving links solid with joints, frame vectors dashed
+    seg_lines = [[ax.plot([], [], "--", color="0.7", lw=1.0)[0] if fixed else ax.plot([], [], "-o", lw=2, ms=4)[0]
+                  for fixed in ground[c]] for c in range(nl)]
+    arm_lines = [ax.plot([], [], "-", color="0.4", lw=1.0)[0] for _ in mech.point_names]
     for i, pn in enumerate(mech.point_names):
         xy = table.points[ok, i] * 1e3
         ax.plot(xy[:, 0], xy[:, 1], ":", lw=1, color="0.5")
@@ -254,13 +258,18 @@ def animate(path: str, mech: Mechanism, table: KinematicsTable, fps: int = 15) -
     def draw(k):
         for c in range(nl):
             poly = ch[k, c, : lens[c]]
-            loop_lines[c].set_data(poly[:, 0], poly[:, 1])
-            loop_lines[c].set_color("C0" if ok[k] else "red")
+            for j, line in enumerate(seg_lines[c]):
+                line.set_data(poly[j: j + 2, 0], poly[j: j + 2, 1])
+                if not ground[c][j]:
+                    line.set_color("C0" if ok[k] else "red")
         for i, m in enumerate(point_marks):
+            c = nl + i
+            arm = ch[k, c, lens[c] - 2: lens[c]]
+            arm_lines[i].set_data(arm[:, 0], arm[:, 1])
             m.set_data([table.points[k, i, 0] * 1e3], [table.points[k, i, 1] * 1e3])
         title.set_text(f"{mech.name}   {table.columns[0]} = {table.data[k, 0]:.1f}"
                        + ("" if ok[k] else "  (not converged)"))
-        return loop_lines + point_marks + [title]
+        return [ln for row in seg_lines for ln in row] + arm_lines + point_marks + [title]
 
     anim = FuncAnimation(fig, draw, frames=len(table.data), blit=False)
     anim.save(path, writer=PillowWriter(fps=fps))
