@@ -225,8 +225,8 @@ def main(argv=None) -> dict:
             results[(method, np.dtype(dtype).name)] = (pos / t_run, err, conv, t_first - t_run)
 
     # hand-written kernel for this mechanism only
-    sig = jl._dyads.branches(mech, jl._dyads.classify(mech), jnp.asarray(q_ref[0, 0]), phis[0],
-                             jnp.asarray(mech.parameters))
+    sig = jl._dyads.solve_nearest(mech, jl._dyads.classify(mech), jnp.asarray(q_ref[0, 0]), phis[0],
+                                  jnp.asarray(mech.parameters))[3]
     s1, s2 = float(sig[0]), float(sig[1])
     hw = jax.jit(lambda Pd, ph: handwritten_closed_form(Pd, ph, s1, s2))
     Pj, phj = jnp.asarray(P), jnp.asarray(phis)

@@ -57,9 +57,8 @@ import numpy as np
 
 from . import _dyads, _structure
 from ._fusion import materialize
-from ._linalg import _solve_small, block_lower_signs
+from ._linalg import solve_block_lower, solve_small
 from ._mechanism import Mechanism
-from ._sharding import design_sharding
 from ._solution import RESULTS, Solution
 
 
@@ -129,12 +128,12 @@ def _linear_solve(mech: Mechanism, signs: bool = False):
     blocks = tuple((tuple(r for li in loops for r in (2 * li, 2 * li + 1)), cols) for loops, cols in order)
     if len(blocks) == 1 and len(blocks[0][1]) > 2:
         def lin(a, b):
-            x, ratio, sg = _solve_small(a, b, "columns")
+            x, ratio, sg = solve_small(a, b, scaling="columns", signs=True)
             return (x, ratio, sg[None]) if signs else (x, ratio)
         return lin
 
     def lin_blocks(a, b):
-        x, ratio, sg = block_lower_signs(a, b, blocks)
+        x, ratio, sg = solve_block_lower(a, b, blocks)
         return (x, ratio, sg) if signs else (x, ratio)
     return lin_blocks
 
@@ -155,16 +154,6 @@ def _known_trig_jvp(primals, tangents):
     _, c, s = primals
     dx, dc, ds = tangents
     return (c, s), (dc - s * dx, ds + c * dx)
-
-
-def _residual_with_trig(mech: Mechanism, q, phi, p, const, trig):
-    """Φ = (the part of Φ that depends on q, with known (cos, sin) `trig`) + `const`."""
-    env = mech._env(q, phi, p)
-    out = []
-    for _, terms in mech.loops:
-        out.extend(mech._sum(terms, env, "var", trig))
-    dtype = jnp.result_type(q)
-    return jnp.stack([jnp.asarray(v, dtype=dtype) for v in out]) + const
 
 
 def newton(mech: Mechanism, q0, phi, p, *, tol, rtol: float, max_steps, limit_step, singular_ratio: float,
@@ -219,7 +208,7 @@ def newton(mech: Mechanism, q0, phi, p, *, tol, rtol: float, max_steps, limit_st
     def resid(qq, c, s):
         trig = dict(tp)
         trig.update({names[i]: (c[j], s[j]) for j, i in enumerate(ang)})
-        return _residual_with_trig(mech, qq, phi, p, const, trig)
+        return mech.residual_var(qq, phi, p, const, trig)
 
     def trig_of(qq):
         qa = jnp.stack([qq[i] for i in ang]) if ang else jnp.zeros((0,), dtype)
@@ -251,10 +240,9 @@ def newton(mech: Mechanism, q0, phi, p, *, tol, rtol: float, max_steps, limit_st
     def body(st):
         qe, step, k, _, _, _, rn_last, _, dqa_prev, rn_best, stall, _, _, _, _ = st
         q = qe - step
-        r, jac, c, s = jax.lax.optimization_barrier(value_and_jac(q))
+        r, jac, c, s = value_and_jac(q)
         dq, piv, sg = lin(jac, r)
         rn = jnp.max(jnp.abs(r))
-        dq = jax.lax.optimization_barrier(dq)
         dqa = jnp.max(jnp.abs(dq) / unit)
         finite = jnp.isfinite(rn) & jnp.isfinite(dqa)
         # one final correction leaves an error ≈ |dq|² / (2 × pivot ratio): small enough
@@ -337,7 +325,7 @@ def _closed_form_path(mech, p, phis, q0, tol, trig_in, trig_p, thr):
     q_ref = jnp.where(jnp.isfinite(q0), q0, 0.0)
 
     def one(phi, t_in):
-        q, ok, rn, sine = _dyads.solve_checked(mech, dyads, sigma, q_ref, phi, p, {**t_in, **trig_p})
+        q, ok, rn, sine = _dyads.solve(mech, dyads, sigma, q_ref, phi, p, {**t_in, **trig_p})
         conv = (rn <= tol) & ref_ok
         code = jnp.where(conv, jnp.where(sine < thr, RESULTS.singular, RESULTS.converged),
                          jnp.where(~ref_ok | ~jnp.isfinite(rn), RESULTS.nonfinite,
@@ -565,8 +553,7 @@ def solve_path(mech: Mechanism, p, phis, q0=None, *, options: NewtonOptions = Ne
     return jax.tree_util.tree_map(lambda x: x[0], sol)
 
 
-def solve(mech: Mechanism, phis, p=None, q0=None, *, options: NewtonOptions = NewtonOptions(),
-          devices=None) -> Solution:
+def solve(mech: Mechanism, phis, p=None, q0=None, *, options: NewtonOptions = NewtonOptions()) -> Solution:
     """Solve positions for one design or a batch of designs, jitted.
 
     `p` of shape (P,) gives a `Solution` with leading axis N; `p` of shape (B, P) gives leading
@@ -574,11 +561,11 @@ def solve(mech: Mechanism, phis, p=None, q0=None, *, options: NewtonOptions = Ne
     (n,) or (B, n). With the default `q0` the solve starts at the file's `[input] start`, where its
     guesses hold, and continues to `phis[0]` first (a lead-in, dropped from the result).
 
-    A batch of designs is split over `devices` (default: every device of the default backend,
-    `jax.devices()`): each device solves its share of the designs, the results do not depend on
-    the split. On a CPU, `XLA_FLAGS=--xla_force_host_platform_device_count=N` (set before JAX is
-    imported) makes N host devices, one per core: XLA runs each compiled kernel on one thread, so
-    this is how a batch uses every core (`benchmarks/scaling.py`).
+    A batch placed on several devices (`jax.device_put(p, NamedSharding(...))`, see
+    `optimize/_sharding.py`) is solved where it lies, each device its share of the designs. On a
+    CPU, XLA already spreads a large fused kernel over the cores;
+    `XLA_FLAGS=--xla_force_host_platform_device_count=N` makes N host devices, which helps where
+    the kernels are small (`benchmarks/scaling.py`: 1.66× with two at 10⁶ positions).
     """
     p = jnp.asarray(mech.parameters if p is None else p)
     if not jnp.issubdtype(p.dtype, jnp.floating):
@@ -592,9 +579,7 @@ def solve(mech: Mechanism, phis, p=None, q0=None, *, options: NewtonOptions = Ne
             phis = np.concatenate([lead_in, np.asarray(phis, dtype=float)])
     phis = jnp.asarray(phis, dtype=p.dtype)
     q0 = jnp.asarray(mech.guess if q0 is None else q0, dtype=p.dtype)
-    devs = tuple(jax.devices() if devices is None else devices) if p.ndim == 2 else ()
-    devs = devs if len(devs) > 1 else ()
-    sol = _jitted_solve(mech, options, p.ndim == 2, phis.ndim == 2, q0.ndim == 2, devs)(p, phis, q0)
+    sol = _jitted_solve(mech, options, p.ndim == 2, phis.ndim == 2, q0.ndim == 2)(p, phis, q0)
     if lead:
         sol = jax.tree_util.tree_map(lambda x: x[..., lead:, :] if x.ndim == p.ndim + 1 else x[..., lead:], sol)
     return sol
@@ -615,17 +600,11 @@ def lead_in_path(mech: Mechanism, phi0: float, max_step: float = np.deg2rad(5.0)
 
 
 @functools.lru_cache(maxsize=64)
-def _jitted_solve(mech, options, batch_p, batch_phi, batch_q0, devices=()):
-    shard = design_sharding(devices) if devices else None
-
+def _jitted_solve(mech, options, batch_p, batch_phi, batch_q0):
     def run(p, phis, q0):
         P = p if batch_p else p[None]
         B = P.shape[0]
         Q0 = q0 if batch_q0 else jnp.broadcast_to(q0, (B,) + q0.shape)
-        if shard is not None:  # designs split over the devices (uneven splits are padded by XLA)
-            P, Q0 = (jax.lax.with_sharding_constraint(x, shard) for x in (P, Q0))
-            if batch_phi:
-                phis = jax.lax.with_sharding_constraint(phis, shard)
         sol = _solve_batch(mech, options, P, phis, Q0)
         return sol if batch_p else jax.tree_util.tree_map(lambda x: x[0], sol)
 

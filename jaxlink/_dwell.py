@@ -138,7 +138,7 @@ def stroke_metrics(s, ds, dds, crank, *, scale: StrokeScale = StrokeScale()):
     **Arguments:** `s`, `ds`, `dds`: (N,) s, s', s'' (SI, per radian), `crank`: l₂ (SI).
 
     **Returns:** dict of scalars (`stroke_mm`, `dwell_<…>_deg`, `acc_sign_changes`, `amax_rel`,
-    `vmax_rel`, `stroke_rel` = h/l₂).
+    `vmax_rel`, `stroke_rel` = h/l₂, `sag_mm`).
     """
     h = jnp.max(s) - jnp.min(s)
     f = scale.factor(h)
@@ -152,38 +152,14 @@ def stroke_metrics(s, ds, dds, crank, *, scale: StrokeScale = StrokeScale()):
     out["acc_sign_changes"] = sign_changes(dds)
     out["amax_rel"] = jnp.max(jnp.abs(dds)) / crank
     out["vmax_rel"] = jnp.max(jnp.abs(ds)) / crank
+    out["sag_mm"] = sag(s, ds) * f
     return out
 
 
 def sag(s, ds):
-    """Sag (units of s; numpy): see the module doc."""
-    s, ds = np.asarray(s), np.asarray(ds)
-    n = len(s)
-    h = s.max() - s.min()
-    k0 = int(np.argmax(s))
-    top = s >= s.min() + 0.75 * h
-    # the arc around the TDC above the 75 % level, as indices in cyclic order
-    arc = [k0]
-    k = (k0 + 1) % n
-    while top[k] and k != k0:
-        arc.append(k)
-        k = (k + 1) % n
-    k = (k0 - 1) % n
-    while top[k] and len(arc) < n:
-        arc.insert(0, k)
-        k = (k - 1) % n
-    arc = np.asarray(arc)
-    d = ds[arc]
-    maxima = [i for i in range(len(arc) - 1) if d[i] > 0 >= d[i + 1]]
-    maxima = [i if s[arc[i]] >= s[arc[i + 1]] else i + 1 for i in maxima]
-    if len(maxima) < 2:
-        return 0.0
-    lo = s[arc[maxima[0]:maxima[-1] + 1]].min()
-    return float(s[k0] - lo)
-
-
-def sag_traced(s, ds):
-    """`sag` in jax (traceable, for jitted reports): the same arc, maxima and minimum."""
+    """Sag (units of s; jax, traceable): see the module doc. The arc around the TDC above the
+    75 % level (cyclic), its local maxima (s' from + to −), and s_max minus the lowest s between
+    the outermost two; 0 for one hump."""
     n = s.shape[0]
     half = n // 2
     lo, hi = jnp.min(s), jnp.max(s)
@@ -294,8 +270,6 @@ def needle_metrics(mech, p=None, *, samples: int = 7200, scale: StrokeScale = St
             continue
         row = {k: float(v[b]) for k, v in vals.items()}
         row["acc_sign_changes"] = int(row["acc_sign_changes"])
-        h = float(np.max(s[b]) - np.min(s[b]))
-        row["sag_mm"] = sag(s[b], ds[b]) * float(scale.factor(h))
         row["converged"] = True
         out.append(row)
     return out if batch else out[0]
@@ -558,7 +532,6 @@ def dwell_objective(problem):
         out = stroke_metrics(s, ds, dds, crank, scale=StrokeScale(length_to_mm=lf * 1e3))
         out.pop("stroke_rel")
         out.update({k: m[k] for k in ("mu_min_deg", "rod_angle_max_deg", "toggle_clear_deg", "grashof_margin_rel")})
-        out["sag_mm"] = sag_traced(s, ds) * lf * 1e3
         out["constraints_met"] = dwell_score(m, opts)[1].astype(float)
         return out
 

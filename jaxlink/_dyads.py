@@ -17,7 +17,7 @@ design, with no Newton and no continuation. Where the square root's argument h²
 is put in its collinear configuration (h = 0, the least-squares closest) and the returned residual
 says by how much its loop misses: rounding at the exact toggle (assembled, within the tolerance),
 more past it (cannot be assembled). The output stays finite (the double-`where` trick keeps
-gradients NaN-free). `solve_checked` also returns the sine of the angle between the columns of
+gradients NaN-free). `solve` also returns the sine of the angle between the columns of
 each dyad's block of Φ_q (≈ 0: dead centre, toggle or change point, a singular position). Angles
 are returned within ±π of the reference configuration.
 """
@@ -163,27 +163,6 @@ def _angle_from(ux, uy, L, inv_L, cs):
     return jnp.arctan2(st, ct), (ct, st), miss
 
 
-def branches(mech: Mechanism, dyads, q, phi, p):
-    """σ of every dyad in the configuration q (the reference), shape (n_dyads,)."""
-    env = mech._env(q, phi, p)
-    out = []
-    for d in dyads:
-        terms = mech.loops[d.loop][1]
-        wx, wy = _known_parts(mech, d, env)
-        ta, tb = terms[d.terms[0]], terms[d.terms[1]]
-        if d.kind == "RRR":
-            ux, uy = mech._term_vector(ta, env)
-            out.append(jnp.where(_cross((wx, wy), (ux, uy)) >= 0, 1.0, -1.0))
-        elif d.kind == "RRP":
-            ell = q[d.unknowns[1]]
-            ang = _expr.evaluate(tb.angle, env, mech.kinds, mech.units, _expr.ANGLE)
-            ex, ey = jnp.cos(ang) * tb.sign, jnp.sin(ang) * tb.sign  # the term is ℓ·(ex, ey)
-            out.append(jnp.where(ell - (wx * ex + wy * ey) >= 0, 1.0, -1.0))
-        else:
-            out.append(jnp.ones_like(jnp.asarray(wx)))
-    return jnp.stack([jnp.asarray(o, dtype=jnp.result_type(q)) for o in out]) if out else jnp.zeros((0,))
-
-
 def _wrap_near(theta, ref):
     """θ + 2πk closest to ref (round, not fmod: several times cheaper on CPU)."""
     two_pi = 2 * jnp.pi
@@ -207,31 +186,24 @@ def parameter_trig(mech: Mechanism, P):
 def solve(mech: Mechanism, dyads, sigma, q_ref, phi, p, trig=None):
     """All unknowns in closed form at input φ, on the branches σ.
 
-    Returns `(q, assemblable, residual)`. `assemblable` is False where a dyad's h² = r_a² − x² (or
-    r_a² − (w × e_b)²) is ≤ 0: that dyad is then put in its collinear configuration (h = 0), the
-    least-squares closest one, and `residual` says by how much its loop misses — rounding at the
-    exact toggle (h² negative by rounding), so that `residual ≤ tol` decides whether the position
-    is assembled (`solve_checked`). Each dyad's loop closes exactly in the vectors u, v it
-    constructs; the unit vectors of the solved angles are u/L_a and v/L_b, so the loop residual
-    with the solved angles is (|L_a| − |u|) û + (|L_b| − |v|) v̂. `residual` is the largest
+    Returns `(q, assemblable, residual, sine)`. `assemblable` is False where a dyad's h² = r_a² − x²
+    (or r_a² − (w × e_b)²) is ≤ 0: that dyad is then put in its collinear configuration (h = 0),
+    the least-squares closest one, and `residual` says by how much its loop misses — rounding at
+    the exact toggle (h² negative by rounding), so that `residual ≤ tol` decides whether the
+    position is assembled. Each dyad's loop closes exactly in the vectors u, v it constructs; the
+    unit vectors of the solved angles are u/L_a and v/L_b, so the loop residual with the solved
+    angles is (|L_a| − |u|) û + (|L_b| − |v|) v̂. `residual` is the largest
     ||L_a| − |u|| + ||L_b| − |v|| over the dyads: an upper bound of max|Φ| at the solution, exact
     to rounding, computed without further trigonometry (it exposes the loss of accuracy next to a
-    dead centre). Angle values come from one atan2 each; (cos, sin) of solved angles are reused by
-    later dyads. `trig` optionally gives (cos, sin) of the input and of angle parameters
-    (`input_trig`, `parameter_trig`), computed once outside the per-position kernel. Angles are
-    returned within ±π of `q_ref`.
+    dead centre). `sine` is the smallest over the dyads of the sine of the angle between the
+    columns of the dyad's block of Φ_q — RRR: between the two links, h |w| / (|L_a| |L_b|); RRP:
+    the link against the slider's normal, h / |L_a|; PP: between the two directions — 0 at a dead
+    centre, a toggle or a change point (h = 0, where the two branches meet), for a few multiplies.
+    Angle values come from one atan2 each; (cos, sin) of solved angles are reused by later dyads.
+    `trig` optionally gives (cos, sin) of the input and of angle parameters (`input_trig`,
+    `parameter_trig`), computed once outside the per-position kernel. Angles are returned within
+    ±π of `q_ref`.
     """
-    q, ok, resid, _, _ = _solve(mech, dyads, sigma, q_ref, phi, p, trig)
-    return q, ok, resid
-
-
-def solve_checked(mech: Mechanism, dyads, sigma, q_ref, phi, p, trig=None):
-    """`solve`, also returning the smallest over the dyads of the sine of the angle between the
-    columns of the dyad's block of Φ_q: `(q, assemblable, residual, sine)`. RRR: the sine of the
-    angle between the two links, h |w| / (|L_a| |L_b|); RRP: the link against the slider's normal,
-    h / |L_a|; PP: the sine between the two directions. It is 0 at a dead centre, a toggle or a
-    change point (h = 0, where the two branches meet and the solution is not unique), and costs a
-    few multiplies (no trigonometry, no square root)."""
     q, ok, resid, _, sine = _solve(mech, dyads, sigma, q_ref, phi, p, trig)
     return q, ok, resid, sine
 

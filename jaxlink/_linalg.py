@@ -11,7 +11,7 @@ by the largest entry by default (kinetostatics, whose system is scaled to O(1)) 
 `scaling="columns"`, by each pivot's column norm (the pivots of the column-equilibrated matrix):
 invariant under the units of the unknowns, as the assembly solve needs (an angle's column of Φ_q
 is ~ a length, a slider length's ~ 1). `solve_2x2` and `solve_block_lower` use the column-scaled
-ratio; `block_lower_signs` also returns the sign of det of each diagonal block (a dyad's circuit).
+ratio and also return the sign of det of each diagonal block (a dyad's circuit).
 """
 
 from __future__ import annotations
@@ -21,7 +21,7 @@ import jax.numpy as jnp
 UNROLL_MAX = 8
 
 
-def solve_small(a, b, *, scaling: str = "matrix"):
+def solve_small(a, b, *, scaling: str = "matrix", signs: bool = False):
     """Solve `a x = b` for one small system (vmap for batches).
 
     **Arguments:**
@@ -37,14 +37,14 @@ def solve_small(a, b, *, scaling: str = "matrix"):
       the sine of the angle between the columns.
 
     **Returns:** `(x, pivot_ratio)`: the solution and the pivot ratio, a cheap singularity
-    indicator (0 for a singular matrix, in which case `x` holds non-finite values).
+    indicator (0 for a singular matrix, in which case `x` holds non-finite values); with
+    `signs=True` also the sign of det a (from the pivots and the row swaps).
     """
-    x, ratio, _ = _solve_small(a, b, scaling)
-    return x, ratio
+    out = _solve_small(a, b, scaling)
+    return out if signs else out[:2]
 
 
-def _solve_small(a, b, scaling: str = "matrix"):
-    """`solve_small`, also returning the sign of det a (from the pivots and the row swaps)."""
+def _solve_small(a, b, scaling):
     n = a.shape[-1]
     tiny = jnp.finfo(a.dtype).tiny
     if n > UNROLL_MAX:
@@ -120,13 +120,8 @@ def _pick_vec(v, idx, k, n):
 
 
 def solve_2x2(a00, a01, a10, a11, b0, b1):
-    """Cramer's rule for one 2×2 system; returns (x0, x1, ratio) with the column-scaled pivot ratio
-    ratio = |det| / (‖col 0‖∞ ‖col 1‖∞) (see `solve_small`, `scaling="columns"`)."""
-    x0, x1, ratio, _ = _solve_2x2(a00, a01, a10, a11, b0, b1)
-    return x0, x1, ratio
-
-
-def _solve_2x2(a00, a01, a10, a11, b0, b1):
+    """Cramer's rule for one 2×2 system; returns (x0, x1, ratio, sign of det) with the
+    column-scaled pivot ratio |det| / (‖col 0‖∞ ‖col 1‖∞) (see `solve_small`, `scaling="columns"`)."""
     det = a00 * a11 - a01 * a10
     c0 = jnp.maximum(jnp.abs(a00), jnp.abs(a10))
     c1 = jnp.maximum(jnp.abs(a01), jnp.abs(a11))
@@ -141,16 +136,10 @@ def solve_block_lower(a, b, blocks):
     `blocks` is a tuple of `(row_indices, col_indices)` (as from `_structure.blocks`, with loop ℓ
     giving rows 2ℓ, 2ℓ+1): rows of block i involve only the columns of blocks ≤ i. Forward
     substitution with Cramer's rule on 2×2 diagonal blocks and `solve_small` on larger ones.
-    Returns `(x, pivot_ratio)`, the pivot ratio column-scaled (`solve_small`, `scaling="columns"`)
-    and the smallest over the diagonal blocks.
-    """
-    x, ratio, _ = block_lower_signs(a, b, blocks)
-    return x, ratio
-
-
-def block_lower_signs(a, b, blocks):
-    """`solve_block_lower`, also returning the sign of det of every diagonal block, shape
-    (n_blocks,): for a dyad, which of its two assembly branches (circuits) the matrix belongs to."""
+    Returns `(x, pivot_ratio, signs)`: the pivot ratio column-scaled (`solve_small`,
+    `scaling="columns"`) and the smallest over the diagonal blocks; the sign of det of every
+    diagonal block, shape (n_blocks,) (for a dyad, which of its two assembly branches — circuits —
+    the matrix belongs to)."""
     n = a.shape[-1]
     x = [None] * n
     ratio = None
@@ -165,7 +154,7 @@ def block_lower_signs(a, b, blocks):
             rhs.append(s)
         if len(cols) == 2 and len(rows) == 2:
             (r0, r1), (c0, c1) = rows, cols
-            x0, x1, rr, sg = _solve_2x2(a[r0, c0], a[r0, c1], a[r1, c0], a[r1, c1], rhs[0], rhs[1])
+            x0, x1, rr, sg = solve_2x2(a[r0, c0], a[r0, c1], a[r1, c0], a[r1, c1], rhs[0], rhs[1])
             x[c0], x[c1] = x0, x1
         else:
             sub = jnp.stack([jnp.stack([a[r, c] for c in cols]) for r in rows])

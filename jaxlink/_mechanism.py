@@ -205,14 +205,6 @@ class Mechanism:
             out.extend(self._sum(terms, env, "all"))
         return _stack(out, q)
 
-    def residual_trig(self, q, phi, p, trig):
-        """Φ evaluated with known (cos, sin) of some names (`trig`), e.g. from a closed form."""
-        env = self._env(q, phi, p)
-        out = []
-        for _, terms in self.loops:
-            out.extend(self._sum(terms, env, "all", trig))
-        return _stack(out, q)
-
     def residual_const(self, phi, p):
         """The part of Φ that does not depend on q (evaluated once per input position)."""
         env = self._env(None, phi, p)
@@ -221,12 +213,13 @@ class Mechanism:
             out.extend(self._sum(terms, env, "const"))
         return _stack(out, p)
 
-    def residual_var(self, q, phi, p, const):
-        """Φ = residual_var + residual_const: the part that depends on q, plus `const`."""
+    def residual_var(self, q, phi, p, const, trig=None):
+        """Φ = residual_var + residual_const: the part that depends on q, plus `const`. `trig`
+        optionally maps names to known (cos, sin) of their values (see `unit_vector`)."""
         env = self._env(q, phi, p)
         out = []
         for _, terms in self.loops:
-            out.extend(self._sum(terms, env, "var"))
+            out.extend(self._sum(terms, env, "var", trig))
         return _stack(out, q) + const
 
     def point_positions(self, q, phi, p):

@@ -107,13 +107,18 @@ class Evaluator:
         ddxy = None if t.ddpoints is None else t.ddpoints[:, k] / lf
         return PathData(xy, dxy, ddxy, sol.q, p), feasible
 
-    def value_single(self, u, c):
-        """Exact objective of one design (+inf if infeasible) and its feasibility."""
+    def value_single(self, u, c, rank: bool = False):
+        """Exact objective of one design (+inf if infeasible) and its feasibility; with `rank`
+        also the objective's start-ranking value (`Objective.rank`, default the value)."""
         phis = jnp.asarray(self.problem.phis, u.dtype)
         path, feas = self.path(u, c, phis, self.objective.order)
-        v = self.objective.value(path)
+        if rank and self.objective.rank is not None:
+            v, r = self.objective.rank(path)
+        else:
+            v = r = self.objective.value(path)
         ok = feas & jnp.isfinite(v)
-        return jnp.where(ok, v, jnp.inf), ok
+        out = (jnp.where(ok, v, jnp.inf), ok)
+        return out + (jnp.where(feas & jnp.isfinite(r), r, jnp.inf),) if rank else out
 
     def smooth_single(self, u, c):
         """Smoothed objective of one design (+inf if infeasible): what the gradient search uses."""
@@ -131,46 +136,20 @@ class Evaluator:
         f, cons, v = self.objective.constraints(path)
         return f, cons, jnp.where(feas & jnp.isfinite(v), v, jnp.inf), feas
 
-    def rank_single(self, u, c):
-        """Exact objective, feasibility and the objective's start-ranking value (`Objective.rank`,
-        default the value) of one design."""
-        phis = jnp.asarray(self.problem.phis, u.dtype)
-        path, feas = self.path(u, c, phis, self.objective.order)
-        if self.objective.rank is None:
-            v = r = self.objective.value(path)
-        else:
-            v, r = self.objective.rank(path)
-        ok = feas & jnp.isfinite(v)
-        return jnp.where(ok, v, jnp.inf), ok, jnp.where(feas & jnp.isfinite(r), r, jnp.inf)
-
     # ------------------------------------------------------------------ batched (jitted)
-    @functools.cached_property
-    def _values_all_circuits(self):
+    @functools.lru_cache(maxsize=4)
+    def _values(self, all_circuits: bool, rank: bool):
+        """Jitted batch of `value_single`: (U) -> (value, ok, circuit[, rank]), the best of every
+        circuit of each design, or (U, circuits) -> (value, ok[, rank])."""
+        if not all_circuits:
+            return jax.jit(jax.vmap(lambda u, c: self.value_single(u, c, rank)))
+
         def one(u):
-            cs = jnp.arange(self.n_circuits)
-            v, ok = jax.vmap(lambda c: self.value_single(u, c))(cs)
-            i = jnp.argmin(v)
-            return v[i], ok[i], i
+            out = jax.vmap(lambda c: self.value_single(u, c, rank))(jnp.arange(self.n_circuits))
+            i = jnp.argmin(out[0])
+            return (out[0][i], out[1][i], i) + tuple(o[i] for o in out[2:])
 
         return jax.jit(jax.vmap(one))
-
-    @functools.cached_property
-    def _values_given_circuit(self):
-        return jax.jit(jax.vmap(self.value_single))
-
-    @functools.cached_property
-    def _ranks_all_circuits(self):
-        def one(u):
-            cs = jnp.arange(self.n_circuits)
-            v, ok, r = jax.vmap(lambda c: self.rank_single(u, c))(cs)
-            i = jnp.argmin(v)
-            return v[i], ok[i], i, r[i]
-
-        return jax.jit(jax.vmap(one))
-
-    @functools.cached_property
-    def _ranks_given_circuit(self):
-        return jax.jit(jax.vmap(self.rank_single))
 
     def evaluate(self, U, circuits=None, *, rank: bool = False):
         """Objective of a batch of designs.
@@ -189,29 +168,20 @@ class Evaluator:
         for s in range(0, B, self.chunk):
             part = U[s:s + self.chunk]
             padded, n = pad_rows(part, self.chunk)
-            r = None
             if circuits is None and self.n_circuits > 1:
-                x = put(jnp.asarray(padded), self.sharding)
-                if rank:
-                    v, ok, c, r = self._ranks_all_circuits(x)
-                else:
-                    v, ok, c = self._values_all_circuits(x)
+                v, ok, c, *r = self._values(True, rank)(put(jnp.asarray(padded), self.sharding))
                 self.evaluations += n * self.n_circuits
             else:
                 cc = np.zeros(len(part), int) if circuits is None else np.asarray(circuits[s:s + self.chunk])
                 cc, _ = pad_rows(cc, self.chunk)
-                x = put((jnp.asarray(padded), jnp.asarray(cc)), self.sharding)
-                if rank:
-                    v, ok, r = self._ranks_given_circuit(*x)
-                else:
-                    v, ok = self._values_given_circuit(*x)
+                v, ok, *r = self._values(False, rank)(*put((jnp.asarray(padded), jnp.asarray(cc)), self.sharding))
                 c = cc
                 self.evaluations += n
             vals.append(np.asarray(v)[:n])
             oks.append(np.asarray(ok)[:n])
             cs.append(np.asarray(c)[:n])
-            if r is not None:
-                rs.append(np.asarray(r)[:n])
+            if rank:
+                rs.append(np.asarray(r[0])[:n])
         out = {
             "value": np.concatenate(vals) if vals else np.zeros(0),
             "feasible": np.concatenate(oks) if oks else np.zeros(0, bool),

@@ -182,7 +182,58 @@ def _v_of_u(u):
     return np.arccos(np.clip(1.0 - 2.0 * np.asarray(u), -1.0, 1.0)) / np.pi
 
 
-class Gradient:
+class _PresampledStarts:
+    """Shared skeleton of the gradient searches: phase 0 draws a seeded Monte Carlo presample in
+    chunks and keeps the `S` best designs (by `_pool_value`), then `_start` begins phase 1, whose
+    chunks `_search_chunk` runs. Subclasses set `ev`, `budget`, `seed`, `S`, `presample`."""
+
+    def init(self):
+        st = _common_state()
+        st["phase"] = np.int64(0)  # 0 presample, 1 search
+        st["pool_value"] = np.full(self.S, np.inf)
+        st["pool_u"] = np.zeros((self.S, self.ev.problem.n_variables))
+        st["pool_circuit"] = np.zeros(self.S, np.int64)
+        st["pool_n"] = np.int64(0)
+        st["iteration"] = np.int64(0)
+        return st
+
+    def done(self, st):
+        return bool(st["done"])
+
+    def step(self, st):
+        if int(st["phase"]) == 0:
+            return self._presample_chunk(st)
+        return self._search_chunk(st)
+
+    def _presample_evaluate(self, st, U):
+        """Evaluate (and count) presampled designs; returns the (U, res) to pool."""
+        raise NotImplementedError
+
+    def _pool_value(self, res):
+        return res["value"]
+
+    def _presample_chunk(self, st):
+        ev = self.ev
+        left = self.presample - int(st["pool_n"])
+        n = min(ev.chunk, left, max(0, (self.budget - int(st["evaluations"])) // ev.n_circuits))
+        if n > 0:
+            rng = np.random.default_rng([self.seed, 1_000_003, int(st["chunk"])])
+            U = rng.random((ev.chunk, ev.problem.n_variables))[:n]
+            U, res = self._presample_evaluate(st, U)
+            # keep the S best (stable order: by value, then by arrival)
+            vals = np.concatenate([st["pool_value"], self._pool_value(res)])
+            us = np.concatenate([st["pool_u"], U])
+            cs = np.concatenate([st["pool_circuit"], res["circuit"]])
+            order = np.argsort(vals, kind="stable")[: self.S]
+            st["pool_value"], st["pool_u"], st["pool_circuit"] = vals[order], us[order], cs[order]
+            st["pool_n"] += np.int64(n)
+        st["chunk"] += 1
+        if int(st["pool_n"]) >= self.presample or n == 0:
+            self._start(st)
+        return st
+
+
+class Gradient(_PresampledStarts):
     """L-BFGS from a batch of starts (see module doc).
 
     Per iteration and start: the direction d = −H g from optax's `scale_by_lbfgs` (memory 10;
@@ -250,47 +301,13 @@ class Gradient:
         st["evaluations"] += np.int64(2 * self.S)
         return np.asarray(value), np.asarray(grad)
 
-    def init(self):
-        st = _common_state()
-        st["phase"] = np.int64(0)  # 0 presample, 1 L-BFGS
-        st["pool_value"] = np.full(self.S, np.inf)
-        st["pool_u"] = np.zeros((self.S, self.ev.problem.n_variables))
-        st["pool_circuit"] = np.zeros(self.S, np.int64)
-        st["pool_n"] = np.int64(0)
-        st["iteration"] = np.int64(0)
-        return st
-
-    def done(self, st):
-        return bool(st["done"])
-
-    def step(self, st):
-        if int(st["phase"]) == 0:
-            return self._presample_chunk(st)
-        return self._lbfgs_chunk(st)
-
-    def _presample_chunk(self, st):
-        ev = self.ev
-        left = self.presample - int(st["pool_n"])
-        n = min(ev.chunk, left, max(0, (self.budget - int(st["evaluations"])) // ev.n_circuits))
-        if n > 0:
-            rng = np.random.default_rng([self.seed, 1_000_003, int(st["chunk"])])
-            U = rng.random((ev.chunk, ev.problem.n_variables))[:n]
-            res = _evaluate(ev, U)
-            _count(st, ev, res, n)
-            _update_best(st, U, res)
-            if self.placement is not None:
-                U, res = self._aligned(st, U, res)
-            # keep the S best (stable order: by value, then by arrival)
-            vals = np.concatenate([st["pool_value"], res["value"]])
-            us = np.concatenate([st["pool_u"], U])
-            cs = np.concatenate([st["pool_circuit"], res["circuit"]])
-            order = np.argsort(vals, kind="stable")[: self.S]
-            st["pool_value"], st["pool_u"], st["pool_circuit"] = vals[order], us[order], cs[order]
-            st["pool_n"] += np.int64(n)
-        st["chunk"] += 1
-        if int(st["pool_n"]) >= self.presample or n == 0:
-            self._start_lbfgs(st)
-        return st
+    def _presample_evaluate(self, st, U):
+        res = _evaluate(self.ev, U)
+        _count(st, self.ev, res, len(U))
+        _update_best(st, U, res)
+        if self.placement is not None:
+            U, res = self._aligned(st, U, res)
+        return U, res
 
     def _aligned(self, st, U, res):
         """Presampled feasible designs moved to their best similarity placement (`_align.py`),
@@ -313,7 +330,7 @@ class Gradient:
         both = {k: np.concatenate([res[k], res2[k]]) for k in ("value", "feasible", "circuit")}
         return np.concatenate([U, U2]), both
 
-    def _start_lbfgs(self, st):
+    def _start(self, st):
         ok = np.isfinite(st["pool_value"])
         if not ok.any() or int(st["evaluations"]) + 3 * self.S > self.budget:
             st["done"] = np.bool_(True)
@@ -373,7 +390,7 @@ class Gradient:
         st["v"], st["value"], st["grad"] = new_v, new_f, new_g
         st["iteration"] += 1
 
-    def _lbfgs_chunk(self, st):
+    def _search_chunk(self, st):
         for _ in range(self.chunk_iterations):
             if (int(st["iteration"]) >= self.iterations or not st["active"].any()
                     or int(st["evaluations"]) + 2 * self.S + self.S > self.budget):
@@ -389,7 +406,7 @@ class Gradient:
         return st
 
 
-class AugmentedLagrangian:
+class AugmentedLagrangian(_PresampledStarts):
     """Gradient search for objectives with constraints (`Objective.constraints`), selected by
     `[optimize] gradient_solver = "al-lbfgs"`: minimize f subject to c_E(x) = 0, c_I(x) ≤ 0
     (normalized) from a batch of starts.
@@ -492,50 +509,19 @@ class AugmentedLagrangian:
         _update_best(st, 0.5 - 0.5 * np.cos(np.pi * v), {"value": exact, "circuit": st["c"]})
         return np.array(val), np.array(grad), np.array(cons)
 
-    # ------------------------------------------------------------------ state
-    def init(self):
-        st = _common_state()
-        V = self.ev.problem.n_variables
-        st["phase"] = np.int64(0)
-        st["pool_value"] = np.full(self.S, np.inf)
-        st["pool_u"] = np.zeros((self.S, V))
-        st["pool_circuit"] = np.zeros(self.S, np.int64)
-        st["pool_n"] = np.int64(0)
-        st["iteration"] = np.int64(0)
-        return st
-
-    def done(self, st):
-        return bool(st["done"])
-
-    def step(self, st):
-        if int(st["phase"]) == 0:
-            return self._presample_chunk(st)
-        return self._chunk(st)
-
-    def _presample_chunk(self, st):
-        ev = self.ev
-        if getattr(self, "_compiler", None) is None:
+    # ------------------------------------------------------------------ presample
+    def _presample_evaluate(self, st, U):
+        if getattr(self, "_compiler", None) is None:  # compile the search while the presample runs
             self._compiler = threading.Thread(target=self._precompile, daemon=True)
             self._compiler.start()
-        left = self.presample - int(st["pool_n"])
-        n = min(ev.chunk, left, max(0, (self.budget - int(st["evaluations"])) // ev.n_circuits))
-        if n > 0:
-            rng = np.random.default_rng([self.seed, 1_000_003, int(st["chunk"])])
-            U = rng.random((ev.chunk, ev.problem.n_variables))[:n]
-            res = ev.evaluate(U, rank=True)
-            res["all_circuits"] = ev.n_circuits > 1
-            _count(st, ev, res, n)
-            _update_best(st, U, res)
-            vals = np.concatenate([st["pool_value"], res["rank"]])
-            us = np.concatenate([st["pool_u"], U])
-            cs = np.concatenate([st["pool_circuit"], res["circuit"]])
-            order = np.argsort(vals, kind="stable")[: self.S]
-            st["pool_value"], st["pool_u"], st["pool_circuit"] = vals[order], us[order], cs[order]
-            st["pool_n"] += np.int64(n)
-        st["chunk"] += 1
-        if int(st["pool_n"]) >= self.presample or n == 0:
-            self._start(st)
-        return st
+        res = self.ev.evaluate(U, rank=True)
+        res["all_circuits"] = self.ev.n_circuits > 1
+        _count(st, self.ev, res, len(U))
+        _update_best(st, U, res)
+        return U, res
+
+    def _pool_value(self, res):
+        return res["rank"]
 
     def _start(self, st):
         if getattr(self, "_compiler", None) is not None:
@@ -651,7 +637,7 @@ class AugmentedLagrangian:
         self._directions(st, np.ones(self.S, bool))
         # keep the curvature pairs: Φ changed only by the multiplier terms
 
-    def _chunk(self, st):
+    def _search_chunk(self, st):
         for _ in range(self.chunk_iterations):
             if (int(st["iteration"]) >= self.iterations or not np.isfinite(st["F"]).any()
                     or int(st["evaluations"]) + 2 * self.S > self.budget):

@@ -51,8 +51,8 @@ def circuit_signs(mech, q_file, phi0, *, all_circuits: bool) -> np.ndarray:
     """(C, n_dyads) branch signs: the file's (C = 1) or every combination (C = 2^n_dyads, the
     file's first)."""
     dyads = _dyads.classify(mech)
-    own = np.asarray(_dyads.branches(mech, dyads, jnp.asarray(q_file), jnp.asarray(phi0),
-                                     jnp.asarray(mech.parameters)))
+    own = np.asarray(_dyads.solve_nearest(mech, dyads, jnp.asarray(q_file), jnp.asarray(phi0),
+                                          jnp.asarray(mech.parameters))[3])
     if not all_circuits:
         return own[None]
     combos = [own]
@@ -64,9 +64,10 @@ def circuit_signs(mech, q_file, phi0, *, all_circuits: bool) -> np.ndarray:
 
 
 def closed_form_start(mech, dyads, q_file, phi0, p, sigma, tol):
-    """(q0, ok): the dyads' closed form at φ₀ on branches σ."""
-    q, ok, rn = _dyads.solve(mech, dyads, sigma, jnp.asarray(q_file, p.dtype), jnp.asarray(phi0, p.dtype), p)
-    return q, ok & (rn <= tol)
+    """(q0, ok): the dyads' closed form at φ₀ on branches σ; ok where its loops close to `tol`
+    (as in the path solve: an exact toggle, h² negative by rounding, is assembled)."""
+    q, _, rn, _ = _dyads.solve(mech, dyads, sigma, jnp.asarray(q_file, p.dtype), jnp.asarray(phi0, p.dtype), p)
+    return q, rn <= tol
 
 
 def continuation_start(mech, q_file, p_file, phi0, p, tol, *, steps: int = 16, newton: int = 3, polish: int = 6):
