@@ -188,7 +188,7 @@ def path_cases(repeats, log, designs=200):
 
 def dwell_cases(repeats, log, designs=64):
     try:
-        from jaxlink import _dwell
+        from jaxlink.analysis import dwell as _dwell
     except Exception as e:  # noqa: BLE001 (the dwell module is optional while in progress)
         print(f"dwell metrics not available ({e}); skipped")
         return []
@@ -221,8 +221,8 @@ def dwell_cases(repeats, log, designs=64):
 
 
 def sinker_cases(repeats, log):
-    from jaxlink import sinker as sk
-    from jaxlink.sinker._reference import reference_solution
+    from jaxlink import cam as sk
+    from jaxlink.cam.reference import reference_solution
 
     C, f = 3.5e4, 0.1
     km = float(sk.damping_from_log_decrement(C, 1.5e-3))

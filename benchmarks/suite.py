@@ -48,7 +48,7 @@ sys.path.insert(0, sys.argv[1])
 import jax
 jax.config.update("jax_enable_x64", True)
 from literature_paths import pylinkage_objective, CASES_DIR
-from jaxlink._mechanism import load
+from jaxlink import load
 from jaxlink.optimize import problem_from
 n = int(sys.argv[2])
 pr = problem_from(load(CASES_DIR / "mkh1.toml"))

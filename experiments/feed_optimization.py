@@ -25,9 +25,9 @@ jax.config.update("jax_enable_x64", True)
 
 import numpy as np  # noqa: E402
 
-from jaxlink._mechanism import load  # noqa: E402
+from jaxlink import load  # noqa: E402
 from jaxlink.optimize import Evaluator, problem_from  # noqa: E402
-from jaxlink.optimize._search import run  # noqa: E402
+from jaxlink.optimize.search import run  # noqa: E402
 
 PUBLISHED = {"two_a": 5.1158, "two_b": 2.2676, "sx": -10.6925, "sy": 55.27, "dx": 0.235}
 

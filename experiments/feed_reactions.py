@@ -26,9 +26,9 @@ jax.config.update("jax_enable_x64", True)
 import jax.numpy as jnp  # noqa: E402
 import numpy as np  # noqa: E402
 
-from jaxlink import _bodies  # noqa: E402
-from jaxlink._kinetostatics import KRESULTS, body_kinematics, solve_reactions  # noqa: E402
-from jaxlink._mechanism import load  # noqa: E402
+from jaxlink.model import bodies as _bodies  # noqa: E402
+from jaxlink.analysis.kinetostatics import KRESULTS, body_kinematics, solve_reactions  # noqa: E402
+from jaxlink import load  # noqa: E402
 
 OMEGA = 575.0
 DESIGNS = {"2.0 / 1.0 / -10 (Table 11.1 design)": (2.0, 1.0, -10.0),

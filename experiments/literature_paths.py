@@ -66,7 +66,7 @@ def pylinkage_case(case: str, budget: int, seed: int, steps: int = 360):
         from pylinkage.optimization.particle_swarm import _local_best_pso
     except ImportError:
         return None
-    from jaxlink._mechanism import load
+    from jaxlink import load
     from jaxlink.optimize import problem_from
 
     pr = problem_from(load(CASES_DIR / f"{case}.toml"))

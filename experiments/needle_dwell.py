@@ -33,9 +33,9 @@ import numpy as np  # noqa: E402
 from scipy.optimize import differential_evolution  # noqa: E402
 
 import jaxlink  # noqa: E402
-from jaxlink import _dwell  # noqa: E402
+from jaxlink.analysis import dwell as _dwell  # noqa: E402
 from jaxlink.optimize import Evaluator, problem_from  # noqa: E402
-from jaxlink.optimize._search import run  # noqa: E402
+from jaxlink.optimize.search import run  # noqa: E402
 
 COLS = ("stroke_mm", "dwell_025pct_deg", "dwell_05pct_deg", "dwell_1pct_deg", "dwell_2pct_deg", "dwell_005mm_deg",
         "acc_sign_changes", "sag_mm", "amax_rel", "vmax_rel", "mu_min_deg", "rod_angle_max_deg", "toggle_clear_deg")

@@ -29,8 +29,8 @@ jax.config.update("jax_enable_x64", True)
 
 import numpy as np  # noqa: E402
 
-from jaxlink import sinker as sk  # noqa: E402
-from jaxlink.sinker._reference import reference_solution  # noqa: E402
+from jaxlink import cam as sk  # noqa: E402
+from jaxlink.cam.reference import reference_solution  # noqa: E402
 
 SPEED = sk.butt_speed(350.0, 0.096)
 

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 import jaxlink
-from jaxlink import _dwell
+from jaxlink.analysis import dwell as _dwell
 
 REF = pathlib.Path(__file__).resolve().parents[2] / "shared" / "reference" / "needle_chosen_stroke.csv"
 

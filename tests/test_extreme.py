@@ -305,7 +305,7 @@ def test_very_high_speed_1e5_rpm(dtype):
 def test_drive_torque_at_1e5_rpm_is_quadratic_in_speed():
     """Constant input speed: every reaction is F(ω) = F(0) + ω² F₂ (gravity plus inertia), so at
     1e5 rpm the torque equals T(0) + (ω/ω₁)² (T(ω₁) − T(0)) to rounding."""
-    from jaxlink._kinetostatics import reactions
+    from jaxlink.analysis.kinetostatics import reactions
 
     mech = jl.load("slider-crank-mass")
     phis = np.deg2rad(np.arange(0.0, 360.0, 15.0))
@@ -399,7 +399,7 @@ def test_stiff_contact_1e7_steady_lag_on_the_rise(method):
     a constant lag l* where the contact force balances the constant load (y'' = 0, y' = y_z'):
     0 = P1 + (C l*/cos α)(P2 sin α + P3 cos α)  ⇒  l* = −P1 cos α / (C (P2 sin α + P3 cos α)),
     1.9e-7 m here. The transient decays in ~0.1 ms, so at the end of the rise the lag is l*."""
-    from jaxlink import sinker as sk
+    from jaxlink import cam as sk
 
     m, f, C = 1.5e-3, 0.1, 1e7
     p = sk.make_params(m=m, C=C, f=f)

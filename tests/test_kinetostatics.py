@@ -9,11 +9,12 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from jaxlink import _bodies, _expr
-from jaxlink._assemble import solve
-from jaxlink._kinematics import transfer
-from jaxlink._kinetostatics import KRESULTS, reactions, solve_reactions
-from jaxlink._mechanism import load
+from jaxlink.model import bodies as _bodies
+from jaxlink.files import expr as _expr
+from jaxlink.solvers.assemble import solve
+from jaxlink.analysis.transfer import transfer
+from jaxlink.analysis.kinetostatics import KRESULTS, reactions, solve_reactions
+from jaxlink import load
 
 G = 9.81
 

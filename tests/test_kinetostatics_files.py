@@ -6,9 +6,9 @@ import sys
 import numpy as np
 import pytest
 
-from jaxlink import _bodies
-from jaxlink._errors import MechanismError
-from jaxlink._mechanism import load
+from jaxlink.model import bodies as _bodies
+from jaxlink.errors import MechanismError
+from jaxlink import load
 from jaxlink.scenes import scene_paths
 
 BASE = scene_paths()["slider-crank-mass"].read_text()
@@ -128,8 +128,8 @@ def test_files_without_bodies_still_load_and_reactions_says_why(tmp_path):
 
 
 def test_points_that_do_not_move_with_their_body_are_named(tmp_path):
-    from jaxlink._assemble import solve
-    from jaxlink._kinetostatics import rigidity_errors
+    from jaxlink.solvers.assemble import solve
+    from jaxlink.analysis.kinetostatics import rigidity_errors
 
     mdl, path = model_of(tmp_path, BASE)
     mech = load(path)

@@ -9,8 +9,8 @@ import sys
 
 import numpy as np
 
-from jaxlink._kinetostatics import KRESULTS, solve_reactions
-from jaxlink._mechanism import load
+from jaxlink.analysis.kinetostatics import KRESULTS, solve_reactions
+from jaxlink import load
 from jaxlink.scenes import scene_paths
 
 

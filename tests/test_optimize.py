@@ -11,11 +11,11 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from jaxlink._errors import MechanismError
-from jaxlink._mechanism import load, loads
+from jaxlink.errors import MechanismError
+from jaxlink import load, loads
 from jaxlink.optimize import Evaluator, PathData, problem_from
-from jaxlink.optimize._objectives import OBJECTIVES
-from jaxlink.optimize._search import _u_of_v, _v_of_u, run
+from jaxlink.optimize.objectives import OBJECTIVES
+from jaxlink.optimize.search import _u_of_v, _v_of_u, run
 
 ROOT = pathlib.Path(__file__).resolve().parents[1]
 CASES = ROOT / "experiments" / "fourbar_cases"
@@ -121,7 +121,7 @@ targets = [[30, 40], [10, 50]]
 
 
 def test_gradient_matches_finite_differences(feed):
-    from jaxlink.optimize._search import Gradient
+    from jaxlink.optimize.search import Gradient
 
     g = Gradient(feed, budget=100, seed=0, starts=4)
     designs = [[2.0, 0.7, 5.0], [2.6, 1.3, -8.0], [1.0, 3.0, 25.0], [3.5, 0.2, -29.0]]
@@ -206,9 +206,9 @@ import json
 import jax
 jax.config.update("jax_enable_x64", True)
 assert len(jax.devices()) == 4, jax.devices()
-from jaxlink._mechanism import load
+from jaxlink import load
 from jaxlink.optimize import Evaluator, problem_from
-from jaxlink.optimize._search import searcher
+from jaxlink.optimize.search import searcher
 ev = Evaluator(problem_from(load("sewing-feed-opt")), chunk=64)
 assert ev.n_devices == 4
 s = searcher(ev, "montecarlo", budget=256, seed=11)
@@ -224,7 +224,7 @@ def test_sharded_run_equals_single_device_run(feed):
     import subprocess
     import sys
 
-    from jaxlink.optimize._search import searcher
+    from jaxlink.optimize.search import searcher
 
     env = dict(os.environ, XLA_FLAGS="--xla_force_host_platform_device_count=4", JAX_PLATFORMS="cpu")
     proc = subprocess.run([sys.executable, "-c", _SHARDED], env=env, capture_output=True, text=True,

@@ -1,7 +1,7 @@
 """Knitting sinker on a stitch cam (issue 6): cam tracks, model, integrators, jamming.
 
 References: closed forms, the numbers published in `shared/spec/sinker-cam.md` (rebuilt from
-the seed), and an independent scipy `solve_ivp` solution (`jaxlink.sinker._reference`).
+the seed), and an independent scipy `solve_ivp` solution (`jaxlink.cam.reference`).
 """
 
 import math
@@ -11,8 +11,8 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from jaxlink import sinker as sk
-from jaxlink.sinker._reference import reference_solution
+from jaxlink import cam as sk
+from jaxlink.cam.reference import reference_solution
 
 SPEED = sk.butt_speed(350.0, 0.096)
 GEOMS = {g.name: g for g in sk.seed_geometries()}

@@ -8,9 +8,9 @@ import numpy as np
 import pytest
 
 from jaxlink import cli
-from jaxlink._errors import MechanismError
+from jaxlink.errors import MechanismError
 from jaxlink.scenes import describe, scene_paths
-from jaxlink.sinker._scene import load_scene
+from jaxlink.cam.scene import load_scene
 
 
 def test_builtin_scene():

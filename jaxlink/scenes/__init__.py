@@ -29,7 +29,7 @@ def describe(path: pathlib.Path) -> str:
 
 def resolve(name_or_path: str) -> pathlib.Path:
     """A path if it exists, else a built-in scene name; raises `MechanismError` otherwise."""
-    from .._errors import MechanismError
+    from ..errors import MechanismError
 
     p = pathlib.Path(name_or_path)
     if p.is_file():

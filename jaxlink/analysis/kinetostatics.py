@@ -1,0 +1,438 @@
+"""Kinetostatics: joint reactions and the driving torque from the solved kinematics (seed 000 §6.1,
+the d'Alembert "release" method, A_S F_S = Q_S).
+
+Every moving body b is released from its joints. With its centroid c_b, mass m_b, inertia J_b about
+the centroid and orientation θ_b, d'Alembert's principle gives three equations per body (forces, and
+moments about a reference point r_b of the body — its centroid, or its first joint if massless):
+
+    Σ_j F_bj  +  Σ F_ext  +  m_b g − m_b c̈_b                                         = 0
+    Σ_j (P_j − r_b) × F_bj + Σ M_bj + Σ (P − r_b) × F_ext + Σ T_ext
+        + (c_b − r_b) × (m_b g − m_b c̈_b) − J_b θ̈_b                                  = 0
+
+with, per joint j between bodies (A, B), the unknown force F_j on B from A (−F_j on A): two
+components (F_x, F_y) for a revolute joint at P_j; for a prismatic joint, a normal force N along
+the left normal n = (−sin a, cos a) of its axis a, at P_j, and a moment M. The drive torque τ acts
+on the input body (from the ground). Unknowns F_S = (F_1x, F_1y, …, τ) number 2·joints + 1, equations
+3·bodies; they agree when Grübler's mobility is 1 (checked when the file is read). The accelerations
+come from the transfer functions μ = dq/dφ, ν = d²q/dφ² (as in `_kinematics`): c̈ = c'' ω² + c' α with
+c' = dc/dφ, c'' = d²c/dφ² by forward AD along the solution curve, likewise θ̈. Moment rows and moment unknowns are scaled by the mechanism's length
+scale so that A_S is O(1) in any unit.
+
+Power balance (a check, `tests/test_kinetostatics.py`): τ ω + Σ P_loads = d(T + V_gravity + V_springs)/dt.
+
+The linear solve is unrolled for n ≤ 8 (`_linalg.solve_small`) and an LU factorization with partial
+pivoting otherwise (`jax.scipy.linalg.lu_factor`, what `jnp.linalg.solve` does, keeping the pivots);
+a position whose A_S is singular (min |pivot| / max |entry| below `singular_ratio`: a toggle position,
+or joints placed so that they over-constrain a body) gets `KRESULTS.singular` and zeros, never an exception, so that
+`vmap` over positions and designs never fails as a whole.
+"""
+
+from __future__ import annotations
+
+import functools
+from typing import NamedTuple
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from ..model import bodies as _bodies
+from ..files import expr as _expr
+from ..solvers.assemble import solve
+from ..files.expr import ANGLE
+from ..solvers.linalg import UNROLL_MAX, solve_small
+from ..model.mechanism import Mechanism
+
+
+class KRESULTS:
+    """Result codes of a kinetostatic solve (int8)."""
+
+    ok = 0
+    singular = 1
+    not_assembled = 2
+    nonfinite = 3
+
+    messages = {
+        0: "ok",
+        1: "singular system: a toggle/dead-centre position, or joints that over-constrain the motion; the "
+           "reactions are not determined here",
+        2: "the kinematics did not converge at this position (see `jaxlink kinematics`)",
+        3: "non-finite values: check masses, parameters and expressions",
+    }
+    names = {0: "ok", 1: "singular", 2: "not_assembled", 3: "nonfinite"}
+
+
+class Reactions(NamedTuple):
+    """Joint reactions and drive torque (leading axes: designs, positions as the inputs).
+
+    **Fields:**
+
+    - `force`: (…, J, 2) N, the force on each joint's second body from its first (x, y).
+    - `moment`: (…, J) N·m, the reaction moment of each prismatic joint (0 for revolute joints).
+    - `torque`: (…,) N·m, the drive torque on the input body from the ground (counter-clockwise +).
+    - `result`: (…,) int8 code (`KRESULTS`); where not ok, the values are 0.
+    - `ratio`: (…,) min |pivot| / max |entry| of the scaled system, a singularity indicator (≈ 1/condition).
+    """
+
+    force: jax.Array
+    moment: jax.Array
+    torque: jax.Array
+    result: jax.Array
+    ratio: jax.Array
+
+
+# ----------------------------------------------------------------------------- geometry
+
+
+def vector_sum(mech: Mechanism, terms, env, dtype):
+    """A vector sum (tuple of `Term`s) evaluated in SI: array (2,)."""
+    x, y = 0.0, 0.0
+    for t in terms:
+        tx, ty = mech._term_vector(t, env)
+        x, y = x + tx, y + ty
+    return jnp.stack([jnp.asarray(x, dtype=dtype), jnp.asarray(y, dtype=dtype)])
+
+
+def angle_value(mech: Mechanism, node, env, dtype):
+    return jnp.asarray(_expr.evaluate(node, env, mech.kinds, mech.units, ANGLE), dtype=dtype)
+
+
+def motion(mech: Mechanism, mdl: _bodies.Model, q, phi, p):
+    """Centroids (nb, 2) and angles (nb,) of the bodies (0 where not declared)."""
+    dtype = jnp.result_type(q)
+    env = mech._env(q, phi, p)
+    zero2 = jnp.zeros((2,), dtype)
+    zero = jnp.zeros((), dtype)
+    c = [vector_sum(mech, b.centroid, env, dtype) if b.centroid is not None else zero2 for b in mdl.bodies]
+    a = [angle_value(mech, b.angle, env, dtype) if b.angle is not None else zero for b in mdl.bodies]
+    return jnp.stack(c), jnp.stack(a)
+
+
+def _geometry(mech: Mechanism, mdl: _bodies.Model, q, phi, p):
+    """Joint points (nj, 2) and axes (nj,), force points (nf, 2), spring ends (ns, 2, 2)."""
+    dtype = jnp.result_type(q)
+    env = mech._env(q, phi, p)
+    pts = jnp.stack([vector_sum(mech, j.at, env, dtype) for j in mdl.joints])
+    axes = jnp.stack([angle_value(mech, j.axis, env, dtype) if j.axis is not None else jnp.zeros((), dtype)
+                      for j in mdl.joints])
+    fpts = (jnp.stack([vector_sum(mech, f.at, env, dtype) for f in mdl.forces]) if mdl.forces
+            else jnp.zeros((0, 2), dtype))
+    spts = (jnp.stack([jnp.stack([vector_sum(mech, s.start, env, dtype), vector_sum(mech, s.end, env, dtype)])
+                       for s in mdl.springs]) if mdl.springs else jnp.zeros((0, 2, 2), dtype))
+    return pts, axes, fpts, spts
+
+
+def _d1_d2(f, x, v, w):
+    """(f(x), d/ds f(x + s v + s² w/2), d²/ds² …) at s = 0; x, v, w tuples of arrays."""
+
+    def curve(s):
+        return f(*[xi + s * vi + 0.5 * s * s * wi for xi, vi, wi in zip(x, v, w)])
+
+    def first(s):
+        return jax.jvp(curve, (s,), (jnp.ones_like(s),))
+
+    s0 = jnp.zeros((), dtype=jnp.result_type(x[0]))
+    (val, d1), (_, d2) = jax.jvp(first, (s0,), (jnp.ones_like(s0),))
+    return val, d1, d2
+
+
+def transfer_functions(mech: Mechanism, q, phi, p):
+    """μ = dq/dφ and ν = d²q/dφ² at one solved position (as `_kinematics.transfer_one`, without the
+    points): Φ_q μ = −Φ_φ,  Φ_q ν = −d²/ds² Φ(q + sμ, φ + s)."""
+    res = lambda qq, ph: mech.residual(qq, ph, p)  # noqa: E731
+    jac = jax.jacfwd(res, argnums=0)(q, phi)
+    one = jnp.ones_like(phi)
+    phi_t = jax.jvp(lambda ph: res(q, ph), (phi,), (one,))[1]
+    mu, _ = solve_small(jac, phi_t)
+    mu = -mu
+    _, _, gamma = _d1_d2(res, (q, phi), (mu, one), (jnp.zeros_like(q), jnp.zeros_like(phi)))
+    nu, _ = solve_small(jac, gamma)
+    return mu, -nu
+
+
+def body_kinematics(mech: Mechanism, mdl: _bodies.Model, q, phi, p):
+    """Centroids and angles with their first and second derivatives with respect to the input:
+    `((c, c', c''), (θ, θ', θ''))`, shapes (nb, 2) and (nb,)."""
+    mu, nu = transfer_functions(mech, q, phi, p)
+    one = jnp.ones_like(phi)
+    (c, a), (c1, a1), (c2, a2) = _d1_d2(lambda qq, ph: motion(mech, mdl, qq, ph, p), (q, phi), (mu, one),
+                                        (nu, jnp.zeros_like(phi)))
+    return (c, c1, c2), (a, a1, a2)
+
+
+def _cross(r, f):
+    return r[0] * f[1] - r[1] * f[0]
+
+
+# ----------------------------------------------------------------------------- the system
+
+
+def system(mech: Mechanism, mdl: _bodies.Model, q, phi, p, omega, alpha=0.0):
+    """The scaled kinetostatic system of one position: `(A, Q, L, axes)` with A (n, n), Q (n,), the
+    length scale L by which moment rows were divided and moment unknowns multiplied (the unknowns
+    are (F_1x, F_1y, …, N_j, M_j/L, …, τ/L)), and the joint axes (nj,) (0 for revolute joints)."""
+    dtype = jnp.result_type(q)
+    (c, c1, c2), (th, th1, th2) = body_kinematics(mech, mdl, q, phi, p)
+    acc_c = c2 * omega**2 + c1 * alpha
+    acc_th = th2 * omega**2 + th1 * alpha
+    pts, axes, fpts, spts = _geometry(mech, mdl, q, phi, p)
+    L = mech.length_scale(p)
+    nb, nj = len(mdl.bodies), len(mdl.joints)
+    n = 2 * nj + 1
+    g = jnp.asarray(mdl.gravity, dtype)
+    st = _static(mdl)
+
+    # reference point of each body: its centroid if it has one, else its first joint
+    ref = jnp.where(st.has_centroid[:, None], c, pts[st.first_joint])
+
+    # unit "wrench" of each unknown column of joint k: a force f (at P_k) and a moment m (already / L)
+    # revolute: (e_x, 0), (e_y, 0); prismatic: (n, 0), (0, 1) with n = (-sin a, cos a)
+    normal = jnp.stack([-jnp.sin(axes), jnp.cos(axes)], axis=-1)  # (nj, 2)
+    ex = jnp.broadcast_to(jnp.asarray([1.0, 0.0], dtype), (nj, 2))
+    ey = jnp.broadcast_to(jnp.asarray([0.0, 1.0], dtype), (nj, 2))
+    prism = st.prismatic[:, None]
+    f0 = jnp.where(prism, normal, ex)
+    f1 = jnp.where(prism, 0.0, ey)
+    fb = jnp.stack([f0, f1], axis=1)  # (nj, 2 columns, 2)
+    mb = jnp.stack([jnp.zeros((nj,), dtype), jnp.where(st.prismatic, 1.0, 0.0)], axis=1)  # (nj, 2)
+    if len(st.inc_joint):
+        k, i, sgn = st.inc_joint, st.inc_body, st.inc_sign
+        r = pts[k] - ref[i]  # (ni, 2)
+        f = fb[k]  # (ni, 2, 2)
+        mom = (r[:, None, 0] * f[..., 1] - r[:, None, 1] * f[..., 0]) / L + mb[k]  # (ni, 2)
+        vals = sgn[:, None, None] * jnp.stack([f[..., 0], f[..., 1], mom], axis=-1)  # (ni, 2 cols, 3 rows)
+        A = jnp.zeros((3 * nb, n), dtype).at[st.rows, st.cols].add(vals.reshape(-1))
+    else:
+        A = jnp.zeros((3 * nb, n), dtype)
+    A = A.at[3 * mdl.input_body + 2, n - 1].add(1.0)  # τ/L on the input body
+
+    # right-hand side: Q = m c̈ − m g − F_ext;  J θ̈ − (c − r) × (m g − m c̈) − Σ (P − r) × F_ext − T_ext
+    ext_f = jnp.zeros((nb + 1, 2), dtype)  # row nb collects what acts on the ground (dropped)
+    ext_m = jnp.zeros((nb + 1,), dtype)
+    ref_g = jnp.concatenate([ref, jnp.zeros((1, 2), dtype)])
+
+    def apply(ext_f, ext_m, body, point, force):
+        b = body if body >= 0 else nb
+        return ext_f.at[b].add(force), ext_m.at[b].add(_cross(point - ref_g[b], force))
+
+    for kf, fl in enumerate(mdl.forces):
+        ext_f, ext_m = apply(ext_f, ext_m, fl.body, fpts[kf], jnp.asarray(fl.force, dtype))
+    for tl in mdl.torques:
+        ext_m = ext_m.at[tl.body if tl.body >= 0 else nb].add(tl.torque)
+    for ks, sp in enumerate(mdl.springs):
+        start, end = spts[ks, 0], spts[ks, 1]
+        d = end - start
+        length = _safe_norm(d)
+        u = d / jnp.where(length > 0, length, 1.0)
+        tension = sp.preload + sp.stiffness * (length - sp.length)
+        ext_f, ext_m = apply(ext_f, ext_m, sp.a, start, tension * u)  # pulls the first end towards the second
+        ext_f, ext_m = apply(ext_f, ext_m, sp.b, end, -tension * u)
+    gmi = st.mass[:, None] * (g - acc_c)  # gravity minus inertia force, (nb, 2)
+    q_f = -ext_f[:nb] - gmi
+    q_m = (st.inertia * acc_th - _cross_rows(c - ref, gmi) - ext_m[:nb]) / L
+    Q = jnp.stack([q_f[:, 0], q_f[:, 1], q_m], axis=1).reshape(-1)
+    return A, Q, L, axes
+
+
+class _Static(NamedTuple):
+    has_centroid: np.ndarray  # (nb,) bool
+    first_joint: np.ndarray  # (nb,) int: a joint of each body
+    prismatic: np.ndarray  # (nj,) bool
+    mass: np.ndarray  # (nb,)
+    inertia: np.ndarray  # (nb,)
+    inc_joint: np.ndarray  # (ni,) joint of each (joint, moving body) incidence
+    inc_body: np.ndarray  # (ni,)
+    inc_sign: np.ndarray  # (ni,) +1 on the joint's second body, −1 on its first
+    rows: np.ndarray  # (ni·2·3,) rows of A for the incidence values (ni, 2 columns, 3 rows)
+    cols: np.ndarray
+
+
+@functools.lru_cache(maxsize=64)
+def _static(mdl: _bodies.Model) -> _Static:
+    inc = [(k, body, sign) for k, j in enumerate(mdl.joints) for body, sign in ((j.b, 1.0), (j.a, -1.0))
+           if body >= 0]
+    k = np.array([e[0] for e in inc], dtype=np.int32)
+    i = np.array([e[1] for e in inc], dtype=np.int32)
+    rows = (3 * i[:, None, None] + np.arange(3)[None, None, :]) + np.zeros((1, 2, 1), np.int32)
+    cols = (2 * k[:, None, None] + np.arange(2)[None, :, None]) + np.zeros((1, 1, 3), np.int32)
+    first = [next(kk for kk, j in enumerate(mdl.joints) if bi in (j.a, j.b)) for bi in range(len(mdl.bodies))]
+    return _Static(
+        np.array([b.centroid is not None for b in mdl.bodies]), np.array(first, dtype=np.int32),
+        np.array([j.kind == "prismatic" for j in mdl.joints]),
+        np.array([b.mass for b in mdl.bodies]), np.array([b.inertia for b in mdl.bodies]),
+        k, i, np.array([e[2] for e in inc]), rows.reshape(-1), cols.reshape(-1))
+
+
+def _cross_rows(r, f):
+    return r[:, 0] * f[:, 1] - r[:, 1] * f[:, 0]
+
+
+def _safe_norm(d):
+    sq = jnp.sum(d * d)
+    ok = sq > 0
+    return jnp.where(ok, jnp.sqrt(jnp.where(ok, sq, 1.0)), 0.0)
+
+
+def default_singular_ratio(dtype) -> float:
+    return float(max(1e-10, 1e3 * np.finfo(dtype).eps))
+
+
+def reactions_one(mech: Mechanism, mdl: _bodies.Model, q, phi, p, omega, alpha=0.0, *,
+                  singular_ratio: float | None = None) -> Reactions:
+    """Reactions and drive torque at one position (see the module docstring)."""
+    dtype = jnp.result_type(q)
+    A, Q, L, axes = system(mech, mdl, q, phi, p, omega, alpha)
+    n = A.shape[0]
+    if n <= UNROLL_MAX:
+        x, ratio = solve_small(A, Q)
+    else:
+        lu, piv = jax.scipy.linalg.lu_factor(A)
+        ratio = jnp.min(jnp.abs(jnp.diag(lu))) / jnp.maximum(jnp.max(jnp.abs(A)), jnp.finfo(dtype).tiny)
+        x = jax.scipy.linalg.lu_solve((lu, piv), Q)
+    thr = default_singular_ratio(dtype) if singular_ratio is None else singular_ratio
+    finite = jnp.all(jnp.isfinite(x))
+    code = jnp.where(ratio < thr, KRESULTS.singular, jnp.where(finite, KRESULTS.ok, KRESULTS.nonfinite))
+    ok = code == KRESULTS.ok
+    x = jnp.where(ok, x, 0.0)
+    nj = len(mdl.joints)
+    f = x[: 2 * nj].reshape(nj, 2)
+    moments = []
+    forces = []
+    for k, j in enumerate(mdl.joints):
+        if j.kind == "revolute":
+            forces.append(f[k])
+            moments.append(jnp.zeros((), dtype))
+        else:
+            forces.append(f[k, 0] * jnp.stack([-jnp.sin(axes[k]), jnp.cos(axes[k])]))
+            moments.append(f[k, 1] * L)
+    return Reactions(jnp.stack(forces), jnp.stack(moments), x[-1] * L, code.astype(jnp.int8), ratio)
+
+
+# ----------------------------------------------------------------------------- batched entry points
+
+
+def reactions(mech: Mechanism, q, phis, p=None, *, omega, alpha=0.0, converged=None,
+              singular_ratio: float | None = None) -> Reactions:
+    """Reactions and drive torque at solved positions, jitted and `vmap`ped.
+
+    **Arguments:**
+
+    - `mech`: a mechanism whose file has `[bodies]` and `[joints]` (validated by `_bodies.model`).
+    - `q`: (N, n) solved unknowns, or (B, N, n) for a batch of designs.
+    - `phis`: (N,) inputs (rad), or (B, N).
+    - `p`: (P,) parameters SI (default: the file's), or (B, P).
+    - `omega`, `alpha` (keyword-only): input speed (rad/s) and acceleration (rad/s²); traced.
+    - `converged`: optional (…, N) bool from the position solve; positions that did not converge get
+      `KRESULTS.not_assembled` and zeros.
+    - `singular_ratio`: pivot ratio below which the system counts as singular (static; default
+      max(1e-10, 1000 eps)).
+
+    **Returns:** `Reactions` with leading axes (N,) or (B, N).
+    """
+    mdl = _bodies.model(mech)
+    p = jnp.asarray(mech.parameters if p is None else p)
+    if not jnp.issubdtype(p.dtype, jnp.floating):
+        p = p.astype(jnp.result_type(float))
+    q = jnp.asarray(q, dtype=p.dtype)
+    phis = jnp.asarray(phis, dtype=p.dtype)
+    omega = jnp.asarray(omega, dtype=p.dtype)
+    alpha = jnp.asarray(alpha, dtype=p.dtype)
+    out = _jitted(mech, mdl, p.ndim == 2, phis.ndim == 2, singular_ratio)(q, phis, p, omega, alpha)
+    if converged is not None:
+        conv = jnp.asarray(converged, dtype=bool)
+        out = Reactions(
+            jnp.where(conv[..., None, None], out.force, 0.0),
+            jnp.where(conv[..., None], out.moment, 0.0),
+            jnp.where(conv, out.torque, 0.0),
+            jnp.where(conv, out.result, jnp.int8(KRESULTS.not_assembled)).astype(jnp.int8),
+            out.ratio,
+        )
+    return out
+
+
+@functools.lru_cache(maxsize=64)
+def _jitted(mech, mdl, batch_p, batch_phi, singular_ratio):
+    def one(q, phi, p, omega, alpha):
+        return reactions_one(mech, mdl, q, phi, p, omega, alpha, singular_ratio=singular_ratio)
+
+    f = jax.vmap(one, in_axes=(0, 0, None, None, None))
+    if batch_p:
+        f = jax.vmap(f, in_axes=(0, 0 if batch_phi else None, 0, None, None))
+    return jax.jit(f)
+
+
+def solve_reactions(mech: Mechanism, phis, p=None, *, omega, alpha=0.0, singular_ratio: float | None = None):
+    """Solve the positions (`_assemble.solve`) and then the reactions: returns `(Solution, Reactions)`.
+
+    `p` (P,) or (B, P) as in `solve`; `phis` (N,) in rad; `omega` rad/s."""
+    _bodies.model(mech)  # validate before the (longer) position solve
+    sol = solve(mech, phis, p)
+    pp = mech.parameters if p is None else p
+    return sol, reactions(mech, sol.q, phis, pp, omega=omega, alpha=alpha, converged=sol.converged,
+                          singular_ratio=singular_ratio)
+
+
+# ----------------------------------------------------------------------------- consistency of the file
+
+
+@functools.lru_cache(maxsize=64)
+def _jitted_points(mech, mdl):
+    def one(q, phi, p):
+        c, a = motion(mech, mdl, q, phi, p)
+        pts, _, fpts, spts = _geometry(mech, mdl, q, phi, p)
+        return c, a, pts, fpts, spts
+
+    return jax.jit(jax.vmap(one, in_axes=(0, 0, None)))
+
+
+def rigidity_errors(mech: Mechanism, q, phis, p=None, *, rtol: float | None = None) -> list:
+    """Check that the points the file attaches to each body move with it: its revolute joints, its
+    centroid and the points where loads act on it. For a body with an `angle`, their coordinates in
+    the body's frame (rotated by −angle, relative to the first point) must stay constant over the
+    positions; for a body without one, their mutual distances. Returns messages (empty if all is
+    well) naming the body, the point and how much it drifts; tolerance `rtol` × the length scale
+    (default max(1e-7, 1000 eps) of the dtype of `q`).
+    A prismatic joint's point slides on one of its bodies and is not checked. `q` (N, n) converged."""
+    mdl = _bodies.model(mech)
+    q = jnp.asarray(q)
+    if rtol is None:
+        rtol = max(1e-7, 1e3 * float(jnp.finfo(q.dtype).eps))
+    p = np.asarray(mech.parameters if p is None else p, dtype=q.dtype)
+    c, a, pts, fpts, spts = (np.asarray(x) for x in _jitted_points(mech, mdl)(
+        jnp.asarray(q), jnp.asarray(phis, dtype=jnp.asarray(q).dtype), jnp.asarray(p)))
+    scale = float(mech.length_scale(jnp.asarray(p)))
+    unit = mech.units.length
+    lu = {1.0: "m", 1e-3: "mm", 1e-2: "cm"}.get(unit, "m")
+    out = []
+    for i, b in enumerate(mdl.bodies):
+        named = []
+        for k, j in enumerate(mdl.joints):
+            if j.kind == "revolute" and i in (j.a, j.b):
+                named.append((f"joint {j.name}", pts[:, k]))
+        if b.centroid is not None:
+            named.append(("the centroid", c[:, i]))
+        for k, f in enumerate(mdl.forces):
+            if f.body == i:
+                named.append((f"load {f.name}", fpts[:, k]))
+        for k, s in enumerate(mdl.springs):
+            for end, body in ((0, s.a), (1, s.b)):
+                if body == i:
+                    named.append((f"spring {s.name} ({'from' if end == 0 else 'to'})", spts[:, k, end]))
+        if len(named) < 2:
+            continue
+        ref_name, ref = named[0]
+        for name, P in named[1:]:
+            d = P - ref
+            if b.angle is not None:
+                ca, sa = np.cos(a[:, i]), np.sin(a[:, i])
+                local = np.stack([ca * d[:, 0] + sa * d[:, 1], -sa * d[:, 0] + ca * d[:, 1]], axis=1)
+                drift = np.max(np.ptp(local, axis=0))
+                what = f"its position relative to {ref_name}, in the frame turned by the body's angle, changes"
+            else:
+                dist = np.hypot(d[:, 0], d[:, 1])
+                drift = np.ptp(dist)
+                what = f"its distance from {ref_name} changes"
+            if drift > rtol * scale:
+                out.append(f"{name} is not fixed in body '{b.name}': {what} by {drift / unit:.4g} {lu} over the "
+                           "positions (check its vector sum, and the body's angle)")
+    return out

@@ -1,0 +1,235 @@
+"""Command group for linkages: `jaxlink scenes`, `jaxlink check`, `jaxlink kinematics`.
+
+Also the shared option helpers other linkage commands (reactions, optimize) reuse:
+`add_mechanism_arguments`, `load_from_args`, `inputs_from_args`, `omega_from_args`.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import sys
+
+import numpy as np
+
+from ..errors import MechanismError
+
+OUTPUTS = ("position", "velocity", "acceleration")
+
+
+# ----------------------------------------------------------------------------- shared helpers
+
+
+def enable_dtype(name: str = "float64"):
+    """Turn on float64 in JAX if asked (the default for every command); returns the numpy dtype."""
+    import jax
+
+    if name == "float64":
+        jax.config.update("jax_enable_x64", True)
+        return np.float64
+    if name == "float32":
+        return np.float32
+    raise MechanismError(f"--dtype must be float64 or float32, not {name!r}")
+
+
+def add_mechanism_arguments(parser: argparse.ArgumentParser, *, positions: bool = True) -> None:
+    """FILE, --set, --dtype and (if `positions`) --rpm/--omega, --start/--step/--count."""
+    parser.add_argument("file", metavar="FILE", help="mechanism TOML file, or a built-in scene name")
+    parser.add_argument(
+        "--set", action="append", default=[], metavar="NAME=VALUE",
+        help="override a parameter, in the file's units (repeatable), e.g. --set l2=2.0 --set gamma=-10",
+    )
+    parser.add_argument("--dtype", default="float64", choices=("float64", "float32"),
+                        help="floating-point precision of the solve (default float64)")
+    if positions:
+        speed = parser.add_mutually_exclusive_group()
+        speed.add_argument("--rpm", type=float, help="input speed in revolutions per minute")
+        speed.add_argument("--omega", type=float,
+                           help="input speed in rad/s (default 1 rad/s: velocities and accelerations "
+                                "are then the transfer functions d/dφ, d²/dφ²)")
+        parser.add_argument("--start", type=float, default=0.0,
+                            help="first input angle, degrees (default 0)")
+        parser.add_argument("--step", type=float, default=5.0,
+                            help="input step, degrees (default 5)")
+        parser.add_argument("--count", type=int, default=None,
+                            help="number of positions (default: a full revolution, 360/step)")
+
+
+def parse_sets(items) -> dict[str, float]:
+    out = {}
+    for item in items or []:
+        if "=" not in item:
+            raise MechanismError(f"--set {item!r}: expected NAME=VALUE, e.g. --set l2=2.0")
+        k, v = item.split("=", 1)
+        k = k.strip()
+        try:
+            out[k] = float(v)
+        except ValueError:
+            raise MechanismError(f"--set {item!r}: '{v}' is not a number") from None
+        if not math.isfinite(out[k]):
+            raise MechanismError(f"--set {item!r}: the value must be finite")
+    return out
+
+
+def load_from_args(args):
+    """The mechanism of FILE with the `--set` overrides applied."""
+    from ..files.reader import load
+
+    return load(args.file, overrides=parse_sets(getattr(args, "set", [])))
+
+
+def inputs_from_args(mech, args) -> np.ndarray:
+    """Input values (SI) from --start/--step/--count (degrees for an angle input, file length unit
+    for a length input)."""
+    if args.step == 0 or not math.isfinite(args.step):
+        raise MechanismError("--step must be a non-zero finite number")
+    count = args.count
+    if count is None:
+        count = max(1, int(round(360.0 / abs(args.step)))) if mech.input_kind == "angle" else 73
+    if count < 1:
+        raise MechanismError("--count must be at least 1")
+    vals = args.start + args.step * np.arange(count)
+    if mech.input_kind == "angle":
+        return np.deg2rad(vals)
+    return vals * mech.units.length
+
+
+def omega_from_args(args) -> float:
+    if getattr(args, "rpm", None) is not None:
+        return args.rpm * 2.0 * math.pi / 60.0
+    if getattr(args, "omega", None) is not None:
+        return float(args.omega)
+    return 1.0
+
+
+# ----------------------------------------------------------------------------- commands
+
+
+def register(sub) -> None:
+    p = sub.add_parser("scenes", help="list the built-in scenes",
+                       description="List the built-in scenes (name and one-line description). "
+                                   "Any FILE argument accepts these names.")
+    p.set_defaults(func=cmd_scenes)
+
+    p = sub.add_parser(
+        "check", help="check a mechanism file and report its structure",
+        description="Validate a mechanism file and report parameters (with their inferred units), "
+                    "unknowns, loops, equations, mobility and whether the guess assembles. "
+                    "Exit status 2 with a one-line message naming file, line, key and reason when "
+                    "the file is wrong; 1 when it is valid but cannot be assembled at its start.",
+    )
+    add_mechanism_arguments(p, positions=False)
+    p.set_defaults(func=cmd_check)
+
+    p = sub.add_parser(
+        "kinematics", help="positions, velocities, accelerations over a revolution",
+        description=(
+            "Solve the loop equations over the input positions (Newton with continuation) and "
+            "write one row per position. CSV columns: input_deg; each unknown as NAME_rad or "
+            "NAME_m; for each point P: P_x_m, P_y_m [, P_vx_m_s, P_vy_m_s] [, P_ax_m_s2, P_ay_m_s2]; "
+            "converged (1/0); residual_m. Velocities and accelerations are exact (forward-mode AD, "
+            "Jacobian solves) at constant input speed."
+        ),
+        formatter_class=argparse.ArgumentDefaultsHelpFormatter,
+    )
+    add_mechanism_arguments(p)
+    p.add_argument("--outputs", default="position,velocity,acceleration",
+                   help="comma-separated subset of position,velocity,acceleration")
+    p.add_argument("--csv", metavar="OUT", help="write the table to this CSV file (default: print a summary)")
+    p.add_argument("--plot", metavar="OUT.png", help="plot the point paths and the curves over the input")
+    p.add_argument("--animate", metavar="OUT.gif", help="animated GIF of the moving linkage")
+    p.set_defaults(func=cmd_kinematics)
+
+
+def cmd_scenes(args) -> int:
+    from ..scenes import describe, scene_paths
+
+    paths = scene_paths()
+    width = max((len(n) for n in paths), default=0)
+    for name, path in paths.items():
+        print(f"{name:<{width}}  {describe(path)}")
+    return 0
+
+
+def cmd_check(args) -> int:
+    enable_dtype(args.dtype)
+    import jax.numpy as jnp
+
+    from ..solvers.assemble import NewtonOptions, method_for, solve
+    from ..solvers.linalg import solve_small
+    from ..results import RESULTS
+    from ..model import structure as _structure
+
+    mech = load_from_args(args)
+    print(f"mechanism   {mech.name}  ({mech.file})")
+    if mech.description:
+        print(f"            {mech.description}")
+    lu = [k for k, v in {"m": 1.0, "mm": 1e-3, "cm": 1e-2}.items() if v == mech.units.length][0]
+    au = "deg" if mech.units.angle != 1.0 else "rad"
+    unit = {"length": lu, "angle": au, "number": ""}
+    print(f"units       lengths in {lu}, angles in {au} (SI inside)")
+    print(f"parameters  {len(mech.parameter_names)}: " + ", ".join(
+        f"{n} = {mech.from_si(n, v):g}{(' ' + unit[k]) if unit[k] else ''}"
+        for n, v, k in zip(mech.parameter_names, mech.parameters, mech.parameter_kinds)))
+    print(f"input       {mech.input_name} ({mech.input_kind}), guesses hold at "
+          f"{mech.from_si(mech.input_name, mech.input_start):g} {unit[mech.input_kind]}")
+    print(f"unknowns    {mech.n_unknowns}: " + ", ".join(
+        f"{n} ({k})" for n, k in zip(mech.unknown_names, mech.unknown_kinds)))
+    print(f"loops       {len(mech.loops)} independent: " + "; ".join(
+        f"{n} ({len(t)} vectors)" for n, t in mech.loops))
+    print(f"equations   {mech.n_equations} scalar (x and y of each loop)")
+    print(f"points      {', '.join(mech.point_names) or '(none)'}")
+    info = _structure.structure(mech)
+    print(f"mobility    {info['mobility_loops']} from the loops "
+          "(unknowns + 1 input − equations)")
+    if info.get("grubler") is not None:
+        g = info["grubler"]
+        print(f"            {g['mobility']} by Grübler: u = {g['members']} members, s = {g['joint_count']} "
+              f"joint count, n = 3(u−1) − 2s; independent loops k = s − u + 1 = {g['loops']}")
+    sol = solve(mech, np.asarray([mech.input_start]))
+    code = int(sol.result[0])
+    jac = np.asarray(__import__("jax").jacfwd(mech.residual)(sol.q[0], jnp.asarray(mech.input_start),
+                                                             jnp.asarray(mech.parameters)))
+    _, ratio = solve_small(jnp.asarray(jac), jnp.zeros(jac.shape[0]))
+    cond = np.linalg.cond(jac)
+    how = ("closed-form dyads" if method_for(mech, NewtonOptions()) == "closed_form"
+           else f"{int(sol.steps[0])} Newton steps")
+    print(f"assembly    at the start: {RESULTS.names[code]} (residual {float(sol.residual[0]):.2e} m, "
+          f"{how}, Jacobian condition number {cond:.3g})")
+    if code == RESULTS.converged:
+        print("            start configuration: " + ", ".join(
+            f"{n} = {mech.from_si(n, float(v)):.6g}" for n, v in zip(mech.unknown_names, sol.q[0])))
+        return 0
+    print(f"            {RESULTS.messages[code]}", file=sys.stderr)
+    return 1
+
+
+def cmd_kinematics(args) -> int:
+    dtype = enable_dtype(args.dtype)
+    outputs = [o.strip() for o in args.outputs.split(",") if o.strip()]
+    for o in outputs:
+        if o not in OUTPUTS:
+            raise MechanismError(f"--outputs: unknown output '{o}'; choose from {', '.join(OUTPUTS)}")
+    order = 2 if "acceleration" in outputs else (1 if "velocity" in outputs else 0)
+    mech = load_from_args(args)
+    phis = inputs_from_args(mech, args)
+    omega = omega_from_args(args)
+    from ..report import kinematics as _report
+
+    table = _report.kinematics_table(mech, phis, omega=omega, order=order, dtype=dtype)
+    bad = int((~table.converged).sum())
+    _report.print_summary(table, sys.stdout, every_row_hint=not args.csv)
+    if args.csv:
+        _report.write_csv(args.csv, table)
+        print(f"wrote {args.csv}: {len(phis)} rows, {len(table.columns)} columns")
+    if args.plot:
+        _report.plot_kinematics(args.plot, mech, table)
+        print(f"wrote {args.plot}")
+    if args.animate:
+        _report.animate(args.animate, mech, table)
+        print(f"wrote {args.animate}")
+    if bad:
+        print(f"warning: {bad} of {len(phis)} positions did not converge (converged = 0 in the table): "
+              + _report.failure_summary(table), file=sys.stderr)
+        return 1
+    return 0

@@ -1,0 +1,343 @@
+"""Mechanism files: read the TOML text, validate every section, convert to SI, build a `Mechanism`.
+
+Every error names the file, the line (found in the text that was parsed) and the key.
+"""
+
+from __future__ import annotations
+
+import math
+import pathlib
+import re
+from typing import Mapping
+
+import jax.numpy as jnp
+import numpy as np
+
+from ..errors import MechanismError
+from ..model.mechanism import Mechanism
+from . import expr as _expr
+from .expr import ANGLE, LENGTH, ExprSyntaxError, UnitError
+from .locator import Locator
+
+try:
+    import tomllib
+except ModuleNotFoundError:  # Python < 3.11
+    import tomli as tomllib  # type: ignore[no-redef]
+
+LENGTH_UNITS = {"m": 1.0, "mm": 1e-3, "cm": 1e-2}
+ANGLE_UNITS = {"rad": 1.0, "deg": math.pi / 180.0}
+KNOWN_TABLES = {
+    "mechanism", "parameters", "input", "unknowns", "loops", "points",
+    "bodies", "joints", "loads", "environment", "optimize", "dynamics",
+}
+
+
+def load(source: str | pathlib.Path, *, overrides: Mapping[str, float] | None = None) -> Mechanism:
+    """Load and validate a mechanism file (a path or a built-in scene name).
+
+    `overrides` replace parameter values (file units), as `--set` does on the command line.
+    Raises `MechanismError` naming the file, line, key and reason for anything wrong.
+    """
+    from ..scenes import resolve
+
+    path = resolve(str(source))
+    text = path.read_text(encoding="utf-8")
+    return loads(text, file=str(path), overrides=overrides)
+
+
+def loads(text: str, *, file: str = "<string>", overrides: Mapping[str, float] | None = None) -> Mechanism:
+    """Like `load`, from the TOML text."""
+    loc = Locator(text)
+
+    def err(msg, table=None, key=None, item=None, keyname=None):
+        line = loc.line(table, key, item) if table is not None else None
+        k = keyname or (f"{table}.{key}" if key else table)
+        return MechanismError(msg, file=file, line=line, key=k)
+
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        m = re.search(r"line (\d+)", str(exc))
+        raise MechanismError(f"not valid TOML: {exc}", file=file, line=int(m.group(1)) if m else None) from None
+
+    for table in data:
+        if table not in KNOWN_TABLES:
+            raise err(
+                f"unknown table [{table}]{_expr.suggest(table, KNOWN_TABLES)}; known tables: "
+                + ", ".join(sorted(KNOWN_TABLES)),
+                table,
+            )
+    mech = data.get("mechanism")
+    if not isinstance(mech, dict):
+        raise MechanismError("missing [mechanism] table (name, length_unit, angle_unit)", file=file)
+    kind = mech.get("kind", "linkage")
+    if kind != "linkage":
+        raise err(
+            f"this is a '{kind}' scene, not a linkage: the loop solver does not apply "
+            "(see `jaxlink simulate`)", "mechanism", "kind",
+        )
+    name = str(mech.get("name", pathlib.Path(file).stem))
+    lu = mech.get("length_unit", "m")
+    au = mech.get("angle_unit", "rad")
+    if lu not in LENGTH_UNITS:
+        raise err(f"bad length unit '{lu}'; use one of {', '.join(LENGTH_UNITS)}", "mechanism", "length_unit")
+    if au not in ANGLE_UNITS:
+        raise err(f"bad angle unit '{au}'; use one of {', '.join(ANGLE_UNITS)}", "mechanism", "angle_unit")
+    units = _expr.Units(LENGTH_UNITS[lu], ANGLE_UNITS[au])
+
+    # ---------------------------------------------------------------- names and values
+    params_raw = data.get("parameters", {})
+    if not isinstance(params_raw, dict):
+        raise err("[parameters] must be a table of NAME = value", "parameters")
+    declared: dict[str, str] = {}
+    pvalues: dict[str, float] = {}
+    for pname, v in params_raw.items():
+        _check_identifier(pname, err, "parameters")
+        if isinstance(v, dict):
+            if "value" not in v:
+                raise err("a parameter table needs 'value' (and optionally 'unit')", "parameters", pname)
+            unit = v.get("unit")
+            v = v["value"]
+            if unit is not None:
+                declared[pname] = _kind_of_unit(unit, err, pname)
+                if unit in LENGTH_UNITS or unit in ANGLE_UNITS:
+                    # convert to the file unit now; SI conversion happens below for all
+                    f = LENGTH_UNITS.get(unit) or ANGLE_UNITS[unit]
+                    v = _num(v, err, "parameters", pname) * f / units.factor(_expr.KIND_DIMS[declared[pname]])
+        pvalues[pname] = _num(v, err, "parameters", pname)
+
+    inp = data.get("input")
+    if not isinstance(inp, dict) or "name" not in inp:
+        raise MechanismError("missing [input] table with name = \"...\" (the driving coordinate)", file=file,
+                             key="input")
+    input_name = str(inp["name"])
+    _check_identifier(input_name, err, "input", "name")
+    input_body = inp.get("body")
+    input_start = _num(inp.get("start", 0.0), err, "input", "start")
+
+    unk_raw = data.get("unknowns", {})
+    if not isinstance(unk_raw, dict) or not unk_raw:
+        raise err("[unknowns] must list the dependent coordinates with their guesses", "unknowns")
+    guesses: dict[str, float] = {}
+    for uname, v in unk_raw.items():
+        _check_identifier(uname, err, "unknowns")
+        guesses[uname] = _num(v, err, "unknowns", uname)
+
+    # name clashes
+    for uname in guesses:
+        if uname in pvalues:
+            raise err(f"'{uname}' is both a parameter and an unknown; rename one", "unknowns", uname)
+    if input_name in pvalues:
+        raise err(f"the input '{input_name}' is also a parameter", "input", "name")
+    if input_name in guesses:
+        raise err(f"the input '{input_name}' is also an unknown", "input", "name")
+    reserved = set(_expr.FUNCTIONS)
+    for n in list(pvalues) + list(guesses) + [input_name]:
+        if n in reserved:
+            raise MechanismError(f"'{n}' is a function name and cannot name a quantity", file=file)
+
+    # ---------------------------------------------------------------- loops and points
+    def parse_terms(table: str, required: bool):
+        raw = data.get(table, {})
+        if not isinstance(raw, dict) or (required and not raw):
+            raise err(f"[{table}] must be a table of NAME = [\"term\", ...]", table)
+        out = []
+        for lname, terms in raw.items():
+            if not isinstance(terms, list):
+                raise err(f"{table}.{lname} must be a list of terms like \"a @ phi2\"", table, lname)
+            if not terms:
+                raise err(f"{table}.{lname} is empty: a {table[:-1]} needs at least one term", table, lname)
+            parsed = []
+            for i, t in enumerate(terms):
+                try:
+                    parsed.append(_expr.parse_term(t))
+                except ExprSyntaxError as exc:
+                    raise err(str(exc), table, lname, item=str(t), keyname=f"{table}.{lname}[{i}]") from None
+            out.append((lname, tuple(parsed)))
+        return tuple(out)
+
+    loops = parse_terms("loops", True)
+    points = parse_terms("points", False)
+
+    known_names = set(pvalues) | set(guesses) | {input_name}
+    for table, group in (("loops", loops), ("points", points)):
+        for lname, terms in group:
+            for i, term in enumerate(terms):
+                for node in term.nodes():
+                    for nm in _expr.names_in(node):
+                        if nm.name not in known_names:
+                            raise err(
+                                f"unknown name '{nm.name}' in \"{term.text}\"{_expr.suggest(nm.name, known_names)}"
+                                " — declare it under [parameters] or [unknowns]",
+                                table, lname, item=term.text, keyname=f"{table}.{lname}[{i}]",
+                            )
+
+    n_eq = 2 * len(loops)
+    if n_eq != len(guesses):
+        raise err(
+            f"{len(loops)} loop(s) give {n_eq} scalar equations but there are {len(guesses)} unknowns "
+            f"({', '.join(guesses)}); each loop closes in x and y, so unknowns must be 2 × loops",
+            "unknowns",
+        )
+    used_in_loops = {nm.name for _, ts in loops for t in ts for nd in t.nodes() for nm in _expr.names_in(nd)}
+    for uname in guesses:
+        if uname not in used_in_loops:
+            raise err(f"unknown '{uname}' appears in no loop", "unknowns", uname)
+    if input_name not in used_in_loops:
+        raise err(f"the input '{input_name}' appears in no loop: nothing drives the mechanism", "input", "name")
+
+    # ---------------------------------------------------------------- kinds (units) inference
+    kinds: dict[str, str | None] = {n: None for n in known_names}
+    kinds.update(declared)
+    where: dict[str, str] = {}
+
+    roles = []
+    for table, group in (("loops", loops), ("points", points)):
+        for lname, terms in group:
+            for i, term in enumerate(terms):
+                key = f"{table}.{lname}[{i}]"
+                if term.polar:
+                    roles.append((term.length, LENGTH, table, lname, term, key))
+                    roles.append((term.angle, ANGLE, table, lname, term, key))
+                else:
+                    roles.append((term.x, LENGTH, table, lname, term, key))
+                    roles.append((term.y, LENGTH, table, lname, term, key))
+
+    changed = True
+    while changed:
+        changed = False
+        for node, role, table, lname, term, key in roles:
+
+            def record(nm, dim, _t=table, _l=lname, _term=term, _key=key):
+                nonlocal changed
+                kind = _expr.DIM_KINDS.get(dim)
+                if kind is None:
+                    raise err(
+                        f"'{nm.name}' would have to be {_expr._dim_name(dim)} in \"{_term.text}\"; "
+                        "only lengths, angles and pure numbers are supported",
+                        _t, _l, item=_term.text, keyname=_key,
+                    )
+                if kinds[nm.name] is None:
+                    kinds[nm.name] = kind
+                    where[nm.name] = f"\"{_term.text}\" ({_key})"
+                    changed = True
+                elif kinds[nm.name] != kind:
+                    first = where.get(nm.name, "its declared unit")
+                    raise err(
+                        f"'{nm.name}' is used as {'an' if kind == 'angle' else 'a'} {kind} in \"{_term.text}\" "
+                        f"but as {'an' if kinds[nm.name] == 'angle' else 'a'} {kinds[nm.name]} in {first}",
+                        _t, _l, item=_term.text, keyname=_key,
+                    )
+
+            try:
+                _expr.kind_constraints(node, role, kinds, record)
+            except UnitError as exc:
+                raise err(f"inconsistent units in \"{term.text}\": {exc}", table, lname, item=term.text,
+                          keyname=key) from None
+
+    for n in [input_name, *guesses]:
+        if kinds[n] is None:
+            raise err(f"cannot tell whether '{n}' is a length or an angle from its use in the loops",
+                      "unknowns" if n in guesses else "input", n if n in guesses else "name")
+    used = {nm.name for node, *_ in roles for nm in _expr.names_in(node)}
+    for n in pvalues:
+        if kinds[n] is None:
+            if n in used:
+                raise err(
+                    f"cannot tell the unit of parameter '{n}' from its use; declare it as "
+                    f"{n} = {{ value = {pvalues[n]}, unit = \"mm\" }} (or \"deg\", \"1\")",
+                    "parameters", n,
+                )
+            kinds[n] = "number"
+
+    # full dimension check of every expression (catches e.g. length + angle inside a product)
+    for node, role, table, lname, term, key in roles:
+        try:
+            d = _expr.dim_of(node, kinds)
+            if d is not None and d != role:
+                raise UnitError(f"it is {_expr._dim_name(d)} where {_expr._dim_name(role)} is expected")
+        except UnitError as exc:
+            raise err(f"inconsistent units in \"{term.text}\": {exc}", table, lname, item=term.text,
+                      keyname=key) from None
+
+    # ---------------------------------------------------------------- overrides and SI values
+    pnames = tuple(pvalues)
+    if overrides:
+        for k, v in overrides.items():
+            if k not in pvalues:
+                raise MechanismError(
+                    f"--set {k}: no such parameter{_expr.suggest(k, pnames)}; parameters: {', '.join(pnames)}",
+                    file=file,
+                )
+            pvalues[k] = _num(v, err, "parameters", k)
+    fac = {"length": units.length, "angle": units.angle, "number": 1.0}
+    p_si = np.array([pvalues[n] * fac[kinds[n]] for n in pnames], dtype=float)
+    q_si = np.array([guesses[n] * fac[kinds[n]] for n in guesses], dtype=float)
+
+    # a parameter standing alone as the LENGTH of a term is a link length: it must be >= 0
+    for _, group in (("loops", loops), ("points", points)):
+        for lname, terms in group:
+            for term in terms:
+                if term.polar and isinstance(term.length, _expr.Name) and term.length.name in pvalues:
+                    pn = term.length.name
+                    if pvalues[pn] < 0:
+                        raise err(
+                            f"length '{pn}' = {pvalues[pn]} is negative; a link length must be ≥ 0 "
+                            "(put the sign in front of the term instead: \"-{pn} @ ...\")".replace("{pn}", pn),
+                            "parameters", pn,
+                        )
+
+    tables = {k: v for k, v in data.items() if k not in ("mechanism", "parameters", "input", "unknowns",
+                                                          "loops", "points")}
+    mechanism = Mechanism(
+        name=name,
+        description=str(mech.get("description", "")),
+        file=file,
+        units=units,
+        parameter_names=pnames,
+        parameter_kinds=tuple(kinds[n] for n in pnames),
+        parameters=p_si,
+        input_name=input_name,
+        input_kind=kinds[input_name],
+        input_body=input_body,
+        input_start=float(input_start) * fac[kinds[input_name]],
+        unknown_names=tuple(guesses),
+        unknown_kinds=tuple(kinds[n] for n in guesses),
+        guess=q_si,
+        loops=loops,
+        points=points,
+        tables=tables,
+        kinds=dict(kinds),
+    )
+    # evaluate once, in numpy float64, to catch anything left (e.g. sqrt of a negative number)
+    r = np.asarray(mechanism.residual(jnp.asarray(q_si), jnp.asarray(0.0), jnp.asarray(p_si)))
+    if not np.all(np.isfinite(r)):
+        raise MechanismError("the loop equations give a non-finite value at the guess; check the expressions "
+                             "(sqrt of a negative number? division by zero?)", file=file, key="loops")
+    return mechanism
+
+
+def _check_identifier(name: str, err, table: str, key: str | None = None) -> None:
+    if not re.fullmatch(r"[A-Za-z_][A-Za-z0-9_]*", str(name)):
+        raise err(f"'{name}' is not a valid name (letters, digits and _, not starting with a digit)",
+                  table, key or name)
+
+
+def _num(v, err, table: str, key: str) -> float:
+    if isinstance(v, bool) or not isinstance(v, (int, float)):
+        raise err(f"'{key}' must be a number, got {v!r}", table, key)
+    v = float(v)
+    if not math.isfinite(v):
+        raise err(f"'{key}' = {v} is not finite", table, key)
+    return v
+
+
+def _kind_of_unit(unit: str, err, pname: str) -> str:
+    if unit in LENGTH_UNITS:
+        return "length"
+    if unit in ANGLE_UNITS:
+        return "angle"
+    if unit in ("1", "", "none"):
+        return "number"
+    raise err(f"bad unit '{unit}'; use one of {', '.join([*LENGTH_UNITS, *ANGLE_UNITS, '1'])}",
+              "parameters", pname)

@@ -1,0 +1,204 @@
+"""Mechanism files: load, validate, convert to SI, compile to pure JAX functions.
+
+A `Mechanism` is immutable and hashable by identity (it is *static* under `jit`: its topology
+fixes shapes and control flow). The numbers a search varies — the parameters — are not stored
+in it but passed as an array `p` (SI, ordered as `mechanism.parameter_names`), so `vmap` over
+designs and `grad` with respect to dimensions reach them.
+
+Residual (seed 000, eq. 4.2–4.6; seed 002): each loop i is a closed polygon of vectors,
+
+    Φ_i(q; φ, p) = Σ_j s_j L_j (cos θ_j, sin θ_j)  +  Σ_j s_j (X_j, Y_j)  = 0  ∈ R²,
+
+with q the unknowns (angles in rad, lengths in m), φ the input and p the parameters.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from typing import Any, Mapping
+
+import jax.numpy as jnp
+import numpy as np
+
+from ..errors import MechanismError
+from ..files import expr as _expr
+from ..files.expr import ANGLE, LENGTH, Term
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class Mechanism:
+    """A compiled mechanism file. Fields are SI; see module docstring for the residual.
+
+    **Fields:**
+
+    - `name`, `description`, `file`: from `[mechanism]`.
+    - `units`: the file's unit factors (SI = file value × factor).
+    - `parameter_names`, `parameter_kinds` ("length" | "angle" | "number"), `parameters` (SI).
+    - `input_name`, `input_kind`, `input_body`, `input_start` (SI: the input value at which the
+      guesses of `[unknowns]` hold; `[input] start`, default 0).
+    - `unknown_names`, `unknown_kinds`, `guess` (SI, at `input_start`).
+    - `loops`, `points`: tuples of `(name, tuple[Term])`.
+    - `tables`: the raw TOML of the optional tables (`bodies`, `joints`, `loads`, `optimize`, …).
+    """
+
+    name: str
+    description: str
+    file: str
+    units: _expr.Units
+    parameter_names: tuple
+    parameter_kinds: tuple
+    parameters: np.ndarray
+    input_name: str
+    input_kind: str
+    input_body: str | None
+    input_start: float
+    unknown_names: tuple
+    unknown_kinds: tuple
+    guess: np.ndarray
+    loops: tuple
+    points: tuple
+    tables: Mapping[str, Any]
+    kinds: Mapping[str, str]
+
+    # ------------------------------------------------------------------ sizes
+    @property
+    def n_unknowns(self) -> int:
+        return len(self.unknown_names)
+
+    @property
+    def n_equations(self) -> int:
+        return 2 * len(self.loops)
+
+    @property
+    def point_names(self) -> tuple:
+        return tuple(n for n, _ in self.points)
+
+    def parameter_index(self, name: str) -> int:
+        try:
+            return self.parameter_names.index(name)
+        except ValueError:
+            raise MechanismError(
+                f"unknown parameter '{name}'{_expr.suggest(name, self.parameter_names)}; "
+                f"parameters: {', '.join(self.parameter_names)}",
+                file=self.file,
+            ) from None
+
+    def to_si(self, name: str, value: float) -> float:
+        """A value of a parameter, unknown or the input, given in file units, in SI."""
+        kind = self.kinds[name]
+        return float(value) * self.kind_factor(kind)
+
+    def from_si(self, name: str, value):
+        return value / self.kind_factor(self.kinds[name])
+
+    def kind_factor(self, kind: str) -> float:
+        return {"length": self.units.length, "angle": self.units.angle}.get(kind, 1.0)
+
+    def with_parameters(self, **values_in_file_units) -> np.ndarray:
+        """The parameter vector (SI) with some values replaced (given in file units)."""
+        p = np.array(self.parameters, dtype=float)
+        for k, v in values_in_file_units.items():
+            p[self.parameter_index(k)] = self.to_si(k, v)
+        return p
+
+    # ------------------------------------------------------------------ compiled functions
+    def _env(self, q, phi, p) -> dict:
+        env = {n: p[i] for i, n in enumerate(self.parameter_names)}
+        if q is not None:
+            env.update({n: q[i] for i, n in enumerate(self.unknown_names)})
+        env[self.input_name] = phi
+        return env
+
+    def _term_vector(self, term: Term, env, trig=None):
+        """(x, y) of one term in SI. `trig` optionally maps names to known (cos, sin) of their
+        value, so that angles like `q + c` need no new trigonometry (see `unit_vector`)."""
+        if term.polar:
+            length = _expr.evaluate(term.length, env, self.kinds, self.units, LENGTH)
+            c, s = self.unit_vector(term.angle, env, trig)
+            return term.sign * length * c, term.sign * length * s
+        x = _expr.evaluate(term.x, env, self.kinds, self.units, LENGTH)
+        y = _expr.evaluate(term.y, env, self.kinds, self.units, LENGTH)
+        return term.sign * x, term.sign * y
+
+    def unit_vector(self, node, env, trig=None):
+        """(cos θ, sin θ) of an angle expression θ. Sums and differences that contain names of
+        `trig` are composed by the angle-addition formulas from their cached (cos, sin)."""
+        if trig:
+            if isinstance(node, _expr.Name) and node.name in trig:
+                return trig[node.name]
+            if isinstance(node, (_expr.Bin, _expr.Neg)) and any(n.name in trig for n in _expr.names_in(node)):
+                if isinstance(node, _expr.Neg):
+                    c, s = self.unit_vector(node.arg, env, trig)
+                    return c, -s
+                if node.op in "+-":
+                    ca, sa = self.unit_vector(node.left, env, trig)
+                    cb, sb = self.unit_vector(node.right, env, trig)
+                    if node.op == "+":
+                        return ca * cb - sa * sb, sa * cb + ca * sb
+                    return ca * cb + sa * sb, sa * cb - ca * sb
+        v = _expr.evaluate(node, env, self.kinds, self.units, ANGLE)
+        return jnp.cos(v), jnp.sin(v)
+
+    def _sum(self, terms, env, which: str, trig=None):
+        """Sum of the terms that depend on the unknowns (`which="var"`), do not ("const"), or all."""
+        unknowns = set(self.unknown_names)
+        sx, sy = 0.0, 0.0
+        for term in terms:
+            dep = any(n.name in unknowns for node in term.nodes() for n in _expr.names_in(node))
+            if which == "all" or (which == "var") == dep:
+                x, y = self._term_vector(term, env, trig)
+                sx, sy = sx + x, sy + y
+        return sx, sy
+
+    def residual(self, q, phi, p):
+        """Φ(q; φ, p), shape (2·loops,): x and y closure of every loop, in metres."""
+        env = self._env(q, phi, p)
+        out = []
+        for _, terms in self.loops:
+            out.extend(self._sum(terms, env, "all"))
+        return _stack(out, q)
+
+    def residual_const(self, phi, p):
+        """The part of Φ that does not depend on q (evaluated once per input position)."""
+        env = self._env(None, phi, p)
+        out = []
+        for _, terms in self.loops:
+            out.extend(self._sum(terms, env, "const"))
+        return _stack(out, p)
+
+    def residual_var(self, q, phi, p, const, trig=None):
+        """Φ = residual_var + residual_const: the part that depends on q, plus `const`. `trig`
+        optionally maps names to known (cos, sin) of their values (see `unit_vector`)."""
+        env = self._env(q, phi, p)
+        out = []
+        for _, terms in self.loops:
+            out.extend(self._sum(terms, env, "var", trig))
+        return _stack(out, q) + const
+
+    def point_positions(self, q, phi, p):
+        """Positions of the points of interest, shape (n_points, 2), metres."""
+        if not self.points:
+            return jnp.zeros((0, 2), dtype=jnp.result_type(q))
+        env = self._env(q, phi, p)
+        rows = [jnp.stack(_broadcast(*self._sum(terms, env, "all"), like=q)) for _, terms in self.points]
+        return jnp.stack(rows)
+
+    def length_scale(self, p):
+        """A length that sets the residual tolerance: the largest |length parameter| (m)."""
+        idx = [i for i, k in enumerate(self.parameter_kinds) if k == "length"]
+        if not idx:
+            return jnp.asarray(1.0, dtype=jnp.result_type(p))
+        return jnp.maximum(jnp.max(jnp.abs(p[jnp.asarray(idx)])), jnp.finfo(jnp.result_type(p)).tiny)
+
+    def mobility_from_loops(self) -> int:
+        """Coordinates (unknowns + input) minus independent scalar loop equations."""
+        return self.n_unknowns + 1 - self.n_equations
+
+
+def _broadcast(*vals, like):
+    dtype = jnp.result_type(like)
+    return [jnp.asarray(v, dtype=dtype) for v in vals]
+
+
+def _stack(vals, like):
+    return jnp.stack(_broadcast(*vals, like=like))

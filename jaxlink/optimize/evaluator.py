@@ -1,0 +1,276 @@
+"""The one batched evaluator: designs → traced paths → objective, jitted, vmapped over designs,
+sharded over devices.
+
+A design is a vector u ∈ [0, 1]^V of normalized variables (x = lower + u (upper − lower) in file
+units) and a circuit index c (which branch signs of the dyads; 0 = the file's). For each design:
+
+1. p = the file's parameters with the variables replaced (SI);
+2. a starting configuration at the first input on the circuit (`_start.py`), gradient stopped;
+3. the path solve over the `samples` inputs (`jaxlink.solvers.assemble.solve_path`: closed-form dyads or
+   Newton continuation; differentiable in p by implicit differentiation);
+4. the point's path (and its input derivatives if the objective needs them, `_kinematics`),
+   with the solved unknowns q and the parameters p (`PathData`);
+5. the objective. A design is *feasible* iff the start and every position converged; an
+   infeasible design gets the value +inf (never NaN), and it is counted.
+
+One *mechanism evaluation* = one design solved over its revolution (on one circuit: with
+`circuits = "all"` a design costs one evaluation per circuit).
+"""
+
+from __future__ import annotations
+
+import copy
+import functools
+import math
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from ..solvers.assemble import NewtonOptions, default_rtol, solve_path
+from ..analysis.transfer import transfer_one
+from .objectives import OBJECTIVES, PathData, to_python
+from .problem import Problem
+from .sharding import design_sharding, pad_rows, put
+from .start import circuit_signs, closed_form_start, continuation_start, dyads_of, file_configuration
+
+
+class Evaluator:
+    """Batched, jitted, sharded evaluation of designs for a `Problem`.
+
+    **Arguments:**
+
+    - `problem`: the parsed `[optimize]` problem.
+    - `chunk`: designs per compiled batch (keyword-only; batches are padded to it).
+    - `devices`: the devices to shard over (default: all).
+    """
+
+    def __init__(self, problem: Problem, *, chunk: int = 256, devices=None, options: NewtonOptions = NewtonOptions()):
+        self.problem = problem
+        mech = problem.mech
+        self.mech = mech
+        self.objective = OBJECTIVES.build(problem)
+        self.options = options
+        self.sharding = design_sharding(devices)
+        self.n_devices = len(self.sharding.mesh.devices.flat)
+        self.chunk = -(-chunk // self.n_devices) * self.n_devices
+        phi0 = float(problem.phis[0])
+        self.phi0 = phi0
+        self.q_file = file_configuration(mech, phi0)
+        self.dyads = dyads_of(mech)
+        method = problem.start_method
+        if method == "auto":
+            method = "closed_form" if self.dyads is not None else "continuation"
+        if method == "closed_form" and self.dyads is None:
+            raise problem.error("start_method = \"closed_form\" needs a mechanism made of dyads (RRR/RRP/PP "
+                                "blocks); use \"continuation\"", "start_method")
+        if problem.circuits == "all" and self.dyads is None:
+            raise problem.error("circuits = \"all\" needs a mechanism made of dyads; use \"file\"", "circuits")
+        self.start_method = method
+        if self.dyads is not None:
+            self.sigmas = circuit_signs(mech, self.q_file, phi0, all_circuits=problem.circuits == "all")
+        else:
+            self.sigmas = np.zeros((1, 0))
+        self.n_circuits = len(self.sigmas)
+        default_report = 7200 if problem.objective == "points" else len(problem.phis)
+        self.report_samples = int(problem.option("report_samples", default_report))
+        self.evaluations = 0  # mechanism evaluations made through this object
+        self.infeasible = 0
+
+    # ------------------------------------------------------------------ single design (traced)
+    def params(self, u):
+        pr = self.problem
+        x = jnp.asarray(pr.lower) + u * jnp.asarray(pr.upper - pr.lower)
+        p = jnp.asarray(self.mech.parameters, dtype=u.dtype)
+        return p.at[jnp.asarray(pr.index)].set(x * jnp.asarray(pr.factor))
+
+    def start(self, p, c):
+        dtype = p.dtype
+        tol = default_rtol(dtype) * self.mech.length_scale(p)
+        if self.start_method == "closed_form":
+            sigma = jnp.asarray(self.sigmas, dtype)[c]
+            return closed_form_start(self.mech, self.dyads, self.q_file, self.phi0, p, sigma, tol)
+        return continuation_start(self.mech, self.q_file, self.mech.parameters, self.phi0, p, tol)
+
+    def path(self, u, c, phis, order: int):
+        """(PathData in file units, feasible) of one design."""
+        p = self.params(u)
+        q0, ok0 = self.start(p, c)
+        q0 = jax.lax.stop_gradient(q0)
+        sol = solve_path(self.mech, p, phis, q0, options=self.options)
+        feasible = ok0 & jnp.all(sol.converged)
+        lf = self.mech.units.length
+        k = self.problem.point
+        t = jax.vmap(lambda q, ph: transfer_one(self.mech, q, ph, p, order))(sol.q, phis)
+        xy = t.points[:, k] / lf
+        dxy = None if t.dpoints is None else t.dpoints[:, k] / lf
+        ddxy = None if t.ddpoints is None else t.ddpoints[:, k] / lf
+        return PathData(xy, dxy, ddxy, sol.q, p), feasible
+
+    def value_single(self, u, c, rank: bool = False):
+        """Exact objective of one design (+inf if infeasible) and its feasibility; with `rank`
+        also the objective's start-ranking value (`Objective.rank`, default the value)."""
+        phis = jnp.asarray(self.problem.phis, u.dtype)
+        path, feas = self.path(u, c, phis, self.objective.order)
+        if rank and self.objective.rank is not None:
+            v, r = self.objective.rank(path)
+        else:
+            v = r = self.objective.value(path)
+        ok = feas & jnp.isfinite(v)
+        out = (jnp.where(ok, v, jnp.inf), ok)
+        return out + (jnp.where(feas & jnp.isfinite(r), r, jnp.inf),) if rank else out
+
+    def smooth_single(self, u, c):
+        """Smoothed objective of one design (+inf if infeasible): what the gradient search uses."""
+        phis = jnp.asarray(self.problem.phis, u.dtype)
+        path, feas = self.path(u, c, phis, self.objective.order)
+        v = self.objective.smooth(path)
+        ok = feas & jnp.isfinite(v)
+        return jnp.where(ok, v, jnp.inf)
+
+    def constrained_single(self, u, c):
+        """For the constrained gradient solver: (f, constraint values (K,), exact value, feasible)
+        of one design from one path solve (`Objective.constraints`)."""
+        phis = jnp.asarray(self.problem.phis, u.dtype)
+        path, feas = self.path(u, c, phis, self.objective.order)
+        f, cons, v = self.objective.constraints(path)
+        return f, cons, jnp.where(feas & jnp.isfinite(v), v, jnp.inf), feas
+
+    # ------------------------------------------------------------------ batched (jitted)
+    @functools.lru_cache(maxsize=4)
+    def _values(self, all_circuits: bool, rank: bool):
+        """Jitted batch of `value_single`: (U) -> (value, ok, circuit[, rank]), the best of every
+        circuit of each design, or (U, circuits) -> (value, ok[, rank])."""
+        if not all_circuits:
+            return jax.jit(jax.vmap(lambda u, c: self.value_single(u, c, rank)))
+
+        def one(u):
+            out = jax.vmap(lambda c: self.value_single(u, c, rank))(jnp.arange(self.n_circuits))
+            i = jnp.argmin(out[0])
+            return (out[0][i], out[1][i], i) + tuple(o[i] for o in out[2:])
+
+        return jax.jit(jax.vmap(one))
+
+    def evaluate(self, U, circuits=None, *, rank: bool = False):
+        """Objective of a batch of designs.
+
+        **Arguments:** `U` (B, V) normalized designs; `circuits` (B,) circuit indices, or None:
+        the file's circuit, or with `circuits = "all"` the best circuit of each design; `rank`:
+        also return the objective's start-ranking value (`Objective.rank`; the gradient
+        search's presample).
+
+        **Returns:** dict of numpy arrays `value` (B,) (+inf if infeasible), `feasible` (B,),
+        `circuit` (B,) (and `rank` (B,)). Counts `B × circuits tried` mechanism evaluations.
+        """
+        U = np.asarray(U, dtype=float)
+        B = len(U)
+        vals, oks, cs, rs = [], [], [], []
+        for s in range(0, B, self.chunk):
+            part = U[s:s + self.chunk]
+            padded, n = pad_rows(part, self.chunk)
+            if circuits is None and self.n_circuits > 1:
+                v, ok, c, *r = self._values(True, rank)(put(jnp.asarray(padded), self.sharding))
+                self.evaluations += n * self.n_circuits
+            else:
+                cc = np.zeros(len(part), int) if circuits is None else np.asarray(circuits[s:s + self.chunk])
+                cc, _ = pad_rows(cc, self.chunk)
+                v, ok, *r = self._values(False, rank)(*put((jnp.asarray(padded), jnp.asarray(cc)), self.sharding))
+                c = cc
+                self.evaluations += n
+            vals.append(np.asarray(v)[:n])
+            oks.append(np.asarray(ok)[:n])
+            cs.append(np.asarray(c)[:n])
+            if rank:
+                rs.append(np.asarray(r[0])[:n])
+        out = {
+            "value": np.concatenate(vals) if vals else np.zeros(0),
+            "feasible": np.concatenate(oks) if oks else np.zeros(0, bool),
+            "circuit": np.concatenate(cs) if cs else np.zeros(0, int),
+        }
+        if rank:
+            out["rank"] = np.concatenate(rs) if rs else np.zeros(0)
+        self.infeasible += int((~out["feasible"]).sum())
+        return out
+
+    # ------------------------------------------------------------------ reports
+    def report(self, u, c: int = 0) -> dict:
+        """The exact objective and metrics of one design, re-solved with `report_samples` inputs
+        (the objective's own samples unless it is `points`). Jitted; the last reports are cached
+        (a search's runner reports its best design after every chunk)."""
+        key = (np.asarray(u, dtype=float).tobytes(), int(c))
+        cache = self.__dict__.setdefault("_report_cache", {})
+        if key not in cache:
+            cache.clear() if len(cache) >= 64 else None
+            cache[key] = self._report(u, c)
+        return copy.deepcopy(cache[key])
+
+    def _report(self, u, c: int) -> dict:
+        u = jnp.asarray(u, dtype=float)
+        pr = self.problem
+        order = max(self.objective.order, self.objective.report_order)
+        feas, value, metrics = self._report_fn(int(c), self.report_samples, order)(u)
+        x = pr.to_file_units(np.asarray(u))
+        out = {
+            "parameters": {n: float(v) for n, v in zip(pr.names, x)},
+            "feasible": bool(feas),
+            "circuit": int(c),
+        }
+        if bool(feas):
+            out["objective"] = float(value)
+            out["metrics"] = to_python(metrics)
+        else:
+            out["objective"] = None
+            out["metrics"] = {}
+        return out
+
+    @functools.lru_cache(maxsize=16)
+    def _report_fn(self, c: int, samples: int, order: int):
+        path_fn = self._path_fn(c, samples, order)
+
+        def one(uu):
+            path, feas = path_fn(uu)
+            return feas, self.objective.value(path), self.objective.metrics(path)
+
+        return jax.jit(one)
+
+    @functools.cached_property
+    def _paths_batch(self):
+        def one(u, c):
+            path, feas = self.path(u, c, jnp.asarray(self.problem.phis, u.dtype), 0)
+            return path.xy, feas
+
+        return jax.jit(jax.vmap(one))
+
+    def paths(self, U, circuits) -> tuple[np.ndarray, np.ndarray]:
+        """(B, N, 2) paths at the search samples (file units) and (B,) feasibility; counts B
+        evaluations."""
+        U = np.asarray(U, dtype=float)
+        xs, oks = [], []
+        for s in range(0, len(U), self.chunk):
+            part, n = pad_rows(U[s:s + self.chunk], self.chunk)
+            cc, _ = pad_rows(np.asarray(circuits[s:s + self.chunk]), self.chunk)
+            xy, ok = self._paths_batch(*put((jnp.asarray(part), jnp.asarray(cc)), self.sharding))
+            xs.append(np.asarray(xy)[:n])
+            oks.append(np.asarray(ok)[:n])
+            self.evaluations += n
+        return np.concatenate(xs), np.concatenate(oks)
+
+    def path_points(self, u, c: int = 0, samples: int | None = None) -> np.ndarray:
+        """(N, 2) path of the point (file units) for plots."""
+        n = samples or self.report_samples
+        path, _ = self._path_fn(int(c), n, 0)(jnp.asarray(u, dtype=float))
+        return np.asarray(path.xy)
+
+    @functools.lru_cache(maxsize=16)
+    def _path_fn(self, c: int, samples: int, order: int):
+        phis = self.problem.phis[0] + 2 * np.pi * np.arange(samples) / samples
+        return jax.jit(lambda uu: self.path(uu, c, jnp.asarray(phis, uu.dtype), order))
+
+
+def evaluation_count_note() -> str:
+    return ("one evaluation = one design solved over its revolution on one circuit; a gradient "
+            "(value and gradient of one design) counts 2 (forward + backward pass)")
+
+
+def _isfinite(x) -> bool:
+    return math.isfinite(float(x))

@@ -1,0 +1,98 @@
+"""Starting configurations for candidate designs far from the file's design.
+
+The path solve continues along the revolution from a configuration at the first input φ₀; a
+candidate design needs its own one, on the file's assembly branch (circuit). Two finders:
+
+- **closed form** (every block of the mechanism is a dyad, `jaxlink.solvers.dyads`): the file's
+  configuration at φ₀ fixes the branch sign σ of every dyad; the candidate's configuration is the
+  dyads' closed form with the same σ (or any σ for `circuits = "all"`). Exact, no iteration: a
+  design is declared unassemblable at φ₀ only when a circle–circle intersection is empty.
+- **continuation in the parameters** (any mechanism): from the file's design p_f and its solved
+  configuration q_f at φ₀, K = 16 homotopy steps p(t) = p_f + t (p − p_f), each corrected by a
+  few Newton iterations (the step limited to 0.3 rad / 0.3 × length scale), then a final polish;
+  the result must close the loops to the solver's tolerance. It stays on the branch connected to
+  the file's configuration; it can fail (wrongly infeasible) when the straight homotopy path
+  crosses a region where the mechanism cannot be assembled at φ₀ although both ends can — the
+  rate is measured in `tests/test_optimize_start.py` and docs/optimize.md.
+"""
+
+from __future__ import annotations
+
+import itertools
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from ..solvers import dyads as _dyads
+from ..solvers.assemble import solve
+from ..solvers.linalg import solve_small
+from ..results import RESULTS
+
+
+def file_configuration(mech, phi0) -> np.ndarray:
+    """The file's design solved at φ₀ (continued from the file's `[input] start`)."""
+    sol = solve(mech, np.asarray([phi0]))
+    if int(sol.result[0]) != RESULTS.converged:
+        from ..errors import MechanismError
+
+        raise MechanismError(
+            f"the file's own design cannot be assembled at the first input of the search "
+            f"({RESULTS.messages[int(sol.result[0])]}); the search needs an assemblable design in the "
+            "file to define the assembly branch", file=mech.file, key="parameters")
+    return np.asarray(sol.q[0])
+
+
+def dyads_of(mech):
+    return _dyads.classify(mech)
+
+
+def circuit_signs(mech, q_file, phi0, *, all_circuits: bool) -> np.ndarray:
+    """(C, n_dyads) branch signs: the file's (C = 1) or every combination (C = 2^n_dyads, the
+    file's first)."""
+    dyads = _dyads.classify(mech)
+    own = np.asarray(_dyads.solve_nearest(mech, dyads, jnp.asarray(q_file), jnp.asarray(phi0),
+                                          jnp.asarray(mech.parameters))[3])
+    if not all_circuits:
+        return own[None]
+    combos = [own]
+    for signs in itertools.product((1.0, -1.0), repeat=len(dyads)):
+        s = np.asarray(signs) * own
+        if not any(np.array_equal(s, c) for c in combos):
+            combos.append(s)
+    return np.stack(combos)
+
+
+def closed_form_start(mech, dyads, q_file, phi0, p, sigma, tol):
+    """(q0, ok): the dyads' closed form at φ₀ on branches σ; ok where its loops close to `tol`
+    (as in the path solve: an exact toggle, h² negative by rounding, is assembled)."""
+    q, _, rn, _ = _dyads.solve(mech, dyads, sigma, jnp.asarray(q_file, p.dtype), jnp.asarray(phi0, p.dtype), p)
+    return q, rn <= tol
+
+
+def continuation_start(mech, q_file, p_file, phi0, p, tol, *, steps: int = 16, newton: int = 3, polish: int = 6):
+    """(q0, ok) by continuation in the parameters from the file's design (see module doc)."""
+    dtype = p.dtype
+    phi0 = jnp.asarray(phi0, dtype)
+    p_file = jnp.asarray(p_file, dtype)
+    scale = mech.length_scale(p)
+    lim = jnp.asarray([0.3 if k == "angle" else 0.3 * scale for k in mech.unknown_kinds], dtype)
+
+    def newton_step(q, pt):
+        r = mech.residual(q, phi0, pt)
+        jac = jax.jacfwd(mech.residual)(q, phi0, pt)
+        dq, _ = solve_small(jac, r)
+        ratio = jnp.max(jnp.abs(dq) / lim)
+        dq = dq * jnp.minimum(1.0, 1.0 / jnp.maximum(ratio, 1e-30))
+        q_new = q - dq
+        return jnp.where(jnp.all(jnp.isfinite(q_new)), q_new, q)
+
+    def body(k, q):
+        t = (k + 1.0) / steps
+        pt = p_file + t * (p - p_file)
+        return jax.lax.fori_loop(0, newton, lambda _, qq: newton_step(qq, pt), q)
+
+    q = jax.lax.fori_loop(0, steps, body, jnp.asarray(q_file, dtype))
+    q = jax.lax.fori_loop(0, polish, lambda _, qq: newton_step(qq, p), q)
+    rn = jnp.max(jnp.abs(mech.residual(q, phi0, p)))
+    return q, rn <= tol
