@@ -27,7 +27,8 @@ import jax.numpy as jnp  # noqa: E402
 import numpy as np  # noqa: E402
 
 from jaxlink.model import bodies as _bodies  # noqa: E402
-from jaxlink.analysis.kinetostatics import KRESULTS, body_kinematics, solve_reactions  # noqa: E402
+from jaxlink import RESULTS
+from jaxlink.analysis.kinetostatics import body_kinematics, solve_reactions  # noqa: E402
 from jaxlink import load  # noqa: E402
 
 OMEGA = 575.0
@@ -72,7 +73,7 @@ def main() -> None:
     phis = np.deg2rad(75.0 + args.step * np.arange(int(round(360.0 / args.step))))
     ps = np.stack([mech.with_parameters(l2=a, l22=b, gamma=g) for a, b, g in DESIGNS.values()])
     sol, r = solve_reactions(mech, phis, ps, omega=OMEGA)  # both designs in one vmapped batch
-    assert np.all(np.asarray(r.result) == KRESULTS.ok), "some positions failed"
+    assert np.all(np.asarray(r.result) == RESULTS.converged), "some positions failed"
     mags = np.linalg.norm(np.asarray(r.force), axis=-1)  # (designs, N, joints)
     torque = np.asarray(r.torque)
     deg = np.rad2deg(phis)

@@ -406,7 +406,7 @@ def test_stiff_contact_1e7_steady_lag_on_the_rise(method):
     geom = [g for g in sk.seed_geometries() if g.name == "R20-55"][0]
     cam = sk.make_cam(geom, sk.butt_speed(350.0, 0.096))
     sol = sk.simulate(p, cam, method=method, rtol=1e-8, atol=1e-13, n_out=2001)
-    assert int(sol.result) == sk.RESULTS.successful
+    assert int(sol.result) == sk.RESULTS.converged
     R_sum = 3.2014 + 3.1216 + 6.323
     P1 = (m * 9.81 - f * R_sum) / m
     P2 = (6 * f**2 / 11 - 156 * f / 36) / m

@@ -13,7 +13,8 @@ from jaxlink.model import bodies as _bodies
 from jaxlink.files import expr as _expr
 from jaxlink.solvers.assemble import solve
 from jaxlink.analysis.transfer import transfer
-from jaxlink.analysis.kinetostatics import KRESULTS, reactions, solve_reactions
+from jaxlink import RESULTS
+from jaxlink.analysis.kinetostatics import reactions, solve_reactions
 from jaxlink import load
 
 G = 9.81
@@ -72,7 +73,7 @@ def test_slider_crank_matches_hand_derivation():
     omega = 60.0
     phis = np.deg2rad(np.arange(0.0, 360.0, 15.0))
     sol, r = solve_reactions(mech, phis, omega=omega)
-    assert np.all(np.asarray(r.result) == KRESULTS.ok)
+    assert np.all(np.asarray(r.result) == RESULTS.converged)
     force, torque = np.asarray(r.force), np.asarray(r.torque)
     scale = np.abs(force).max()
     for k, phi in enumerate(phis):
@@ -92,7 +93,7 @@ def test_slider_crank_matches_hand_derivation():
 def _vsum(mech, terms, env):
     x, y = 0.0, 0.0
     for t in terms:
-        tx, ty = mech._term_vector(t, env)
+        tx, ty = mech.term_vector(t, env)
         x, y = x + tx, y + ty
     return jnp.stack([jnp.asarray(x, jnp.float64), jnp.asarray(y, jnp.float64)])
 
@@ -105,7 +106,7 @@ def _energies(mech):
     p = jnp.asarray(mech.parameters)
 
     def positions(qq, ph):
-        env = mech._env(qq, ph, p)
+        env = mech.env(qq, ph, p)
         cs = [(_vsum(mech, b.centroid, env) if b.centroid is not None else jnp.zeros(2)) for b in mdl.bodies]
         th = [(_expr.evaluate(b.angle, env, mech.kinds, mech.units, _expr.ANGLE) if b.angle is not None
                else 0.0 * ph) for b in mdl.bodies]
@@ -161,7 +162,7 @@ def test_power_balance(name, overrides, start, step, omega, alpha):
     dE_dt = omega * ((T + V)[:, 1:] @ weights) + (alpha / omega) * 2 * T[:, 0]
     q = np.asarray(sol.q).reshape(n, len(offsets), -1)[:, 0]
     r = reactions(mech, q, phis, p, omega=omega, alpha=alpha)
-    assert np.all(np.asarray(r.result) == KRESULTS.ok)
+    assert np.all(np.asarray(r.result) == RESULTS.converged)
     drive = np.asarray(r.torque) * omega
     err = np.abs(drive + P[:, 0] - dE_dt).max()
     assert err <= 1e-8 * np.abs(drive).max(), (err, np.abs(drive).max())
@@ -185,7 +186,7 @@ def test_feed_peak_reactions_match_the_independent_model():
     for design, (peaks, torque) in SPEC_FEED.items():
         p = mech.with_parameters(l2=design[0], l22=design[1], gamma=design[2])
         _, r = solve_reactions(mech, phis, p, omega=575.0)
-        assert np.all(np.asarray(r.result) == KRESULTS.ok)
+        assert np.all(np.asarray(r.result) == RESULTS.converged)
         mags = np.linalg.norm(np.asarray(r.force), axis=-1)  # (72, joints)
         for k, name in enumerate(names):
             value, angle = peaks[name]
@@ -223,7 +224,7 @@ def test_coincident_joints_are_reported_singular(tmp_path):
     path.write_text(src)
     mech = load(str(path))
     _, r = solve_reactions(mech, np.deg2rad([10.0, 100.0]), omega=10.0)
-    assert np.all(np.asarray(r.result) == KRESULTS.singular)
+    assert np.all(np.asarray(r.result) == RESULTS.singular)
     assert np.all(np.asarray(r.force) == 0) and np.all(np.isfinite(np.asarray(r.torque)))
 
 
@@ -234,5 +235,5 @@ def test_unconverged_positions_are_flagged():
     conv = np.ones(len(phis), bool)
     conv[1] = False
     r = reactions(mech, sol.q, phis, omega=10.0, converged=conv)
-    assert list(np.asarray(r.result)[:3]) == [KRESULTS.ok, KRESULTS.not_assembled, KRESULTS.ok]
+    assert list(np.asarray(r.result)[:3]) == [RESULTS.converged, RESULTS.not_assembled, RESULTS.converged]
     assert np.asarray(r.torque)[1] == 0.0 and np.asarray(r.torque)[0] != 0.0

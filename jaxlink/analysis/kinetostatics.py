@@ -23,7 +23,7 @@ Power balance (a check, `tests/test_kinetostatics.py`): τ ω + Σ P_loads = d(T
 The linear solve is unrolled for n ≤ 8 (`_linalg.solve_small`) and an LU factorization with partial
 pivoting otherwise (`jax.scipy.linalg.lu_factor`, what `jnp.linalg.solve` does, keeping the pivots);
 a position whose A_S is singular (min |pivot| / max |entry| below `singular_ratio`: a toggle position,
-or joints placed so that they over-constrain a body) gets `KRESULTS.singular` and zeros, never an exception, so that
+or joints placed so that they over-constrain a body) gets `RESULTS.singular` and zeros, never an exception, so that
 `vmap` over positions and designs never fails as a whole.
 """
 
@@ -42,24 +42,7 @@ from ..solvers.assemble import solve
 from ..files.expr import ANGLE
 from ..solvers.linalg import UNROLL_MAX, solve_small
 from ..model.mechanism import Mechanism
-
-
-class KRESULTS:
-    """Result codes of a kinetostatic solve (int8)."""
-
-    ok = 0
-    singular = 1
-    not_assembled = 2
-    nonfinite = 3
-
-    messages = {
-        0: "ok",
-        1: "singular system: a toggle/dead-centre position, or joints that over-constrain the motion; the "
-           "reactions are not determined here",
-        2: "the kinematics did not converge at this position (see `jaxlink kinematics`)",
-        3: "non-finite values: check masses, parameters and expressions",
-    }
-    names = {0: "ok", 1: "singular", 2: "not_assembled", 3: "nonfinite"}
+from ..results import RESULTS
 
 
 class Reactions(NamedTuple):
@@ -70,7 +53,7 @@ class Reactions(NamedTuple):
     - `force`: (…, J, 2) N, the force on each joint's second body from its first (x, y).
     - `moment`: (…, J) N·m, the reaction moment of each prismatic joint (0 for revolute joints).
     - `torque`: (…,) N·m, the drive torque on the input body from the ground (counter-clockwise +).
-    - `result`: (…,) int8 code (`KRESULTS`); where not ok, the values are 0.
+    - `result`: (…,) int8 code (`RESULTS`); where not ok, the values are 0.
     - `ratio`: (…,) min |pivot| / max |entry| of the scaled system, a singularity indicator (≈ 1/condition).
     """
 
@@ -88,7 +71,7 @@ def vector_sum(mech: Mechanism, terms, env, dtype):
     """A vector sum (tuple of `Term`s) evaluated in SI: array (2,)."""
     x, y = 0.0, 0.0
     for t in terms:
-        tx, ty = mech._term_vector(t, env)
+        tx, ty = mech.term_vector(t, env)
         x, y = x + tx, y + ty
     return jnp.stack([jnp.asarray(x, dtype=dtype), jnp.asarray(y, dtype=dtype)])
 
@@ -100,7 +83,7 @@ def angle_value(mech: Mechanism, node, env, dtype):
 def motion(mech: Mechanism, mdl: _bodies.Model, q, phi, p):
     """Centroids (nb, 2) and angles (nb,) of the bodies (0 where not declared)."""
     dtype = jnp.result_type(q)
-    env = mech._env(q, phi, p)
+    env = mech.env(q, phi, p)
     zero2 = jnp.zeros((2,), dtype)
     zero = jnp.zeros((), dtype)
     c = [vector_sum(mech, b.centroid, env, dtype) if b.centroid is not None else zero2 for b in mdl.bodies]
@@ -111,7 +94,7 @@ def motion(mech: Mechanism, mdl: _bodies.Model, q, phi, p):
 def _geometry(mech: Mechanism, mdl: _bodies.Model, q, phi, p):
     """Joint points (nj, 2) and axes (nj,), force points (nf, 2), spring ends (ns, 2, 2)."""
     dtype = jnp.result_type(q)
-    env = mech._env(q, phi, p)
+    env = mech.env(q, phi, p)
     pts = jnp.stack([vector_sum(mech, j.at, env, dtype) for j in mdl.joints])
     axes = jnp.stack([angle_value(mech, j.axis, env, dtype) if j.axis is not None else jnp.zeros((), dtype)
                       for j in mdl.joints])
@@ -291,8 +274,8 @@ def reactions_one(mech: Mechanism, mdl: _bodies.Model, q, phi, p, omega, alpha=0
         x = jax.scipy.linalg.lu_solve((lu, piv), Q)
     thr = default_singular_ratio(dtype) if singular_ratio is None else singular_ratio
     finite = jnp.all(jnp.isfinite(x))
-    code = jnp.where(ratio < thr, KRESULTS.singular, jnp.where(finite, KRESULTS.ok, KRESULTS.nonfinite))
-    ok = code == KRESULTS.ok
+    code = jnp.where(ratio < thr, RESULTS.singular, jnp.where(finite, RESULTS.converged, RESULTS.nonfinite))
+    ok = code == RESULTS.converged
     x = jnp.where(ok, x, 0.0)
     nj = len(mdl.joints)
     f = x[: 2 * nj].reshape(nj, 2)
@@ -323,7 +306,7 @@ def reactions(mech: Mechanism, q, phis, p=None, *, omega, alpha=0.0, converged=N
     - `p`: (P,) parameters SI (default: the file's), or (B, P).
     - `omega`, `alpha` (keyword-only): input speed (rad/s) and acceleration (rad/s²); traced.
     - `converged`: optional (…, N) bool from the position solve; positions that did not converge get
-      `KRESULTS.not_assembled` and zeros.
+      `RESULTS.not_assembled` and zeros.
     - `singular_ratio`: pivot ratio below which the system counts as singular (static; default
       max(1e-10, 1000 eps)).
 
@@ -344,7 +327,7 @@ def reactions(mech: Mechanism, q, phis, p=None, *, omega, alpha=0.0, converged=N
             jnp.where(conv[..., None, None], out.force, 0.0),
             jnp.where(conv[..., None], out.moment, 0.0),
             jnp.where(conv, out.torque, 0.0),
-            jnp.where(conv, out.result, jnp.int8(KRESULTS.not_assembled)).astype(jnp.int8),
+            jnp.where(conv, out.result, jnp.int8(RESULTS.not_assembled)).astype(jnp.int8),
             out.ratio,
         )
     return out

@@ -35,22 +35,7 @@ import jax
 import jax.numpy as jnp
 from jax import lax
 
-
-class RESULTS:
-    """Result codes of `integrate_hybrid` (`Solution.result`)."""
-
-    successful = 0
-    max_steps_reached = 1
-    step_size_too_small = 2
-    stopped = 3  # the `stop_when` monitor fired (e.g. jamming detected): not a failure
-
-    messages = {
-        0: "successful",
-        1: "max_steps reached before the end time: raise max_steps or loosen rtol/atol",
-        2: "step size underflow or non-finite state: the problem is ill-posed at these "
-           "parameters (check the stiffness and mass)",
-        3: "stopped early by the monitor (e.g. jamming detected)",
-    }
+from ..results import RESULTS
 
 
 # ----------------------------------------------------------------------------------------
@@ -335,7 +320,7 @@ def integrate_hybrid(
     state = _State(
         t=jnp.asarray(0.0, dtype), u=u0, f=jnp.zeros_like(u0), f_valid=jnp.asarray(False),
         h=jnp.asarray(h0, dtype), mode=jnp.asarray(mode0, dtype), done=jnp.asarray(False),
-        result=jnp.asarray(RESULTS.successful), stats=Stats(zero, zero, zero, zero, zero),
+        result=jnp.asarray(RESULTS.converged), stats=Stats(zero, zero, zero, zero, zero),
         monitor=monitor_init)
 
     def cond(carry):
@@ -426,11 +411,11 @@ def integrate_hybrid(
             stopped = accept & stop_when(monitor)
         too_many = (stats.num_steps + stats.num_rejected) >= max_steps
         too_small = h_next < 1e-14 * jnp.maximum(t_end, 1e-300)
-        result = jnp.where(finished, RESULTS.successful,
+        result = jnp.where(finished, RESULTS.converged,
                            jnp.where(stopped, RESULTS.stopped,
                                      jnp.where(too_small, RESULTS.step_size_too_small,
-                                               jnp.where(too_many, RESULTS.max_steps_reached,
-                                                         RESULTS.successful))))
+                                               jnp.where(too_many, RESULTS.max_steps,
+                                                         RESULTS.converged))))
         done = finished | stopped | too_many | too_small
         new = _State(
             t=t_acc,

@@ -106,7 +106,7 @@ def _simulate_cmd(args) -> int:
         for i_f, f in enumerate(scene.f_values):
             s = case(i_f, i_g)
             mx = maxima(s, cam_g)
-            ok = int(s.result) == RESULTS.successful
+            ok = int(s.result) == RESULTS.converged
             failed += not ok
             print(f"{g.name:>8} {f:6.3f} | {mx.rise_a:10.1f} {mx.rise_v:6.3f} "
                   f"{mx.rise_lag * 1e3:8.4f} | {mx.desc_a:10.1f} {mx.desc_v:6.3f} | "

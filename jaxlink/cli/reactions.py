@@ -25,7 +25,7 @@ class ReactionsTable:
     columns: list
     data: np.ndarray  # (N, 2 J + 2)
     ok: np.ndarray  # (N,) bool
-    result: np.ndarray  # (N,) KRESULTS codes
+    result: np.ndarray  # (N,) RESULTS codes
     joint_names: tuple
     omega: float
 
@@ -43,7 +43,8 @@ def reactions_table(mech, phis, *, omega: float, p=None, dtype=np.float64, degre
     the input angles as given (the `input_deg` column; default `phis` converted)."""
     from ..model import bodies as _bodies
     from ..errors import MechanismError
-    from ..analysis.kinetostatics import KRESULTS, rigidity_errors, solve_reactions
+    from ..results import RESULTS
+    from ..analysis.kinetostatics import rigidity_errors, solve_reactions
 
     mdl = _bodies.model(mech)
     p = np.asarray(mech.parameters if p is None else p, dtype=dtype)
@@ -55,7 +56,7 @@ def reactions_table(mech, phis, *, omega: float, p=None, dtype=np.float64, degre
             raise MechanismError("the bodies do not move rigidly with the kinematics: " + "; ".join(errors),
                                  file=mech.file, key="bodies")
     res = np.asarray(r.result)
-    ok = res == KRESULTS.ok
+    ok = res == RESULTS.converged
     force = np.where(ok[:, None, None], np.asarray(r.force, dtype=float), np.nan)
     torque = np.where(ok, np.asarray(r.torque, dtype=float), np.nan)
     cols = ["input_deg"]
@@ -142,7 +143,7 @@ def register(sub) -> None:
 def cmd_reactions(args) -> int:
     dtype = enable_dtype(args.dtype)
     from ..model import bodies as _bodies
-    from ..analysis.kinetostatics import KRESULTS
+    from ..results import RESULTS
 
     mech = load_from_args(args)
     _bodies.model(mech)  # file errors first
@@ -163,8 +164,8 @@ def cmd_reactions(args) -> int:
         parts = []
         for code in np.unique(table.result[bad]):
             where = table.data[table.result == code, 0]
-            parts.append(f"{int((table.result == code).sum())} × {KRESULTS.names[int(code)]} (first at "
-                         f"input_deg = {where[0]:g}): {KRESULTS.messages[int(code)]}")
+            parts.append(f"{int((table.result == code).sum())} × {RESULTS.names[int(code)]} (first at "
+                         f"input_deg = {where[0]:g}): {RESULTS.messages[int(code)]}")
         print(f"warning: {int(bad.sum())} of {len(phis)} positions have no reactions (nan in the table): "
               + "; ".join(parts), file=sys.stderr)
         return 1

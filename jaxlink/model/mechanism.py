@@ -102,14 +102,14 @@ class Mechanism:
         return p
 
     # ------------------------------------------------------------------ compiled functions
-    def _env(self, q, phi, p) -> dict:
+    def env(self, q, phi, p) -> dict:
         env = {n: p[i] for i, n in enumerate(self.parameter_names)}
         if q is not None:
             env.update({n: q[i] for i, n in enumerate(self.unknown_names)})
         env[self.input_name] = phi
         return env
 
-    def _term_vector(self, term: Term, env, trig=None):
+    def term_vector(self, term: Term, env, trig=None):
         """(x, y) of one term in SI. `trig` optionally maps names to known (cos, sin) of their
         value, so that angles like `q + c` need no new trigonometry (see `unit_vector`)."""
         if term.polar:
@@ -146,13 +146,13 @@ class Mechanism:
         for term in terms:
             dep = any(n.name in unknowns for node in term.nodes() for n in _expr.names_in(node))
             if which == "all" or (which == "var") == dep:
-                x, y = self._term_vector(term, env, trig)
+                x, y = self.term_vector(term, env, trig)
                 sx, sy = sx + x, sy + y
         return sx, sy
 
     def residual(self, q, phi, p):
         """Φ(q; φ, p), shape (2·loops,): x and y closure of every loop, in metres."""
-        env = self._env(q, phi, p)
+        env = self.env(q, phi, p)
         out = []
         for _, terms in self.loops:
             out.extend(self._sum(terms, env, "all"))
@@ -160,7 +160,7 @@ class Mechanism:
 
     def residual_const(self, phi, p):
         """The part of Φ that does not depend on q (evaluated once per input position)."""
-        env = self._env(None, phi, p)
+        env = self.env(None, phi, p)
         out = []
         for _, terms in self.loops:
             out.extend(self._sum(terms, env, "const"))
@@ -169,7 +169,7 @@ class Mechanism:
     def residual_var(self, q, phi, p, const, trig=None):
         """Φ = residual_var + residual_const: the part that depends on q, plus `const`. `trig`
         optionally maps names to known (cos, sin) of their values (see `unit_vector`)."""
-        env = self._env(q, phi, p)
+        env = self.env(q, phi, p)
         out = []
         for _, terms in self.loops:
             out.extend(self._sum(terms, env, "var", trig))
@@ -179,7 +179,7 @@ class Mechanism:
         """Positions of the points of interest, shape (n_points, 2), metres."""
         if not self.points:
             return jnp.zeros((0, 2), dtype=jnp.result_type(q))
-        env = self._env(q, phi, p)
+        env = self.env(q, phi, p)
         rows = [jnp.stack(_broadcast(*self._sum(terms, env, "all"), like=q)) for _, terms in self.points]
         return jnp.stack(rows)
 

@@ -126,12 +126,12 @@ def chains(mech: Mechanism, q, phis, p):
     max_len = max(len(t) for _, t in groups)
 
     def one(qk, phik):
-        env = mech._env(qk, phik, jnp.asarray(p))
+        env = mech.env(qk, phik, jnp.asarray(p))
         out = []
         for _, terms in groups:
             pts = [jnp.zeros(2, dtype=qk.dtype)]
             for term in terms:
-                x, y = mech._term_vector(term, env)
+                x, y = mech.term_vector(term, env)
                 pts.append(pts[-1] + jnp.stack([jnp.asarray(x, qk.dtype), jnp.asarray(y, qk.dtype)]))
             pts += [pts[-1]] * (max_len + 1 - len(pts))
             out.append(jnp.stack(pts))

@@ -60,7 +60,7 @@ from ..model import structure as _structure
 from .fusion import materialize
 from .linalg import solve_block_lower, solve_small
 from ..model.mechanism import Mechanism
-from ..results import RESULTS, Solution
+from ..results import RESULTS, Solution, SolveStats
 
 
 class NewtonOptions(NamedTuple):
@@ -530,7 +530,7 @@ def _float0(x):
 
 def _solve_batch(mech, options, P, phis, Q0) -> Solution:
     q, rn, code, k = _batch_solver(mech, options)(P, phis, Q0)
-    return Solution(q=q, converged=code == RESULTS.converged, residual=rn, result=code, steps=k)
+    return Solution(q=q, points=None, result=code, stats=SolveStats(residual=rn, steps=k))
 
 
 def solve_path(mech: Mechanism, p, phis, q0=None, *, options: NewtonOptions = NewtonOptions()) -> Solution:

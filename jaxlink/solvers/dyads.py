@@ -138,7 +138,7 @@ def _known_parts(mech: Mechanism, dyad: Dyad, env, trig=None):
     terms = mech.loops[dyad.loop][1]
     sx, sy = 0.0, 0.0
     for i in dyad.rest:
-        x, y = mech._term_vector(terms[i], env, trig)
+        x, y = mech.term_vector(terms[i], env, trig)
         sx, sy = sx + x, sy + y
     return -sx, -sy
 
