@@ -144,7 +144,7 @@ def path_cases(repeats, log, designs=200):
     # targets: points near the file design's coupler curve (the "points" objective of [optimize])
     phis_t = np.deg2rad(np.arange(0.0, 360.0, 45.0))
     base = jl.solve(mech, phis_t)
-    tgt = np.asarray(jl.transfer(mech, base.q, phis_t, mech.parameters, order=0).points[:, 0])
+    tgt = np.asarray(jl.transfer(mech, phis_t, base.q, mech.parameters, order=0).points[:, 0])
     tgt = tgt + 1e-3 * rng.standard_normal(tgt.shape)
     T = jnp.asarray(tgt)
 
@@ -154,7 +154,7 @@ def path_cases(repeats, log, designs=200):
         @jax.jit
         def f(Pd):
             sol = jl.solve(mech, phis, Pd)
-            xy = jax.vmap(lambda q, p: jl.transfer(mech, q, phis, p, order=0).points[:, 0])(sol.q, Pd)
+            xy = jax.vmap(lambda q, p: jl.transfer(mech, phis, q, p, order=0).points[:, 0])(sol.q, Pd)
             a = xy
             ab = jnp.roll(xy, -1, axis=1) - a
 

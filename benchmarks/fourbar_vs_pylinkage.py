@@ -206,7 +206,7 @@ def main(argv=None) -> dict:
         @jax.jit
         def f(Pd, ph=ph):
             sol = jl.solve(mech, ph, Pd, jnp.asarray(mech.guess, dtype=Pd.dtype))
-            xy = jax.vmap(lambda q, p: jl.transfer(mech, q, ph, p, order=0).points[:, 0])(sol.q, Pd)
+            xy = jax.vmap(lambda q, p: jl.transfer(mech, ph, q, p, order=0).points[:, 0])(sol.q, Pd)
             return xy, sol.converged
 
         t = time.perf_counter()

@@ -50,8 +50,8 @@ def main(argv=None) -> dict:
     P = jnp.asarray(mech.parameters[None] * (1 + 0.005 * rng.uniform(-1, 1, (B, len(mech.parameters)))))
 
     def spread(p):
-        s = jl.solve_path(mech, p, phis)
-        xy = jl.transfer(mech, s.q, phis, p, order=0).points[:, 0]
+        s = jl.solve_path(mech, phis, p)
+        xy = jl.transfer(mech, phis, s.q, p, order=0).points[:, 0]
         return jnp.sum((xy - xy.mean(0)) ** 2)
 
     fwd = jax.jit(jax.vmap(spread))

@@ -54,7 +54,7 @@ def feed_point(step_deg: float = 5.0, omega: float = OMEGA) -> dict:
     phis = np.deg2rad(deg)
     sol = solve(mech, phis)
     assert np.all(np.asarray(sol.converged))
-    tr = transfer(mech, sol.q, jnp.asarray(phis), jnp.asarray(mech.parameters), order=2)
+    tr = transfer(mech, jnp.asarray(phis), sol.q, jnp.asarray(mech.parameters), order=2)
     _, _, v, a = time_derivatives(tr, omega)
     k = mech.point_names.index("Z")
     return {"deg": deg, "y": np.asarray(tr.points[:, k, 1]), "vy": np.asarray(v[:, k, 1]),

@@ -61,7 +61,7 @@ def test_slider_crank_velocity_acceleration_match_closed_form_derivatives():
     P = {n: mech.parameters[mech.parameter_index(n)] for n in mech.parameter_names}
     phis = np.deg2rad(np.arange(0.0, 360.0, 10.0))
     sol = jl.solve(mech, phis)
-    tr = jl.transfer(mech, sol.q, phis, mech.parameters)
+    tr = jl.transfer(mech, phis, sol.q, mech.parameters)
     omega = 100.0
     qd, qdd, _, _ = jl.time_derivatives(tr, omega)
     h = 1e-4

@@ -255,7 +255,7 @@ def test_scale_disparity(case, dtype, method):
     if swing > 1e-2:
         assert motion_err / swing < (1e-12 if f64 else 1e-4)
     # the coupler point P = a e2 + (b/2) e3 + (b/4) e3⊥, relative to the longest link
-    tr = jl.transfer(FOURBAR, sol.q, np.asarray(phis).astype(dtype), jnp.asarray(mech.parameters, dtype=dtype),
+    tr = jl.transfer(FOURBAR, np.asarray(phis).astype(dtype), sol.q, jnp.asarray(mech.parameters, dtype=dtype),
                      order=0)
     px = a * np.cos(phis) + b / 2 * np.cos(phi3) - b / 4 * np.sin(phi3)
     py = a * np.sin(phis) + b / 2 * np.sin(phi3) + b / 4 * np.cos(phi3)
@@ -289,7 +289,7 @@ def test_very_high_speed_1e5_rpm(dtype):
     sol = _solve(mech, phis, dtype, "auto", _q0(a, b, c, d, 0.0, -1))
     assert bool(np.all(sol.converged))
     omega = 1e5 * 2 * math.pi / 60
-    tr = jl.transfer(FOURBAR, sol.q, phis.astype(dtype), jnp.asarray(mech.parameters, dtype=dtype))
+    tr = jl.transfer(FOURBAR, phis.astype(dtype), sol.q, jnp.asarray(mech.parameters, dtype=dtype))
     qd, qdd, v, acc = jl.time_derivatives(tr, jnp.asarray(omega, dtype=dtype))
     f = lambda x: _freudenstein_jnp(a, b, c, d, x, -1.0)  # noqa: E731
     d1 = jax.vmap(jax.jacfwd(f))(jnp.asarray(phis)) * omega

@@ -17,7 +17,7 @@ def _feed(overrides=None, omega=1.0, start=75.0, count=73, step=5.0):
     phis = np.deg2rad(start + step * np.arange(count))
     sol = jl.solve(mech, phis)
     assert bool(np.all(sol.converged))
-    tr = jl.transfer(mech, sol.q, phis, mech.parameters)
+    tr = jl.transfer(mech, phis, sol.q, mech.parameters)
     _, _, v, a = jl.time_derivatives(tr, omega)
     return mech, sol, np.asarray(tr.points[:, 0]), np.asarray(v[:, 0]), np.asarray(a[:, 0])
 
@@ -54,7 +54,7 @@ def test_reference_csv_to_1e9():
     mech = jl.load("sewing-feed")
     phis = np.deg2rad(ref[:, 0])
     sol = jl.solve(mech, phis)
-    tr = jl.transfer(mech, sol.q, phis, mech.parameters)
+    tr = jl.transfer(mech, phis, sol.q, mech.parameters)
     qd, qdd, v, a = jl.time_derivatives(tr, 261.8)
     q = np.asarray(sol.q)
     # angles agree modulo 2π; the CSV prints 10 significant digits

@@ -11,8 +11,8 @@ def _feed_path_objective(mech, phis):
     iz = 0
 
     def f(p):
-        sol = jl.solve_path(mech, p, phis)
-        tr = jl.transfer(mech, sol.q, phis, p, order=0)
+        sol = jl.solve_path(mech, phis, p)
+        tr = jl.transfer(mech, phis, sol.q, p, order=0)
         xy = tr.points[:, iz]
         # a path objective: spread of the path around its centre plus a tilt term
         c = jnp.mean(xy, axis=0)
@@ -41,7 +41,7 @@ def test_feed_path_gradient_matches_central_differences():
 def test_forward_and_reverse_mode_agree():
     mech = jl.load("four-bar")
     phis = jnp.asarray(np.deg2rad(np.arange(0.0, 360.0, 10.0)))
-    f = lambda p: jnp.sum(jl.solve_path(mech, p, phis).q[:, 1] ** 2)  # noqa: E731
+    f = lambda p: jnp.sum(jl.solve_path(mech, phis, p).q[:, 1] ** 2)  # noqa: E731
     p = jnp.asarray(mech.parameters)
     rev = jax.grad(f)(p)
     fwd = jax.jacfwd(f)(p)
@@ -53,14 +53,14 @@ def test_gradient_wrt_input_is_the_velocity():
     mech = jl.load("sewing-feed")
     phis = jnp.asarray(np.deg2rad(75.0 + 5.0 * np.arange(8)))
     p = jnp.asarray(mech.parameters)
-    q, dq = jax.jvp(lambda ph: jl.solve_path(mech, p, ph).q, (phis,), (jnp.ones_like(phis),))
-    tr = jl.transfer(mech, q, phis, p, order=1)
+    q, dq = jax.jvp(lambda ph: jl.solve_path(mech, ph, p).q, (phis,), (jnp.ones_like(phis),))
+    tr = jl.transfer(mech, phis, q, p, order=1)
     np.testing.assert_allclose(np.asarray(dq), np.asarray(tr.mu), rtol=1e-12, atol=1e-12)
 
 
 def test_non_converged_positions_get_zero_gradient_not_nan():
     mech = jl.load("four-bar", overrides={"a": 40.0})  # non-Grashof: part of the turn unreachable
     phis = jnp.asarray(np.deg2rad(np.arange(0.0, 360.0, 10.0)))
-    f = lambda p: jnp.sum(jl.solve_path(mech, p, phis).q)  # noqa: E731
+    f = lambda p: jnp.sum(jl.solve_path(mech, phis, p).q)  # noqa: E731
     g = jax.grad(f)(jnp.asarray(mech.with_parameters(a=40.0)))
     assert np.all(np.isfinite(np.asarray(g)))

@@ -157,7 +157,7 @@ def test_power_balance(name, overrides, start, step, omega, alpha):
     p = jnp.asarray(mech.parameters)
     sol = solve(mech, grid)
     assert np.all(np.asarray(sol.converged))
-    mu = transfer(mech, sol.q, jnp.asarray(grid), p, order=1).mu
+    mu = transfer(mech, jnp.asarray(grid), sol.q, p, order=1).mu
     T, V, P = (np.asarray(x).reshape(n, len(offsets)) for x in _energies(mech)(sol.q, jnp.asarray(grid), mu, omega))
     dE_dt = omega * ((T + V)[:, 1:] @ weights) + (alpha / omega) * 2 * T[:, 0]
     q = np.asarray(sol.q).reshape(n, len(offsets), -1)[:, 0]

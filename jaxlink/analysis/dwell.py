@@ -235,7 +235,7 @@ def solve_stroke(mech, p=None, samples: int = 7200, *, phi0: float = 0.0, s_name
     sol = _solve(mech, phis, p)
     import jaxlink
 
-    t = jaxlink.transfer(mech, sol.q, phis, p, order=2)
+    t = jaxlink.transfer(mech, phis, sol.q, p, order=2)
     j = mech.unknown_names.index(s_name)
     conv = jnp.all(sol.converged, axis=-1)
     return phis, sol.q, sol.q[..., j], t.mu[..., j], t.nu[..., j], conv

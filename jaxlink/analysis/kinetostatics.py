@@ -14,7 +14,7 @@ components (F_x, F_y) for a revolute joint at P_j; for a prismatic joint, a norm
 the left normal n = (−sin a, cos a) of its axis a, at P_j, and a moment M. The drive torque τ acts
 on the input body (from the ground). Unknowns F_S = (F_1x, F_1y, …, τ) number 2·joints + 1, equations
 3·bodies; they agree when Grübler's mobility is 1 (checked when the file is read). The accelerations
-come from the transfer functions μ = dq/dφ, ν = d²q/dφ² (as in `_kinematics`): c̈ = c'' ω² + c' α with
+come from the transfer functions μ = dq/dφ, ν = d²q/dφ² (`analysis/transfer.py`): c̈ = c'' ω² + c' α with
 c' = dc/dφ, c'' = d²c/dφ² by forward AD along the solution curve, likewise θ̈. Moment rows and moment unknowns are scaled by the mechanism's length
 scale so that A_S is O(1) in any unit.
 
@@ -41,6 +41,7 @@ from ..files import expr as _expr
 from ..solvers.assemble import solve
 from ..files.expr import ANGLE
 from ..solvers.linalg import UNROLL_MAX, solve_small
+from .transfer import along, rates
 from ..model.mechanism import Mechanism
 from ..results import RESULTS
 
@@ -105,40 +106,12 @@ def _geometry(mech: Mechanism, mdl: _bodies.Model, q, phi, p):
     return pts, axes, fpts, spts
 
 
-def _d1_d2(f, x, v, w):
-    """(f(x), d/ds f(x + s v + s² w/2), d²/ds² …) at s = 0; x, v, w tuples of arrays."""
-
-    def curve(s):
-        return f(*[xi + s * vi + 0.5 * s * s * wi for xi, vi, wi in zip(x, v, w)])
-
-    def first(s):
-        return jax.jvp(curve, (s,), (jnp.ones_like(s),))
-
-    s0 = jnp.zeros((), dtype=jnp.result_type(x[0]))
-    (val, d1), (_, d2) = jax.jvp(first, (s0,), (jnp.ones_like(s0),))
-    return val, d1, d2
-
-
-def transfer_functions(mech: Mechanism, q, phi, p):
-    """μ = dq/dφ and ν = d²q/dφ² at one solved position (as `_kinematics.transfer_one`, without the
-    points): Φ_q μ = −Φ_φ,  Φ_q ν = −d²/ds² Φ(q + sμ, φ + s)."""
-    res = lambda qq, ph: mech.residual(qq, ph, p)  # noqa: E731
-    jac = jax.jacfwd(res, argnums=0)(q, phi)
-    one = jnp.ones_like(phi)
-    phi_t = jax.jvp(lambda ph: res(q, ph), (phi,), (one,))[1]
-    mu, _ = solve_small(jac, phi_t)
-    mu = -mu
-    _, _, gamma = _d1_d2(res, (q, phi), (mu, one), (jnp.zeros_like(q), jnp.zeros_like(phi)))
-    nu, _ = solve_small(jac, gamma)
-    return mu, -nu
-
-
 def body_kinematics(mech: Mechanism, mdl: _bodies.Model, q, phi, p):
     """Centroids and angles with their first and second derivatives with respect to the input:
     `((c, c', c''), (θ, θ', θ''))`, shapes (nb, 2) and (nb,)."""
-    mu, nu = transfer_functions(mech, q, phi, p)
+    mu, nu = rates(mech, q, phi, p)
     one = jnp.ones_like(phi)
-    (c, a), (c1, a1), (c2, a2) = _d1_d2(lambda qq, ph: motion(mech, mdl, qq, ph, p), (q, phi), (mu, one),
+    (c, a), (c1, a1), (c2, a2) = along(lambda qq, ph: motion(mech, mdl, qq, ph, p), (q, phi), (mu, one),
                                         (nu, jnp.zeros_like(phi)))
     return (c, c1, c2), (a, a1, a2)
 

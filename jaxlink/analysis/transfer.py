@@ -1,7 +1,7 @@
 """Velocities, accelerations and transfer functions from the solved positions — exact, by
 forward-mode AD, with the same Jacobian Φ_q as the position solve.
 
-For a 1-DOF mechanism with input φ, along the solution curve q(φ) (seed 000 §5.4, eq. 4.8–4.10):
+For a 1-DOF mechanism with input φ, along the solution curve q(φ) :
 
     Φ_q μ = −Φ_φ                                μ = dq/dφ        (first transfer function)
     Φ_q ν = −d²/ds² Φ(q + s μ, φ + s)|_{s=0}    ν = d²q/dφ²      (second transfer function)
@@ -37,17 +37,37 @@ class Transfer(NamedTuple):
     ddpoints: jax.Array | None
 
 
-def _second_along(f, x, v, w):
-    """d²/ds² f(x + s v + s² w / 2) at s = 0 (x, v, w tuples of arrays)."""
+def along(f, x, v, w):
+    """`(f(c(0)), d/ds f(c(s)), d²/ds² f(c(s)))` at s = 0 on the curve c(s) = x + s v + s² w / 2
+    (x, v, w tuples of arrays), by nested forward-mode AD."""
 
     def curve(s):
         return f(*[xi + s * vi + 0.5 * s * s * wi for xi, vi, wi in zip(x, v, w)])
 
-    def d1(s):
-        return jax.jvp(curve, (s,), (jnp.ones_like(s),))[1]
+    def first(s):
+        return jax.jvp(curve, (s,), (jnp.ones_like(s),))
 
     s0 = jnp.zeros((), dtype=jnp.result_type(x[0]))
-    return jax.jvp(d1, (s0,), (jnp.ones_like(s0),))[1]
+    (val, d1), (_, d2) = jax.jvp(first, (s0,), (jnp.ones_like(s0),))
+    return val, d1, d2
+
+
+def rates(mech: Mechanism, q, phi, p, order: int = 2):
+    """`(mu, nu)` = (dq/dφ, d²q/dφ²) at one solved position (`nu` is None for `order=1`):
+
+        Φ_q μ = −Φ_φ,        Φ_q ν = −d²/ds² Φ(q + s μ, φ + s)|_{s=0}.
+    """
+    res = lambda qq, ph: mech.residual(qq, ph, p)  # noqa: E731
+    jac = jax.jacfwd(res, argnums=0)(q, phi)
+    one = jnp.ones_like(phi)
+    phi_t = jax.jvp(lambda ph: res(q, ph), (phi,), (one,))[1]
+    mu, _ = solve_small(jac, phi_t)
+    mu = -mu
+    if order < 2:
+        return mu, None
+    _, _, gamma = along(res, (q, phi), (mu, one), (jnp.zeros_like(q), jnp.zeros_like(phi)))
+    nu, _ = solve_small(jac, gamma)
+    return mu, -nu
 
 
 def transfer_one(mech: Mechanism, q, phi, p, order: int) -> Transfer:
@@ -55,36 +75,39 @@ def transfer_one(mech: Mechanism, q, phi, p, order: int) -> Transfer:
     pts = mech.point_positions(q, phi, p)
     if order == 0:
         return Transfer(pts, None, None, None, None)
-    res = lambda qq, ph: mech.residual(qq, ph, p)  # noqa: E731
-    jac = jax.jacfwd(res, argnums=0)(q, phi)
+    mu, nu = rates(mech, q, phi, p, order)
     one = jnp.ones_like(phi)
-    phi_t = jax.jvp(lambda ph: res(q, ph), (phi,), (one,))[1]
-    mu, _ = solve_small(jac, phi_t)
-    mu = -mu
     pos = lambda qq, ph: mech.point_positions(qq, ph, p)  # noqa: E731
-    dpts = jax.jvp(pos, (q, phi), (mu, one))[1]
     if order == 1:
+        dpts = jax.jvp(pos, (q, phi), (mu, one))[1]
         return Transfer(pts, mu, None, dpts, None)
-    zq, zphi = jnp.zeros_like(q), jnp.zeros_like(phi)
-    gamma = _second_along(res, (q, phi), (mu, one), (zq, zphi))
-    nu, _ = solve_small(jac, gamma)
-    nu = -nu
-    ddpts = _second_along(pos, (q, phi), (mu, one), (nu, zphi))
+    _, dpts, ddpts = along(pos, (q, phi), (mu, one), (nu, jnp.zeros_like(phi)))
     return Transfer(pts, mu, nu, dpts, ddpts)
 
 
-def transfer(mech: Mechanism, q, phis, p, *, order: int = 2) -> Transfer:
-    """`transfer_one` vmapped over positions `(N, n)`, `(N,)` — and over designs if `p` is (B, P)
-    with `q` (B, N, n) and `phis` (N,) or (B, N)."""
-    return _jitted_transfer(mech, order, jnp.ndim(p) == 2, jnp.ndim(phis) == 2)(q, phis, p)
+@functools.partial(jax.jit, static_argnames=("order",))
+def _transfer(mech, phis, q, p, order):
+    p = jnp.asarray(mech.parameters if p is None else p)
+    if not jnp.issubdtype(p.dtype, jnp.floating):
+        p = p.astype(jnp.result_type(float))
+    q = jnp.asarray(q, p.dtype)
+    phis = jnp.asarray(phis, p.dtype)
+    f = jax.vmap(lambda qq, phi, pp: transfer_one(mech, qq, phi, pp, order), in_axes=(0, 0, None))
+    if p.ndim == 2:
+        f = jax.vmap(f, in_axes=(0, 0 if phis.ndim == 2 else None, 0))
+    return f(q, phis, p)
 
 
-@functools.lru_cache(maxsize=64)
-def _jitted_transfer(mech, order, batch_p, batch_phi):
-    f = jax.vmap(lambda q, phi, p: transfer_one(mech, q, phi, p, order), in_axes=(0, 0, None))
-    if batch_p:
-        f = jax.vmap(f, in_axes=(0, 0 if batch_phi else None, 0))
-    return jax.jit(f)
+def transfer(mech: Mechanism, phis, q, p=None, *, order: int = 2) -> Transfer:
+    """Transfer functions at solved positions, jitted and `vmap`ped.
+
+    **Arguments:** `phis` (N,) inputs; `q` (N, n) the solved unknowns (`Solution.q`); `p` (P,)
+    parameters (default `mech.parameters`). A batch of designs: `p` (B, P), `q` (B, N, n), `phis`
+    (N,) or (B, N). `order` (static): 0 points, 1 first, 2 second derivatives.
+
+    **Returns:** `Transfer` with leading axes as `q`.
+    """
+    return _transfer(mech, phis, q, p, order)
 
 
 def time_derivatives(t: Transfer, omega, alpha=0.0):

@@ -1,15 +1,19 @@
-"""Mechanism files: load, validate, convert to SI, compile to pure JAX functions.
+"""The model of a linkage: its structure (static) and its numbers (a pytree).
 
-A `Mechanism` is immutable and hashable by identity (it is *static* under `jit`: its topology
-fixes shapes and control flow). The numbers a search varies — the parameters — are not stored
-in it but passed as an array `p` (SI, ordered as `mechanism.parameter_names`), so `vmap` over
-designs and `grad` with respect to dimensions reach them.
+A `Mechanism` is a JAX pytree: its leaves are the numbers a search varies — `parameters` (SI,
+ordered as `parameter_names`) and `guess` (SI, ordered as `unknown_names`) — and everything else
+(names, loops, points, units: the `Structure`) is static, hashed by identity. So a mechanism can be
+passed through `jax.jit`, `vmap` and `grad` like any array argument; a change of numbers reuses the
+compiled functions and a change of structure compiles new ones. The solvers also take the
+parameters as an explicit array `p`, so `vmap` over designs and `grad` with respect to dimensions
+reach them without rebuilding the mechanism.
 
-Residual (seed 000, eq. 4.2–4.6; seed 002): each loop i is a closed polygon of vectors,
+Residual: each loop i is a closed polygon of vectors,
 
     Φ_i(q; φ, p) = Σ_j s_j L_j (cos θ_j, sin θ_j)  +  Σ_j s_j (X_j, Y_j)  = 0  ∈ R²,
 
-with q the unknowns (angles in rad, lengths in m), φ the input and p the parameters.
+with q the unknowns (angles in rad, lengths in m), φ the input and p the parameters; term j has
+the sign s_j and either a length L_j and an angle θ_j (polar) or components (X_j, Y_j).
 """
 
 from __future__ import annotations
@@ -17,6 +21,7 @@ from __future__ import annotations
 import dataclasses
 from typing import Any, Mapping
 
+import jax
 import jax.numpy as jnp
 import numpy as np
 
@@ -26,8 +31,9 @@ from ..files.expr import ANGLE, LENGTH, Term
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
-class Mechanism:
-    """A compiled mechanism file. Fields are SI; see module docstring for the residual.
+class Structure:
+    """The static part of a mechanism (hashed by identity): names, units, loops, points, tables,
+    and the functions of the loops. Fields are SI; see the module docstring for the residual.
 
     **Fields:**
 
@@ -47,14 +53,12 @@ class Mechanism:
     units: _expr.Units
     parameter_names: tuple
     parameter_kinds: tuple
-    parameters: np.ndarray
     input_name: str
     input_kind: str
     input_body: str | None
     input_start: float
     unknown_names: tuple
     unknown_kinds: tuple
-    guess: np.ndarray
     loops: tuple
     points: tuple
     tables: Mapping[str, Any]
@@ -93,13 +97,6 @@ class Mechanism:
 
     def kind_factor(self, kind: str) -> float:
         return {"length": self.units.length, "angle": self.units.angle}.get(kind, 1.0)
-
-    def with_parameters(self, **values_in_file_units) -> np.ndarray:
-        """The parameter vector (SI) with some values replaced (given in file units)."""
-        p = np.array(self.parameters, dtype=float)
-        for k, v in values_in_file_units.items():
-            p[self.parameter_index(k)] = self.to_si(k, v)
-        return p
 
     # ------------------------------------------------------------------ compiled functions
     def env(self, q, phi, p) -> dict:
@@ -193,6 +190,68 @@ class Mechanism:
     def mobility_from_loops(self) -> int:
         """Coordinates (unknowns + input) minus independent scalar loop equations."""
         return self.n_unknowns + 1 - self.n_equations
+
+
+
+class Mechanism:
+    """A mechanism: its `structure` (static) and its numbers `parameters` (P,) and `guess` (n,), SI.
+
+    Every attribute of the `Structure` (names, units, loops, `residual`, `point_positions`, …) is
+    reachable on the mechanism itself (`mech.unknown_names`, `mech.residual(q, phi, p)`).
+    `Mechanism(parameters=…, guess=…, structure=…)` or, from the structure's fields,
+    `Mechanism(parameters=…, guess=…, name=…, …)`. A pytree (leaves: parameters, guess);
+    immutable; `replace(parameters=…)` gives a copy with other numbers and the same structure.
+    """
+
+    __slots__ = ("parameters", "guess", "structure")
+    parameters: Any
+    guess: Any
+    structure: Structure
+
+    def __init__(self, *, parameters, guess, structure: Structure | None = None, **fields):
+        if structure is None:
+            structure = Structure(**fields)
+        elif fields:
+            raise TypeError(f"Mechanism: give either a structure or its fields, not both ({', '.join(fields)})")
+        object.__setattr__(self, "parameters", parameters)
+        object.__setattr__(self, "guess", guess)
+        object.__setattr__(self, "structure", structure)
+
+    def __setattr__(self, name, value):
+        raise dataclasses.FrozenInstanceError(f"cannot assign to field '{name}' (a Mechanism is immutable)")
+
+    def __getattr__(self, name):
+        if name in Mechanism.__slots__:  # not yet set (copying, unpickling)
+            raise AttributeError(name)
+        return getattr(self.structure, name)
+
+    def __repr__(self):
+        return (f"Mechanism({self.structure.name!r}: {len(self.structure.parameter_names)} parameters, "
+                f"{len(self.structure.unknown_names)} unknowns, {len(self.structure.loops)} loops, "
+                f"{len(self.structure.points)} points)")
+
+    def replace(self, *, parameters=None, guess=None) -> Mechanism:
+        """A copy with other numbers (SI) and the same structure (compiled functions are reused)."""
+        return Mechanism(parameters=self.parameters if parameters is None else parameters,
+                         guess=self.guess if guess is None else guess, structure=self.structure)
+
+    def with_parameters(self, **values_in_file_units) -> np.ndarray:
+        """The parameter vector (SI) with some values replaced (given in file units)."""
+        p = np.array(self.parameters, dtype=float)
+        for k, v in values_in_file_units.items():
+            p[self.parameter_index(k)] = self.to_si(k, v)
+        return p
+
+
+def _flatten(m: Mechanism):
+    return (m.parameters, m.guess), m.structure
+
+
+def _unflatten(structure, leaves):
+    return Mechanism(parameters=leaves[0], guess=leaves[1], structure=structure)
+
+
+jax.tree_util.register_pytree_node(Mechanism, _flatten, _unflatten)
 
 
 def _broadcast(*vals, like):

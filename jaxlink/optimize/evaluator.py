@@ -97,7 +97,7 @@ class Evaluator:
         p = self.params(u)
         q0, ok0 = self.start(p, c)
         q0 = jax.lax.stop_gradient(q0)
-        sol = solve_path(self.mech, p, phis, q0, options=self.options)
+        sol = solve_path(self.mech, phis, p, q0, options=self.options)
         feasible = ok0 & jnp.all(sol.converged)
         lf = self.mech.units.length
         k = self.problem.point

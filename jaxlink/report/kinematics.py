@@ -42,7 +42,7 @@ def kinematics_table(mech: Mechanism, phis, *, omega: float = 1.0, order: int = 
     """Solve positions at `phis` (SI) and, up to `order`, point velocities/accelerations at ω."""
     p = np.asarray(mech.parameters if p is None else p, dtype=dtype)
     sol = solve(mech, np.asarray(phis, dtype=dtype), jnp.asarray(p))
-    tr = transfer(mech, sol.q, jnp.asarray(phis, dtype=dtype), jnp.asarray(p), order=order)
+    tr = transfer(mech, jnp.asarray(phis, dtype=dtype), sol.q, jnp.asarray(p), order=order)
     _, _, v, a = time_derivatives(tr, omega)
     conv = np.asarray(sol.converged)
     # the residual at the returned q (the solver reports the one before its last correction)

@@ -309,17 +309,17 @@ def method_for(mech: Mechanism, opts: "NewtonOptions") -> str:
     return opts.method
 
 
-def _closed_form_path(mech, p, phis, q0, tol, trig_in, trig_p, thr):
+def _closed_form_path(mech, p, phis, q0, tol, trig_in, trig_p, thr, phi_ref):
     """Every position of one design in closed form, on the branches nearest to the guess q0 at
-    the first input (`_dyads.solve_nearest`): no Newton, no continuation.
+    the input `phi_ref` where it holds (`_dyads.solve_nearest`): no Newton, no continuation.
 
     A position is assembled when its loops close to `tol` (the residual of the closed form,
     exact to rounding: a dyad at its exact toggle, h² negative by rounding, is assembled at
     h = 0); it is `singular` when some dyad's links are collinear to within `thr` (the sine of
     the angle between them: dead centre, toggle, change point)."""
     dyads = _dyads.classify(mech)
-    t_first = jax.tree_util.tree_map(lambda x: x[0], trig_in)
-    _, _, _, sigma = _dyads.solve_nearest(mech, dyads, q0, phis[0], p, {**t_first, **trig_p})
+    t_ref = _dyads.input_trig(mech, phi_ref)
+    _, _, _, sigma = _dyads.solve_nearest(mech, dyads, q0, phi_ref, p, {**t_ref, **trig_p})
     # a guess that selects no branch (NaN), or parameters that allow no check (a NaN or infinite
     # tolerance, e.g. from a NaN length that no loop uses): nothing here can be verified
     ref_ok = jnp.all(jnp.isfinite(q0)) & jnp.isfinite(tol)
@@ -445,9 +445,45 @@ def _continuation_one(mech, opts, p, phis, first, tol, kw):
     return jax.lax.scan(step, init, phis[1:])[1]
 
 
-def _solve_batch_impl(mech: Mechanism, opts: NewtonOptions, P, phis, Q0):
-    """P (B, P), phis (N,) shared by all designs or (B, N), Q0 (B, n)
-    -> q (B, N, n), rnorm, result, steps (B, N)."""
+def _lead_in(mech: Mechanism, opts: NewtonOptions, p, phi_a, phi_b, q0, tol, kw):
+    """The configuration at `phi_b` of one design, from the guess `q0` that holds at `phi_a`: Newton
+    along `phi_a + k h`, k = 0 … n−1 (h = (phi_b − phi_a)/n, |h| ≤ 5° for an angle input, ≤ 5 % of
+    the length scale for a length input), each from the secant extrapolation of the last two
+    converged positions (step-limited from `q0` at k = 0 and after a failed position). Returns the
+    last converged q (q0 if none): the guess for `phi_b`. A `while_loop` with a traced trip count,
+    so the same under `jit` as eagerly; zero trips when phi_b = phi_a."""
+    dtype = jnp.result_type(q0)
+    if mech.input_kind == "length":
+        max_step = 0.05 * mech.length_scale(p)
+    else:
+        max_step = jnp.asarray(np.deg2rad(5.0), dtype)
+    gap = phi_b - phi_a
+    steps = jnp.ceil(jnp.abs(gap) / max_step)
+    n = jnp.where(jnp.isfinite(steps), jnp.minimum(steps, 2**30), 0).astype(jnp.int32)
+    h = gap / jnp.maximum(n, 1).astype(dtype)
+
+    def body(st):
+        k, q1, q2, f1, f2, ng, failed = st
+        phi = phi_a + k.astype(dtype) * h
+        restart = (k == 0) | failed
+        d = f1 - f2
+        lin = q1 + (q1 - q2) * jnp.where(jnp.abs(d) > 0, (phi - f1) / jnp.where(jnp.abs(d) > 0, d, 1.0), 0.0)
+        guess = jnp.where(restart, jnp.where(ng > 0, q1, q0), jnp.where(ng >= 2, lin, q1))
+        q, _, code, _, _ = newton(mech, guess, phi, p, tol=tol, limit_step=restart,
+                                  max_steps=jnp.where(restart, opts.max_steps_first, opts.max_steps), **kw)
+        good = (code == RESULTS.converged) | (code == RESULTS.singular)
+        return (k + 1, jnp.where(good, q, q1), jnp.where(good, q1, q2), jnp.where(good, phi, f1),
+                jnp.where(good, f1, f2), ng + good.astype(jnp.int32), ~good)
+
+    zero = jnp.zeros((), jnp.int32)
+    init = (zero, q0, q0, phi_a, phi_a, zero, jnp.zeros((), bool))
+    out = jax.lax.while_loop(lambda st: st[0] < n, body, init)
+    return out[1]
+
+
+def _solve_batch_impl(mech: Mechanism, opts: NewtonOptions, P, phis, Q0, phi_ref):
+    """P (B, P), phis (N,) shared by all designs or (B, N), Q0 (B, n) holding at the inputs
+    `phi_ref` (B,) (None: at the first input) -> q (B, N, n), rnorm, result, steps (B, N)."""
     dtype = jnp.result_type(Q0)
     B = P.shape[0]
     shared = phis.ndim == 1
@@ -457,20 +493,24 @@ def _solve_batch_impl(mech: Mechanism, opts: NewtonOptions, P, phis, Q0):
     tol = rtol * jax.vmap(mech.length_scale)(P)
     thr = singular_threshold(opts, dtype)
     method = method_for(mech, opts)
+    phi0 = jnp.broadcast_to(phis[0], (B,)) if shared else phis[:, 0]
     if method == "closed_form":
-        # every (design, input) pair is independent, on the branches (circuits) of the guess. The
-        # trigonometry of the inputs (N values) and of the angle parameters (B) is computed once,
-        # not inside every fused kernel.
+        # every (design, input) pair is independent, on the branches (circuits) of the guess at the
+        # reference input. The trigonometry of the inputs (N values) and of the angle parameters
+        # (B) is computed once, not inside every fused kernel.
+        ref = phi0 if phi_ref is None else phi_ref
         trig_in, trig_p = materialize((_dyads.input_trig(mech, phis), _dyads.parameter_trig(mech, P)))
-        return jax.vmap(lambda p, ph, q0, t, ti, tp: _closed_form_path(mech, p, ph, q0, t, ti, tp, thr),
-                        in_axes=(0, ax, 0, 0, ax, 0))(P, phis, Q0, tol, trig_in, trig_p)
+        return jax.vmap(lambda p, ph, q0, t, ti, tp, r: _closed_form_path(mech, p, ph, q0, t, ti, tp, thr, r),
+                        in_axes=(0, ax, 0, 0, ax, 0, 0))(P, phis, Q0, tol, trig_in, trig_p, ref)
     # Newton: a design whose tolerance is not finite (a NaN or infinite length, even one that only
     # a point uses) or whose guess is not finite (it selects no branch) is `nonfinite` at every
     # position, without iterating (a NaN tolerance makes `newton` stop at once)
     bad = ~jnp.isfinite(tol) | ~jnp.all(jnp.isfinite(Q0), axis=1)
     tol = jnp.where(bad, jnp.nan, tol)
     trig_p = materialize(_dyads.parameter_trig(mech, P))
-    phi0 = jnp.broadcast_to(phis[0], (B,)) if shared else phis[:, 0]
+    if phi_ref is not None:  # continue from where the guesses hold to the first input
+        Q0 = jax.vmap(lambda p, a, b, q0, t, tp: _lead_in(mech, opts, p, a, b, q0, t, _newton_kw(rtol, thr, tp)))(
+            P, phi_ref, phi0, Q0, tol, trig_p)
     first = _first_positions(mech, opts, P, phi0, Q0, tol, rtol, thr, trig_p)
     q1, r1, c1, k1, _ = first
 
@@ -490,123 +530,112 @@ def _solve_batch_impl(mech: Mechanism, opts: NewtonOptions, P, phis, Q0):
     return join((q1, r1, c1, k1), rest)
 
 
-@functools.lru_cache(maxsize=64)
-def _batch_solver(mech: Mechanism, opts: NewtonOptions):
-    """The differentiable batched solve: (P (B,P), phis (N,) or (B,N), Q0 (B,n)) -> (q, rnorm, result, steps)."""
+@functools.partial(jax.custom_jvp, nondiff_argnums=(0, 1))
+def _solve_batch(structure, opts: NewtonOptions, P, phis, Q0, phi_ref):
+    """The differentiable batched solve: (P (B,P), phis (N,) or (B,N), Q0 (B,n), phi_ref (B,) or
+    None) -> (q, rnorm, result, steps). `structure` and `opts` are static."""
+    return _solve_batch_impl(structure, opts, P, phis, Q0, phi_ref)
 
-    @jax.custom_jvp
-    def solve_batch(P, phis, Q0):
-        return _solve_batch_impl(mech, opts, P, phis, Q0)
 
-    @solve_batch.defjvp
-    def _jvp(primals, tangents):
-        P, phis, Q0 = primals
-        dP, dphis, _ = tangents
-        out = solve_batch(P, phis, Q0)
-        q, rn, code, k = out
-        lin = _linear_solve(mech)
+@_solve_batch.defjvp
+def _solve_batch_jvp(structure, opts, primals, tangents):
+    """Implicit differentiation: dq = −Φ_q⁻¹ (Φ_p dp + Φ_φ dφ) at every converged position (zero
+    elsewhere); the guesses and the reference input select a branch and carry no derivative."""
+    P, phis, Q0, phi_ref = primals
+    dP, dphis = tangents[0], tangents[1]
+    mech = structure
+    out = _solve_batch(structure, opts, P, phis, Q0, phi_ref)
+    q, rn, code, k = out
+    lin = _linear_solve(mech)
 
-        def one(p, dp, qk, phik, dphik, ok):
-            rhs = jax.jvp(lambda pp, ph: mech.residual(qk, ph, pp), (p, phik), (dp, dphik))[1]
-            jac = jax.jacfwd(mech.residual)(qk, phik, p)
-            # where not converged the sensitivity is undefined: solve a harmless identity system
-            # instead (and zero the result), so that neither the JVP nor its transpose (grad)
-            # produces NaN
-            eye = jnp.eye(jac.shape[0], dtype=jac.dtype)
-            dq, _ = lin(jnp.where(ok, jac, eye), jnp.where(ok, rhs, 0.0))
-            return jnp.where(ok, -dq, 0.0)
+    def one(p, dp, qk, phik, dphik, ok):
+        rhs = jax.jvp(lambda pp, ph: mech.residual(qk, ph, pp), (p, phik), (dp, dphik))[1]
+        jac = jax.jacfwd(mech.residual)(qk, phik, p)
+        # where not converged the sensitivity is undefined: solve a harmless identity system
+        # instead (and zero the result), so that neither the JVP nor its transpose (grad)
+        # produces NaN
+        eye = jnp.eye(jac.shape[0], dtype=jac.dtype)
+        dq, _ = lin(jnp.where(ok, jac, eye), jnp.where(ok, rhs, 0.0))
+        return jnp.where(ok, -dq, 0.0)
 
-        per_pos = jax.vmap(one, in_axes=(None, None, 0, 0, 0, 0))
-        ax = None if phis.ndim == 1 else 0
-        dq = jax.vmap(per_pos, in_axes=(0, 0, 0, ax, ax, 0))(P, dP, q, phis, dphis, code == RESULTS.converged)
-        return out, (dq, jnp.zeros_like(rn), _float0(code), _float0(k))
-
-    return solve_batch
+    per_pos = jax.vmap(one, in_axes=(None, None, 0, 0, 0, 0))
+    ax = None if phis.ndim == 1 else 0
+    dq = jax.vmap(per_pos, in_axes=(0, 0, 0, ax, ax, 0))(P, dP, q, phis, dphis, code == RESULTS.converged)
+    return out, (dq, jnp.zeros_like(rn), _float0(code), _float0(k))
 
 
 def _float0(x):
     return np.zeros(np.shape(x), dtype=jax.dtypes.float0)
 
 
-def _solve_batch(mech, options, P, phis, Q0) -> Solution:
-    q, rn, code, k = _batch_solver(mech, options)(P, phis, Q0)
-    return Solution(q=q, points=None, result=code, stats=SolveStats(residual=rn, steps=k))
+def _points(structure, q, phis, P, code):
+    """Points of interest (B, N, n_points, 2) at solved positions; NaN where not assembled."""
+    ax = None if phis.ndim == 1 else 0
+    pts = jax.vmap(jax.vmap(structure.point_positions, in_axes=(0, 0, None)), in_axes=(0, ax, 0))(q, phis, P)
+    assembled = (code == RESULTS.converged) | (code == RESULTS.singular)
+    return jnp.where(assembled[..., None, None], pts, jnp.nan)
 
 
-def solve_path(mech: Mechanism, p, phis, q0=None, *, options: NewtonOptions = NewtonOptions()) -> Solution:
-    """Solve the positions of one design along a sequence of inputs (differentiable in p, φ).
-
-    **Arguments:**
-
-    - `mech`: the compiled mechanism.
-    - `p`: (P,) parameters, SI (`mech.parameters` for the file's design).
-    - `phis`: (N,) input values, SI, in the order of the continuation.
-    - `q0`: (n,) guess at `phis[0]` (default: the file's guess).
-    - `options`: `NewtonOptions` (keyword-only, static).
-
-    **Returns:** a `Solution` with leading axis N.
-    """
-    p = jnp.asarray(p)
-    dtype = jnp.result_type(p)
-    phis = jnp.asarray(phis, dtype=dtype)
-    q0 = jnp.asarray(mech.guess if q0 is None else q0, dtype=dtype)
-    sol = _solve_batch(mech, options, p[None], phis, q0[None])
-    return jax.tree_util.tree_map(lambda x: x[0], sol)
-
-
-def solve(mech: Mechanism, phis, p=None, q0=None, *, options: NewtonOptions = NewtonOptions()) -> Solution:
-    """Solve positions for one design or a batch of designs, jitted.
-
-    `p` of shape (P,) gives a `Solution` with leading axis N; `p` of shape (B, P) gives leading
-    axes (B, N) (designs × positions). `phis` is (N,) (shared by all designs) or (B, N); `q0` is
-    (n,) or (B, n). With the default `q0` the solve starts at the file's `[input] start`, where its
-    guesses hold, and continues to `phis[0]` first (a lead-in, dropped from the result).
-
-    A batch placed on several devices (`jax.device_put(p, NamedSharding(...))`, see
-    `optimize/_sharding.py`) is solved where it lies, each device its share of the designs. On a
-    CPU, XLA already spreads a large fused kernel over the cores;
-    `XLA_FLAGS=--xla_force_host_platform_device_count=N` makes N host devices, which helps where
-    the kernels are small (`benchmarks/scaling.py`: 1.66× with two at 10⁶ positions).
-    """
+def _batch(mech, phis, p, q0, options: NewtonOptions, points: bool) -> Solution:
+    """The common body of `solve` and `solve_path`: shapes, dtypes, defaults, the lead-in."""
     p = jnp.asarray(mech.parameters if p is None else p)
     if not jnp.issubdtype(p.dtype, jnp.floating):
         p = p.astype(jnp.result_type(float))
-    lead = 0
-    if q0 is None and np.ndim(phis) == 1 and not isinstance(phis, jax.core.Tracer):
-        # the file's guesses hold at `input_start`: continue from there to phis[0] first
-        lead_in = lead_in_path(mech, float(np.asarray(phis)[0]))
-        lead = len(lead_in)
-        if lead:
-            phis = np.concatenate([lead_in, np.asarray(phis, dtype=float)])
-    phis = jnp.asarray(phis, dtype=p.dtype)
-    q0 = jnp.asarray(mech.guess if q0 is None else q0, dtype=p.dtype)
-    sol = _jitted_solve(mech, options, p.ndim == 2, phis.ndim == 2, q0.ndim == 2)(p, phis, q0)
-    if lead:
-        sol = jax.tree_util.tree_map(lambda x: x[..., lead:, :] if x.ndim == p.ndim + 1 else x[..., lead:], sol)
-    return sol
+    dtype = p.dtype
+    batch = p.ndim == 2
+    P = p if batch else p[None]
+    B = P.shape[0]
+    phis = jnp.asarray(phis, dtype=dtype)
+    if phis.ndim == 0:
+        phis = phis[None]
+    if not batch and phis.ndim == 2:
+        raise ValueError(f"phis of shape {phis.shape} needs a batch of designs p (B, P); p is {p.shape}")
+    # the guesses hold at `[input] start`: continue from there to the first input (a lead-in)
+    from_start = q0 is None
+    q0 = jnp.asarray(mech.guess if q0 is None else q0, dtype=dtype)
+    Q0 = q0 if q0.ndim == 2 else jnp.broadcast_to(q0, (B,) + q0.shape)
+    phi_ref = jnp.full((B,), mech.input_start, dtype) if from_start else None
+    structure = mech.structure if isinstance(mech, Mechanism) else mech
+    q, rn, code, k = _solve_batch(structure, options, P, phis, Q0, phi_ref)
+    pts = _points(structure, q, phis, P, code) if points else None
+    sol = Solution(q=q, points=pts, result=code, stats=SolveStats(residual=rn, steps=k))
+    return sol if batch else jax.tree_util.tree_map(lambda x: x[0], sol)
 
 
-def lead_in_path(mech: Mechanism, phi0: float, max_step: float = np.deg2rad(5.0)) -> np.ndarray:
-    """Inputs from the file's `input_start` towards `phi0` (excluded), steps ≤ `max_step`
-    (5° for an angle input; 5 % of the length scale for a length input)."""
-    start = mech.input_start
-    if mech.input_kind == "length":
-        lengths = [abs(v) for v, k in zip(mech.parameters, mech.parameter_kinds) if k == "length"]
-        max_step = 0.05 * (max(lengths) if lengths else 1.0)
-    gap = phi0 - start
-    if abs(gap) < 1e-12:
-        return np.zeros((0,))
-    n = int(np.ceil(abs(gap) / max_step))
-    return start + gap * np.arange(n) / n
+@functools.partial(jax.jit, static_argnames=("options", "points"))
+def _solve_jit(mech, phis, p, q0, options, points):
+    return _batch(mech, phis, p, q0, options, points)
 
 
-@functools.lru_cache(maxsize=64)
-def _jitted_solve(mech, options, batch_p, batch_phi, batch_q0):
-    def run(p, phis, q0):
-        P = p if batch_p else p[None]
-        B = P.shape[0]
-        Q0 = q0 if batch_q0 else jnp.broadcast_to(q0, (B,) + q0.shape)
-        sol = _solve_batch(mech, options, P, phis, Q0)
-        return sol if batch_p else jax.tree_util.tree_map(lambda x: x[0], sol)
+def solve(mech: Mechanism, phis, p=None, q0=None, *, options: NewtonOptions = NewtonOptions(),
+          points: bool = True) -> Solution:
+    """Solve the positions of one design or a batch of designs along a sequence of inputs.
 
-    return jax.jit(run)
+    **Arguments:**
+
+    - `mech`: the mechanism (`jaxlink.load`).
+    - `phis`: (N,) input values, SI (rad, or m for a length input), in the order of the
+      continuation; (B, N) gives each design its own inputs.
+    - `p`: (P,) parameters, SI, ordered as `mech.parameter_names` (default `mech.parameters`),
+      or (B, P) for a batch of designs.
+    - `q0`: (n,) or (B, n) guess that holds at `phis[0]`. Default: the file's guesses, which hold
+      at `[input] start`; the solve continues from there to `phis[0]` first (a lead-in).
+    - `options`: `NewtonOptions` (static: another value compiles anew).
+    - `points`: also compute the points of interest (`Solution.points`).
+
+    **Returns:** a `Solution` (q, points, result, stats) with leading axes (N,) or (B, N).
+
+    One jitted function (compiled once per shape, dtype and options); the same under an outer
+    `jax.jit`, `vmap` or `grad` (exact derivatives by implicit differentiation). The dtype is that
+    of `p` (float64 needs `jax.config.update("jax_enable_x64", True)`). A batch placed on several
+    devices (`jax.device_put(p, NamedSharding(...))`) is solved where it lies.
+    """
+    return _solve_jit(mech, phis, p, q0, options, points)
+
+
+def solve_path(mech: Mechanism, phis, p=None, q0=None, *, options: NewtonOptions = NewtonOptions(),
+               points: bool = False) -> Solution:
+    """`solve` for one design, not wrapped in its own `jit`: for use inside the caller's traced
+    functions (`vmap` over designs, `grad`), as the design search does. Same arguments and
+    defaults as `solve` (`p` (P,), `phis` (N,), `q0` (n,)), but `points=False` by default."""
+    return _batch(mech, phis, p, q0, options, points)
