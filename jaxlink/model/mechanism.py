@@ -59,6 +59,7 @@ class Mechanism:
     points: tuple
     tables: Mapping[str, Any]
     kinds: Mapping[str, str]
+    bodies: Any = None  # jaxlink.model.bodies.Model of [bodies]/[joints]/[loads]/[environment], or None
 
     # ------------------------------------------------------------------ sizes
     @property
