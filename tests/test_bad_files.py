@@ -42,7 +42,8 @@ CASES = {
                    ["loops.main is empty"], 20),
     "bad_unit": (('length_unit = "mm"', 'length_unit = "inch"'), ["bad length unit 'inch'"], 3),
     "syntax": (('"b @ phi3"', '"b @ * phi3"'), ["syntax error at column 5", "unexpected '*'", "loops.main[1]"], 20),
-    "mixed_units": (('"b @ phi3"', '"b @ phi3 + a"'), ["'a' is used as an angle in \"b @ phi3 + a\" but as a length in \"a @ phi2\""], 20),
+    "mixed_units": (('"b @ phi3"', '"b @ phi3 + a"'),
+                    ["'a' is used as an angle in \"b @ phi3 + a\" but as a length in \"a @ phi2\""], 20),
     "area_as_length": (('"b @ phi3"', '"c * c @ phi3"'),
                        ["inconsistent units", "it is length^2 where a length is expected"], 20),
 }
@@ -89,3 +90,53 @@ def test_cli_unknown_scene_and_bad_set(tmp_path):
     r = subprocess.run([sys.executable, "-m", "jaxlink.cli", "kinematics", "four-bar", "--set", "zz=1"],
                        capture_output=True, text=True)
     assert r.returncode == 2 and "--set zz: no such parameter" in r.stderr
+
+
+def test_loads_of_text_gives_the_line_of_the_text():
+    """`loads` of a string (no file on disk) still names the line of the mistake."""
+    with pytest.raises(jl.MechanismError) as info:
+        jl.loads(_bad("unknown_name"), file="inline.toml")
+    assert str(info.value).startswith("inline.toml:20") and info.value.key == "loops.main[3]"
+
+
+def test_nonfinite_loops_are_found_at_the_input_start():
+    """The load-time evaluation is at `[input] start`, where the guesses hold: sqrt(cos φ) is
+    finite at φ = 0 but not at φ = 180°."""
+    text = GOOD.replace('"-d @ 0"', '"-d * sqrt(cos(phi2)) @ 0"')
+    jl.loads(text, file="t.toml")  # start 0: cos φ = 1
+    bad = text.replace('name = "phi2"', 'name = "phi2"\nstart = 180.0')
+    with pytest.raises(jl.MechanismError) as info:
+        jl.loads(bad, file="t.toml")
+    assert "non-finite" in info.value.reason and "[input] start" in info.value.reason
+    assert info.value.key == "loops.main" and info.value.line == 21  # one line added above it
+
+
+def test_set_values_are_read_like_the_cam_scenes():
+    from jaxlink.files.overrides import parse_numbers, parse_set
+
+    assert parse_set(["C=1e5", "cam.arc=polygon", "f=[0.1, 0.12]", "n=3"]) == [
+        ("C", 1e5), ("cam.arc", "polygon"), ("f", [0.1, 0.12]), ("n", 3)]
+    assert parse_numbers(["a=.5", "b = 2", "c=-1e-3"]) == {"a": 0.5, "b": 2.0, "c": -1e-3}
+    for item, words in (("a", "expected NAME=VALUE"), ("a=x", "'x' is not a number"),
+                        ("a=inf", "must be finite"), ("a=[1]", "is not a number")):
+        with pytest.raises(jl.MechanismError, match=words):
+            parse_numbers([item])
+
+
+def test_an_item_of_a_multiline_list_gets_its_own_line():
+    text = GOOD.replace('main = ["a @ phi2", "b @ phi3", "-c @ phi4", "-d @ 0"]',
+                        'main = [\n  "a @ phi2",\n  "b @ phi3",\n  "-c @ phi4",\n  "-dd @ 0",\n]')
+    with pytest.raises(jl.MechanismError) as info:
+        jl.loads(text, file="t.toml")
+    assert info.value.key == "loops.main[3]" and info.value.line == text.splitlines().index('  "-dd @ 0",') + 1
+
+
+def test_locator_tables_arrays_of_tables_and_array_lines():
+    from jaxlink.files.locator import Locator
+
+    loc = Locator("[a]\nx = [\n  [1, 2],\n  [3, 4],\n]\ny = 1\n[[b.c]]\nz = 1\n[[b.c]]\nz = 2\n[d.e]\nw = 1\n")
+    assert loc.line("a", "y") == 6  # the line `[1, 2],` of an array starts no table
+    assert loc.line("a", "x", item="[3, 4]") == 4
+    assert loc.line("b.c", "z", index=1) == 10 and loc.line("b.c") == 7
+    assert loc.line("d", "e") == 11  # a sub-table written as its own header
+    assert loc.line("a", "nope") is None and loc.line("zz") is None

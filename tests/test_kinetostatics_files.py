@@ -6,9 +6,9 @@ import sys
 import numpy as np
 import pytest
 
-from jaxlink.model import bodies as _bodies
-from jaxlink.errors import MechanismError
 from jaxlink import load
+from jaxlink.errors import MechanismError
+from jaxlink.model import bodies as _bodies
 from jaxlink.scenes import scene_paths
 
 BASE = scene_paths()["slider-crank-mass"].read_text()
@@ -121,15 +121,15 @@ def test_bad_loads_and_gravity(tmp_path):
 
 def test_files_without_bodies_still_load_and_reactions_says_why(tmp_path):
     mech = load("four-bar")  # kinematics needs no bodies
-    assert not _bodies.has_bodies(mech)
+    assert mech.bodies is None
     r = subprocess.run([sys.executable, "-m", "jaxlink.cli", "reactions", "four-bar"], capture_output=True, text=True)
     assert r.returncode == 2
     assert "four-bar.toml" in r.stderr and "[bodies]" in r.stderr and "no bodies" in r.stderr
 
 
 def test_points_that_do_not_move_with_their_body_are_named(tmp_path):
-    from jaxlink.solvers.assemble import solve
     from jaxlink.analysis.kinetostatics import rigidity_errors
+    from jaxlink.solvers.assemble import solve
 
     mdl, path = model_of(tmp_path, BASE)
     mech = load(path)
@@ -145,3 +145,85 @@ def test_points_that_do_not_move_with_their_body_are_named(tmp_path):
     # the missing crank vector (25 mm) turns in the rod's frame: it drifts by about its diameter
     drift = float(errors[0].split("changes by ")[1].split(" mm")[0])
     assert 45.0 < drift <= 50.0
+
+
+# ----------------------------------------------------------------------------- checked at load, lines of the text
+
+
+def test_loads_of_text_names_the_line_of_a_bad_joint():
+    from jaxlink import loads
+
+    text = BASE.replace('kind = "prismatic"', 'kind = "prismatik"')
+    with pytest.raises(MechanismError) as info:
+        loads(text, file="inline.toml")  # no file on disk: the line comes from the text
+    e = info.value
+    assert e.file == "inline.toml" and e.key == "joints.guide.kind"
+    assert e.line == line_of(text, 'kind = "prismatik"') and "did you mean 'prismatic'" in e.reason
+    text = BASE.replace('bodies = ["crank", "rod"]', 'bodies = ["crank", "crank"]')
+    with pytest.raises(MechanismError) as info:
+        loads(text)
+    assert info.value.key == "joints.A.bodies" and info.value.line == line_of(text, '["crank", "crank"]')
+
+
+def test_an_edited_file_gets_the_line_of_the_text_that_was_parsed(tmp_path):
+    """The text differs from the file on disk (lines added above the mistake): the line is the text's."""
+    from jaxlink import loads
+
+    path = tmp_path / "m.toml"
+    path.write_text(BASE)
+    edited = BASE.replace("[parameters]\n", "[parameters]\n# a\n# b\n# c\n").replace(
+        'bodies = ["rod", "slider"]', 'bodies = ["rodd", "slider"]')
+    with pytest.raises(MechanismError) as info:
+        loads(edited, file=str(path))
+    assert info.value.line == line_of(edited, '"rodd"') != line_of(BASE, 'bodies = ["rod", "slider"]')
+    assert info.value.key == "joints.B.bodies"
+
+
+def test_check_reports_a_bad_body_key_with_file_line_and_key(tmp_path):
+    path = tmp_path / "m.toml"
+    text = BASE.replace("inertia = 2.6667e-4", "inertai = 2.6667e-4")
+    path.write_text(text)
+    r = subprocess.run([sys.executable, "-m", "jaxlink.cli", "check", str(path)], capture_output=True, text=True)
+    assert r.returncode == 2 and "Traceback" not in r.stderr
+    assert f"{path}:{line_of(text, 'inertai')}" in r.stderr and "[bodies.rod.inertai]" in r.stderr
+    assert "did you mean 'inertia'" in r.stderr
+
+
+def test_check_reports_a_bad_input_body_and_a_missing_body_table(tmp_path):
+    path = tmp_path / "m.toml"
+    text = BASE.replace('body = "crank"\n\n[unknowns]', 'body = "krank"\n\n[unknowns]')
+    path.write_text(text)
+    r = subprocess.run([sys.executable, "-m", "jaxlink.cli", "check", str(path)], capture_output=True, text=True)
+    assert r.returncode == 2 and f"{path}:{line_of(text, 'krank')}" in r.stderr and "[input.body]" in r.stderr
+    # joints that name no declared body: the file has [joints] but no [bodies]
+    start, stop = BASE.index("[bodies.crank]"), BASE.index("[joints.O]")
+    with pytest.raises(MechanismError) as info:
+        load_text(tmp_path, BASE[:start] + BASE[stop:])
+    assert info.value.key == "bodies" and "no bodies" in info.value.reason
+
+
+def load_text(tmp_path, text):
+    path = tmp_path / "t.toml"
+    path.write_text(text)
+    return load(str(path))
+
+
+def test_gravity_alone_is_checked_and_gives_no_body_model(tmp_path):
+    start = BASE.index("[bodies.crank]")
+    mech = load_text(tmp_path, BASE[:start] + "[environment]\ngravity = [0.0, -9.81]\n")
+    assert mech.bodies is None
+    with pytest.raises(MechanismError) as info:
+        load_text(tmp_path, BASE[:start] + "[environment]\ngravty = [0.0, -9.81]\n")
+    assert info.value.key == "environment.gravty" and "did you mean 'gravity'" in info.value.reason
+
+
+def test_grubler_counts_the_parsed_joints():
+    from jaxlink.model.structure import structure
+
+    info = structure(load("slider-crank-mass"))
+    # u = ground + crank, rod, slider; s = O, A, B, guide: n = 3·3 − 2·4 = 1, k = 4 − 4 + 1 = 1
+    assert info["grubler"] == {"members": 4, "joint_count": 4, "mobility": 1, "loops": 1}
+    info = structure(load("sewing-feed"))
+    # six members and seven revolute joints: n = 3·5 − 2·7 = 1, two independent loops
+    assert info["grubler"] == {"members": 6, "joint_count": 7, "mobility": 1, "loops": 2}
+    assert structure(load("four-bar"))["grubler"] is None

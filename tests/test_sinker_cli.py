@@ -8,9 +8,9 @@ import numpy as np
 import pytest
 
 from jaxlink import cli
+from jaxlink.cam.scene import load_scene
 from jaxlink.errors import MechanismError
 from jaxlink.scenes import describe, scene_paths
-from jaxlink.cam.scene import load_scene
 
 
 def test_builtin_scene():
@@ -108,3 +108,28 @@ def test_cli_jamming(tmp_path, capsys):
     assert abs(data["R10-50"]["dynamic_f"] - 0.1636) < 1e-3
     assert cli.main(["jamming", str(scene), "--tol", "0"]) == 2
     assert "--tol" in capsys.readouterr().err
+
+
+def test_geometry_entries_and_text_get_their_lines():
+    """The scene reader uses the linkage files' Locator: an entry of [[cam.geometry]] is found by
+    its index, and a scene given as text (edited, not on disk) gets the lines of that text."""
+    from jaxlink.cam.scene import loads_scene
+
+    text = scene_paths()["sinker-cam"].read_text()
+    old = 'name = "R10-50"\nR = 0.010                     # m\ndescent_deg = 50.0'
+    assert old in text
+    bad = text.replace(old, 'name = "R10-50"\nR = 0.010\n\ndescent_deg = 25.0')
+    with pytest.raises(MechanismError) as exc:
+        loads_scene(bad, file="edited.toml")
+    lines = bad.splitlines()
+    assert exc.value.key == "cam.geometry[2].descent_deg" and exc.value.file == "edited.toml"
+    assert lines[exc.value.line - 1].startswith("descent_deg = 25.0")
+    bad = text.replace(old, 'name = "R10-50"\nR = -0.010\ndescent_deg = 50.0')
+    with pytest.raises(MechanismError) as exc:
+        loads_scene(bad)
+    assert exc.value.key == "cam.geometry[2].R" and bad.splitlines()[exc.value.line - 1] == "R = -0.010"
+
+
+def test_set_suggests_the_name():
+    with pytest.raises(MechanismError, match="did you mean 'dynamics.damping'"):
+        load_scene("sinker-cam", ["dynamics.dampng=always"])

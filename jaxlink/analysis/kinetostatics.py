@@ -273,7 +273,7 @@ def reactions(mech: Mechanism, q, phis, p=None, *, omega, alpha=0.0, converged=N
 
     **Arguments:**
 
-    - `mech`: a mechanism whose file has `[bodies]` and `[joints]` (validated by `_bodies.model`).
+    - `mech`: a mechanism whose file has `[bodies]` and `[joints]` (checked when read: `jaxlink/files/bodies.py`).
     - `q`: (N, n) solved unknowns, or (B, N, n) for a batch of designs.
     - `phis`: (N,) inputs (rad), or (B, N).
     - `p`: (P,) parameters SI (default: the file's), or (B, P).
@@ -321,7 +321,7 @@ def solve_reactions(mech: Mechanism, phis, p=None, *, omega, alpha=0.0, singular
     """Solve the positions (`_assemble.solve`) and then the reactions: returns `(Solution, Reactions)`.
 
     `p` (P,) or (B, P) as in `solve`; `phis` (N,) in rad; `omega` rad/s."""
-    _bodies.model(mech)  # validate before the (longer) position solve
+    _bodies.model(mech)  # a file without bodies is refused before the (longer) position solve
     sol = solve(mech, phis, p)
     pp = mech.parameters if p is None else p
     return sol, reactions(mech, sol.q, phis, pp, omega=omega, alpha=alpha, converged=sol.converged,

@@ -8,13 +8,16 @@ split, arc, chord, and `[[cam.geometry]]` entries with name, R, descent_deg), `[
 `n` in rev/min. Unknown keys are errors (they are usually typos).
 
 `--set NAME=VALUE` overrides use `table.key` or a bare key that is unique across tables;
-VALUE is parsed as TOML (`0.1`, `[0.1, 0.12]`, `"polygon"`), a bare word as a string.
+VALUE is read as for the linkage files (`jaxlink/files/overrides.py`): TOML (`0.1`,
+`[0.1, 0.12]`, `"polygon"`), a bare word as a string. Error lines come from the `Locator`
+(`jaxlink/files/locator.py`) of the text that was parsed.
 """
 
 from __future__ import annotations
 
 import dataclasses
 import math
+import pathlib
 import re
 
 try:
@@ -23,8 +26,11 @@ except ModuleNotFoundError:  # Python < 3.11
     import tomli as tomllib  # type: ignore[no-redef]
 
 from ..errors import MechanismError
-from .track import CamGeometry, butt_speed
+from ..files.expr import suggest
+from ..files.locator import Locator
+from ..files.overrides import parse_set
 from .sinker import SinkerParams, make_params
+from .track import CamGeometry, butt_speed
 
 KIND = "cam-follower"
 
@@ -82,36 +88,6 @@ class SinkerScene:
                              file=self.path, key="simulate.geometry")
 
 
-def _line_of(text: str, table: str, key: str) -> int | None:
-    """1-based line of `key = ...` inside `[table]` (best effort, for error messages)."""
-    current = None
-    for i, line in enumerate(text.splitlines(), 1):
-        s = line.strip()
-        m = re.match(r"^\[\[?\s*([A-Za-z0-9_.\-]+)\s*\]\]?", s)
-        if m:
-            current = m.group(1).split(".")[0]
-            continue
-        if current == table and re.match(rf"^{re.escape(key)}\s*=", s):
-            return i
-    return None
-
-
-def parse_set(items: list[str] | None) -> list[tuple[str, object]]:
-    """`["C=1e5", "cam.arc=polygon"]` -> `[("C", 100000.0), ("cam.arc", "polygon")]`."""
-    out = []
-    for item in items or []:
-        if "=" not in item:
-            raise MechanismError(f"--set expects NAME=VALUE, got {item!r}")
-        name, raw = item.split("=", 1)
-        name, raw = name.strip(), raw.strip()
-        try:
-            value = tomllib.loads(f"v = {raw}")["v"]
-        except tomllib.TOMLDecodeError:
-            value = raw
-        out.append((name, value))
-    return out
-
-
 def _apply_set(data: dict, overrides, path: str) -> set[tuple[str, str]]:
     done = set()
     for name, value in overrides:
@@ -120,14 +96,17 @@ def _apply_set(data: dict, overrides, path: str) -> set[tuple[str, str]]:
         else:
             tables = [t for t, keys in _SCHEMA.items() if name in keys and t != "mechanism"]
             if len(tables) != 1:
+                bare = {k for t, keys in _SCHEMA.items() for k in keys if t != "mechanism"}
                 raise MechanismError(
-                    f"--set {name}: unknown parameter" if not tables else
+                    f"--set {name}: unknown parameter{suggest(name, bare)}" if not tables else
                     f"--set {name}: ambiguous, write one of "
                     + ", ".join(f"{t}.{name}" for t in tables), file=path, key=name)
             table, key = tables[0], name
         if table not in _SCHEMA or key not in _SCHEMA[table] or key == "geometry" and \
                 table == "cam":
-            raise MechanismError(f"--set {name}: unknown parameter", file=path, key=name)
+            known = [f"{t}.{k}" for t, keys in _SCHEMA.items() for k in keys if t != "mechanism"]
+            raise MechanismError(f"--set {name}: unknown parameter{suggest(name, known)}", file=path,
+                                 key=name)
         data.setdefault(table, {})[key] = value
         done.add((table, key))
     return done
@@ -146,21 +125,33 @@ def load_scene(path_or_name: str, overrides: list[str] | None = None) -> SinkerS
     from ..scenes import resolve
 
     p = resolve(path_or_name)
-    path = str(p)
-    text = p.read_text()
+    return loads_scene(p.read_text(encoding="utf-8"), file=str(p), overrides=overrides)
+
+
+def loads_scene(text: str, *, file: str = "<string>", overrides: list[str] | None = None) -> SinkerScene:
+    """Like `load_scene`, from the TOML text; `file` names it in error messages, whose lines are
+    those of `text`."""
+    path = file
+    loc = Locator(text)
     try:
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
-        raise MechanismError(f"not valid TOML: {exc}", file=path) from None
+        m = re.search(r"line (\d+)", str(exc))
+        raise MechanismError(f"not valid TOML: {exc}", file=path, line=int(m.group(1)) if m else None) from None
 
     overridden = set()
 
-    def err(msg, table, key, sub=None):
+    def err(msg, table, key, sub=None, *, index=None, subkey=None):
+        """`sub` extends the key (`[2].R`); `index`, `subkey`: the entry of an array of tables
+        `[[table.key]]` and its key, to find the line."""
+        name = f"{table}.{key}" + (sub or "")
         if (table, key) in overridden:
-            return MechanismError(msg + " (value from --set)", file=path,
-                                  key=f"{table}.{key}" + (sub or ""))
-        return MechanismError(msg, file=path, line=_line_of(text, table, key),
-                              key=f"{table}.{key}" + (sub or ""))
+            return MechanismError(msg + " (value from --set)", file=path, key=name)
+        if index is None:
+            line = loc.line(table, key)
+        else:
+            line = loc.line(f"{table}.{key}", subkey, index=index)
+        return MechanismError(msg, file=path, line=line, key=name)
 
     mech = data.get("mechanism")
     if not isinstance(mech, dict):
@@ -171,14 +162,15 @@ def load_scene(path_or_name: str, overrides: list[str] | None = None) -> SinkerS
     overridden.update(_apply_set(data, parse_set(overrides), path))
     for table, content in data.items():
         if table not in _SCHEMA:
-            raise MechanismError(f"unknown table [{table}]; known: " + ", ".join(_SCHEMA),
-                                 file=path, key=table)
+            raise MechanismError(f"unknown table [{table}]{suggest(table, _SCHEMA)}; known: "
+                                 + ", ".join(_SCHEMA), file=path, line=loc.line(table), key=table)
         if not isinstance(content, dict):
-            raise MechanismError(f"[{table}] must be a table", file=path, key=table)
+            raise MechanismError(f"[{table}] must be a table", file=path, line=loc.line("", table),
+                                 key=table)
         for key, value in content.items():
             want = _SCHEMA[table].get(key)
             if want is None:
-                raise err(f"unknown key; known keys of [{table}]: "
+                raise err(f"unknown key{suggest(key, _SCHEMA[table])}; known keys of [{table}]: "
                           + ", ".join(_SCHEMA[table]), table, key)
             if want is float and isinstance(value, int) and not isinstance(value, bool):
                 content[key] = float(value)
@@ -235,29 +227,29 @@ def load_scene(path_or_name: str, overrides: list[str] | None = None) -> SinkerS
     for i, gd in enumerate(raw_geoms):
         sub = f"[{i}]"
         if not isinstance(gd, dict):
-            raise err("each [[cam.geometry]] must be a table", "cam", "geometry", sub)
+            raise err("each [[cam.geometry]] must be a table", "cam", "geometry", sub, index=i)
         for key in gd:
             if key not in _GEOMETRY_KEYS:
                 raise err(f"unknown key {key!r}; known: name, R, descent_deg", "cam",
-                          "geometry", f"{sub}.{key}")
+                          "geometry", f"{sub}.{key}", index=i, subkey=key)
         for key, typ in _GEOMETRY_KEYS.items():
             if key not in gd:
-                raise err(f"missing key {key!r}", "cam", "geometry", sub)
+                raise err(f"missing key {key!r}", "cam", "geometry", sub, index=i)
             if typ is float and not (isinstance(gd[key], (int, float))
                                      and not isinstance(gd[key], bool)):
-                raise err(f"{key} must be a number", "cam", "geometry", f"{sub}.{key}")
+                raise err(f"{key} must be a number", "cam", "geometry", f"{sub}.{key}", index=i, subkey=key)
         if not gd["R"] > 0:
-            raise err("R must be positive (m)", "cam", "geometry", f"{sub}.R")
+            raise err("R must be positive (m)", "cam", "geometry", f"{sub}.R", index=i, subkey="R")
         if not rise < gd["descent_deg"] < 90:
             raise err(f"descent_deg must lie between rise_deg ({rise}) and 90",
-                      "cam", "geometry", f"{sub}.descent_deg")
+                      "cam", "geometry", f"{sub}.descent_deg", index=i, subkey="descent_deg")
         g = CamGeometry(str(gd["name"]), float(gd["R"]), math.radians(rise),
                         math.radians(float(gd["descent_deg"])), length=length,
                         split=(float(split[0]), float(split[1])), arc=arc, chord=chord)
         x_arc = g.radius * (math.sin(g.descent_angle) - math.sin(g.rise_angle))
         if x_arc >= length:
             raise err(f"the transition arc ({x_arc * 1e3:.2f} mm) does not fit in L",
-                      "cam", "geometry", f"{sub}.R")
+                      "cam", "geometry", f"{sub}.R", index=i, subkey="R")
         geoms.append(g)
     names = [g.name for g in geoms]
     if len(set(names)) != len(names):
@@ -280,7 +272,7 @@ def load_scene(path_or_name: str, overrides: list[str] | None = None) -> SinkerS
                          R_sum=sum(rs), F_P=fp, g=grav, damping_always=damping == "always",
                          cos_in_N=normal == "C*lag/cos")
     return SinkerScene(
-        path=path, name=str(mech.get("name", p.stem)),
+        path=path, name=str(mech.get("name", pathlib.Path(path).stem)),
         description=str(mech.get("description", "")), params=params, f_values=f_values,
         geometries=geoms, speed=butt_speed(n_rpm, diameter), sim_geometries=list(sim_geoms),
         method=method, rtol=rtol, atol=atol, points=points, jam_tol=jam_tol,

@@ -55,27 +55,12 @@ def add_mechanism_arguments(parser: argparse.ArgumentParser, *, positions: bool 
                             help="number of positions (default: a full revolution, 360/step)")
 
 
-def parse_sets(items) -> dict[str, float]:
-    out = {}
-    for item in items or []:
-        if "=" not in item:
-            raise MechanismError(f"--set {item!r}: expected NAME=VALUE, e.g. --set l2=2.0")
-        k, v = item.split("=", 1)
-        k = k.strip()
-        try:
-            out[k] = float(v)
-        except ValueError:
-            raise MechanismError(f"--set {item!r}: '{v}' is not a number") from None
-        if not math.isfinite(out[k]):
-            raise MechanismError(f"--set {item!r}: the value must be finite")
-    return out
-
-
 def load_from_args(args):
     """The mechanism of FILE with the `--set` overrides applied."""
+    from ..files.overrides import parse_numbers
     from ..files.reader import load
 
-    return load(args.file, overrides=parse_sets(getattr(args, "set", [])))
+    return load(args.file, overrides=parse_numbers(getattr(args, "set", [])))
 
 
 def inputs_from_args(mech, args) -> np.ndarray:
@@ -113,8 +98,10 @@ def register(sub) -> None:
 
     p = sub.add_parser(
         "check", help="check a mechanism file and report its structure",
-        description="Validate a mechanism file and report parameters (with their inferred units), "
-                    "unknowns, loops, equations, mobility and whether the guess assembles. "
+        description="Validate a mechanism file (every table, [bodies], [joints], [loads] and "
+                    "[environment] included) and report parameters (with their inferred units), "
+                    "unknowns, loops, equations, bodies and joints, mobility and whether the guess "
+                    "assembles. "
                     "Exit status 2 with a one-line message naming file, line, key and reason when "
                     "the file is wrong; 1 when it is valid but cannot be assembled at its start.",
     )
@@ -155,10 +142,10 @@ def cmd_check(args) -> int:
     enable_dtype(args.dtype)
     import jax.numpy as jnp
 
+    from ..model import structure as _structure
+    from ..results import RESULTS
     from ..solvers.assemble import NewtonOptions, method_for, solve
     from ..solvers.linalg import solve_small
-    from ..results import RESULTS
-    from ..model import structure as _structure
 
     mech = load_from_args(args)
     print(f"mechanism   {mech.name}  ({mech.file})")
@@ -179,6 +166,15 @@ def cmd_check(args) -> int:
         f"{n} ({len(t)} vectors)" for n, t in mech.loops))
     print(f"equations   {mech.n_equations} scalar (x and y of each loop)")
     print(f"points      {', '.join(mech.point_names) or '(none)'}")
+    if mech.bodies is not None:
+        mdl = mech.bodies
+        names = ("ground", *mdl.body_names)
+        print(f"bodies      {len(mdl.bodies)} moving: {', '.join(mdl.body_names)}; the input drives "
+              f"{mdl.body_names[mdl.input_body]}")
+        print(f"joints      {len(mdl.joints)}: " + ", ".join(
+            f"{j.name} ({j.kind} {names[j.a + 1]}–{names[j.b + 1]})" for j in mdl.joints))
+        loads = [*(f.name for f in mdl.forces), *(t.name for t in mdl.torques), *(s.name for s in mdl.springs)]
+        print(f"loads       {', '.join(loads) or '(none)'}; gravity ({mdl.gravity[0]:g}, {mdl.gravity[1]:g}) m/s²")
     info = _structure.structure(mech)
     print(f"mobility    {info['mobility_loops']} from the loops "
           "(unknowns + 1 input − equations)")

@@ -41,10 +41,10 @@ class ReactionsTable:
 def reactions_table(mech, phis, *, omega: float, p=None, dtype=np.float64, degrees=None) -> ReactionsTable:
     """Solve positions at `phis` (rad) and the reactions at input speed `omega` (rad/s). `degrees`:
     the input angles as given (the `input_deg` column; default `phis` converted)."""
-    from ..model import bodies as _bodies
-    from ..errors import MechanismError
-    from ..results import RESULTS
     from ..analysis.kinetostatics import rigidity_errors, solve_reactions
+    from ..errors import MechanismError
+    from ..model import bodies as _bodies
+    from ..results import RESULTS
 
     mdl = _bodies.model(mech)
     p = np.asarray(mech.parameters if p is None else p, dtype=dtype)
@@ -146,7 +146,7 @@ def cmd_reactions(args) -> int:
     from ..results import RESULTS
 
     mech = load_from_args(args)
-    _bodies.model(mech)  # file errors first
+    _bodies.model(mech)  # a file without bodies is refused before the solve
     phis = inputs_from_args(mech, args)
     omega = omega_from_args(args)
     degrees = args.start + args.step * np.arange(len(phis))  # exactly as asked (no rad round trip)

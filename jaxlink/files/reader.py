@@ -16,6 +16,7 @@ import numpy as np
 from ..errors import MechanismError
 from ..model.mechanism import Mechanism
 from . import expr as _expr
+from .bodies import read_bodies
 from .expr import ANGLE, LENGTH, ExprSyntaxError, UnitError
 from .locator import Locator
 
@@ -35,8 +36,9 @@ KNOWN_TABLES = {
 def load(source: str | pathlib.Path, *, overrides: Mapping[str, float] | None = None) -> Mechanism:
     """Load and validate a mechanism file (a path or a built-in scene name).
 
-    `overrides` replace parameter values (file units), as `--set` does on the command line.
-    Raises `MechanismError` naming the file, line, key and reason for anything wrong.
+    `overrides` replace parameter values (file units), as `--set` does on the command line
+    (`jaxlink/files/overrides.py` reads them). Raises `MechanismError` naming the file, line, key
+    and reason for anything wrong.
     """
     from ..scenes import resolve
 
@@ -46,7 +48,9 @@ def load(source: str | pathlib.Path, *, overrides: Mapping[str, float] | None = 
 
 
 def loads(text: str, *, file: str = "<string>", overrides: Mapping[str, float] | None = None) -> Mechanism:
-    """Like `load`, from the TOML text."""
+    """Like `load`, from the TOML text; `file` names it in error messages, whose lines are those
+    of `text`. Every table is checked here, `[bodies]`, `[joints]`, `[loads]` and `[environment]`
+    too (`jaxlink/files/bodies.py`)."""
     loc = Locator(text)
 
     def err(msg, table=None, key=None, item=None, keyname=None):
@@ -113,6 +117,8 @@ def loads(text: str, *, file: str = "<string>", overrides: Mapping[str, float] |
     input_name = str(inp["name"])
     _check_identifier(input_name, err, "input", "name")
     input_body = inp.get("body")
+    if input_body is not None and not isinstance(input_body, str):
+        raise err(f"'body' must name the body the input drives, got {input_body!r}", "input", "body")
     input_start = _num(inp.get("start", 0.0), err, "input", "start")
 
     unk_raw = data.get("unknowns", {})
@@ -276,7 +282,7 @@ def loads(text: str, *, file: str = "<string>", overrides: Mapping[str, float] |
 
     # a parameter standing alone as the LENGTH of a term is a link length: it must be >= 0
     for _, group in (("loops", loops), ("points", points)):
-        for lname, terms in group:
+        for _lname, terms in group:
             for term in terms:
                 if term.polar and isinstance(term.length, _expr.Name) and term.length.name in pvalues:
                     pn = term.length.name
@@ -286,6 +292,10 @@ def loads(text: str, *, file: str = "<string>", overrides: Mapping[str, float] |
                             "(put the sign in front of the term instead: \"-{pn} @ ...\")".replace("{pn}", pn),
                             "parameters", pn,
                         )
+
+    input_start_si = float(input_start) * fac[kinds[input_name]]
+    body_model = read_bodies(data, file=file, err=err, kinds=kinds, length_unit=units.length,
+                             input_name=input_name, input_body=input_body)
 
     tables = {k: v for k, v in data.items() if k not in ("mechanism", "parameters", "input", "unknowns",
                                                           "loops", "points")}
@@ -300,7 +310,7 @@ def loads(text: str, *, file: str = "<string>", overrides: Mapping[str, float] |
         input_name=input_name,
         input_kind=kinds[input_name],
         input_body=input_body,
-        input_start=float(input_start) * fac[kinds[input_name]],
+        input_start=input_start_si,
         unknown_names=tuple(guesses),
         unknown_kinds=tuple(kinds[n] for n in guesses),
         guess=q_si,
@@ -308,12 +318,15 @@ def loads(text: str, *, file: str = "<string>", overrides: Mapping[str, float] |
         points=points,
         tables=tables,
         kinds=dict(kinds),
+        bodies=body_model,
     )
-    # evaluate once, in numpy float64, to catch anything left (e.g. sqrt of a negative number)
-    r = np.asarray(mechanism.residual(jnp.asarray(q_si), jnp.asarray(0.0), jnp.asarray(p_si)))
+    # evaluate once at the guess, where it holds (the input at `[input] start`), in numpy float64,
+    # to catch anything left (e.g. sqrt of a negative number)
+    r = np.asarray(mechanism.residual(jnp.asarray(q_si), jnp.asarray(input_start_si), jnp.asarray(p_si)))
     if not np.all(np.isfinite(r)):
-        raise MechanismError("the loop equations give a non-finite value at the guess; check the expressions "
-                             "(sqrt of a negative number? division by zero?)", file=file, key="loops")
+        lname = loops[int(np.flatnonzero(~np.isfinite(r))[0]) // 2][0]
+        raise err(f"loop '{lname}' gives a non-finite value at the guess (the input at [input] start); "
+                  "check the expressions (sqrt of a negative number? division by zero?)", "loops", lname)
     return mechanism
 
 

@@ -63,6 +63,7 @@ class Structure:
     points: tuple
     tables: Mapping[str, Any]
     kinds: Mapping[str, str]
+    bodies: Any = None  # jaxlink.model.bodies.Model of [bodies]/[joints]/[loads]/[environment], or None
 
     # ------------------------------------------------------------------ sizes
     @property

@@ -1,61 +1,41 @@
-"""Structural analysis (seed 002; seed 000 ch. 4): mobility and independent loops.
+"""Structural analysis: mobility and independent loops.
 
 From the loop equations: mobility = (unknowns + 1 input) − 2 × loops.
 From `[joints]` (when the file has them), Grübler–Kutzbach for planar mechanisms:
 
-    n = 3 (u − 1) − Σ_t t · s_t,      s_t = Σ_v s_tv (v − 1),      k = s − u + 1,
+    n = 3 (u − 1) − Σ_t t · s_t,      k = s − u + 1,
 
-u = members including the frame (`ground`), t = 2 for revolute/prismatic joints and 1 for a higher
-pair (cam contact), a joint connecting v members counting v − 1 times.
+u = members including the frame (`ground`), s_t the number of joints of class t and s = Σ_t s_t.
+What a joint may be, and its class, is `JOINT_CLASS` (`jaxlink/model/bodies.py`): every joint
+joins two members (a pin shared by v members is written as v − 1 joints).
 """
 
 from __future__ import annotations
 
-from ..errors import MechanismError
+from .bodies import JOINT_CLASS, Model
 from .mechanism import Mechanism
 
-JOINT_CLASS = {"revolute": 2, "prismatic": 2, "higher": 1, "cam": 1}
 
-
-def grubler(joints: dict, *, file: str | None = None) -> dict:
-    """Mobility from a `{name: {"bodies": [...], "kind": ...}}` table of joints."""
-    members = {"ground"}
-    s = {1: 0, 2: 0}
-    for jname, j in joints.items():
-        if not isinstance(j, dict):
-            raise MechanismError(f"joint '{jname}' must be a table", file=file, key=f"joints.{jname}")
-        bodies = j.get("bodies")
-        if not isinstance(bodies, list) or len(bodies) < 2:
-            raise MechanismError("'bodies' must list at least two bodies (use \"ground\" for the frame)",
-                                 file=file, key=f"joints.{jname}.bodies")
-        kind = j.get("kind", "revolute")
-        if kind not in JOINT_CLASS:
-            raise MechanismError(f"unknown joint kind '{kind}'; use one of {', '.join(JOINT_CLASS)}",
-                                 file=file, key=f"joints.{jname}.kind")
-        members.update(str(b) for b in bodies)
-        s[JOINT_CLASS[kind]] += len(bodies) - 1
-    u = len(members)
-    joint_count = s[1] + s[2]
+def grubler(mdl: Model) -> dict:
+    """Members u, joint count s, mobility n and independent loops k of a body model."""
+    u = len(mdl.bodies) + 1
+    s = len(mdl.joints)
     return {
         "members": u,
-        "joint_count": joint_count,
-        "mobility": 3 * (u - 1) - 2 * s[2] - 1 * s[1],
-        "loops": joint_count - u + 1,
+        "joint_count": s,
+        "mobility": 3 * (u - 1) - sum(JOINT_CLASS[j.kind] for j in mdl.joints),
+        "loops": s - u + 1,
     }
 
 
 def structure(mech: Mechanism) -> dict:
-    info = {
+    return {
         "unknowns": mech.n_unknowns,
         "equations": mech.n_equations,
         "loops": len(mech.loops),
         "mobility_loops": mech.mobility_from_loops(),
-        "grubler": None,
+        "grubler": None if mech.bodies is None else grubler(mech.bodies),
     }
-    joints = mech.tables.get("joints")
-    if isinstance(joints, dict) and joints:
-        info["grubler"] = grubler(joints, file=mech.file)
-    return info
 
 
 # ----------------------------------------------------------------------------- solve order
