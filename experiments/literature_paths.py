@@ -1,4 +1,4 @@
-"""The eight four-bar path-synthesis cases of ../shared/benchmarks/fourbar-path/, solved by
+"""The eight four-bar path-synthesis cases of benchmarks/fourbar-path/, solved by
 `jaxlink optimize --method gradient` from random starts, against the literature's untimed error;
 and pylinkage's own optimizer (particle swarm) on the same objective and budget for some cases.
 
@@ -24,7 +24,7 @@ import numpy as np
 
 HERE = pathlib.Path(__file__).resolve().parent
 CASES_DIR = HERE / "fourbar_cases"
-BENCH = HERE.parents[1] / "shared" / "benchmarks" / "fourbar-path" / "fourbar_path_benchmarks.json"
+BENCH = HERE.parent / "benchmarks" / "fourbar-path" / "fourbar_path_benchmarks.json"
 CASES = ("mkh1", "mkh2", "mkh3", "mcgarva", "ullah", "yu1", "yu2", "wu3")
 
 

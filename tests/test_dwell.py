@@ -13,7 +13,7 @@ import pytest
 import jaxlink
 from jaxlink.analysis import dwell as _dwell
 
-REF = pathlib.Path(__file__).resolve().parents[2] / "shared" / "reference" / "needle_chosen_stroke.csv"
+REF = pathlib.Path(__file__).resolve().parent / "data" / "reference" / "needle_chosen_stroke.csv"
 
 # spec §3 table: stroke mm, dwell 0.25 %, 0.5 %, 1 %, 2 %, 0.05 mm, sign ch., sag mm, amax, vmax,
 # mu_min, rod°, toggle°

@@ -1,5 +1,5 @@
 """sewing-feed against seed 000 Tables 1-3, 11.1, 12.1 (transcribed in tests/data) and the
-independent reference CSV (../shared/reference/feed_original_2500rpm.csv)."""
+independent reference CSV (tests/data/reference/feed_original_2500rpm.csv)."""
 
 import pathlib
 
@@ -9,7 +9,7 @@ import pytest
 import jaxlink as jl
 
 DATA = pathlib.Path(__file__).parent / "data"
-REF = pathlib.Path(__file__).resolve().parents[1].parent / "shared" / "reference" / "feed_original_2500rpm.csv"
+REF = pathlib.Path(__file__).resolve().parent / "data" / "reference" / "feed_original_2500rpm.csv"
 
 
 def _feed(overrides=None, omega=1.0, start=75.0, count=73, step=5.0):

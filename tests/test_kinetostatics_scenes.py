@@ -15,9 +15,7 @@ from jaxlink import load
 from jaxlink.scenes import scene_paths
 
 
-REFERENCE = pathlib.Path(__file__).resolve().parents[2] / "shared" / "reference" / "needle_chosen_stroke.csv"
-if not REFERENCE.exists():  # the shared folder beside the working tree
-    REFERENCE = pathlib.Path("/work/shared/reference/needle_chosen_stroke.csv")
+REFERENCE = pathlib.Path(__file__).resolve().parent / "data" / "reference" / "needle_chosen_stroke.csv"
 
 
 def test_needle_reactions_match_the_reference(tmp_path):

@@ -19,7 +19,7 @@ from jaxlink.optimize.search import _u_of_v, _v_of_u, run
 
 ROOT = pathlib.Path(__file__).resolve().parents[1]
 CASES = ROOT / "experiments" / "fourbar_cases"
-BENCH = ROOT.parent / "shared" / "benchmarks" / "fourbar-path" / "fourbar_path_benchmarks.json"
+BENCH = ROOT / "benchmarks" / "fourbar-path" / "fourbar_path_benchmarks.json"
 
 
 @pytest.fixture(scope="module")
@@ -79,7 +79,6 @@ def test_feed_reproduces_published_path_figures(feed):
     assert abs(r2["dx"]) == pytest.approx(0.235, abs=5e-4)
 
 
-@pytest.mark.skipif(not BENCH.exists(), reason="benchmarks/fourbar-path not available")
 @pytest.mark.parametrize("case", ["mcgarva"])  # its literature solution is on circuit c2
 def test_literature_case_files_reproduce_reference_error(case):
     ref = json.loads(BENCH.read_text())[case]["ref_sse_nearest"]

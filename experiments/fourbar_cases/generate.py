@@ -1,4 +1,4 @@
-"""Write one mechanism file per four-bar path-synthesis case of ../shared/benchmarks/fourbar-path/.
+"""Write one mechanism file per four-bar path-synthesis case of benchmarks/fourbar-path/.
 
 Each file's design is the literature solution (so `jaxlink kinematics` shows it and its untimed
 error reproduces the benchmark's `ref_sse_nearest`); its `[optimize]` section makes the ground
@@ -23,7 +23,7 @@ import sys
 import numpy as np
 
 HERE = pathlib.Path(__file__).resolve().parent
-DEFAULT = HERE.parents[2] / "shared" / "benchmarks" / "fourbar-path"
+DEFAULT = HERE.parents[1] / "benchmarks" / "fourbar-path"
 CASES = ("mkh1", "mkh2", "mkh3", "mcgarva", "ullah", "yu1", "yu2", "wu3")
 
 
