@@ -9,8 +9,9 @@ coupler point P. Measured in this run, on the same designs:
 - **pylinkage numba core over many designs**: the same compiled `simulate` called in a Python loop
   over designs, with each design's constraint array and start positions written directly (no
   `Linkage` rebuild: the fastest way pylinkage can sweep designs; single-threaded, as pylinkage is);
-- **jaxlink** `solve` (default `method="auto"`: closed-form dyads) + the coupler point
-  (`transfer(order=0)`), one jitted call for all designs, float64 and float32.
+- **jaxlink** `jl.solve(mech, phis, P, q0)` (default `method="auto"`: closed-form dyads), which
+  returns the coupler point too (`Solution.points`): the call the README shows, one call for all
+  designs, float64 and float32.
 
 Error: max |ΔP| (m) of the coupler point against the Freudenstein closed form (numpy, float64) on
 the start branch, over every design and angle. Time: best of repeats after compilation. Run:
@@ -203,11 +204,11 @@ def main(argv=None) -> dict:
         Pd = jnp.asarray(P, dtype=dtype)
         ph = jnp.asarray(phis, dtype=dtype)
 
-        @jax.jit
-        def f(Pd, ph=ph):
-            sol = jl.solve(mech, ph, Pd, jnp.asarray(mech.guess, dtype=Pd.dtype))
-            xy = jax.vmap(lambda q, p: jl.transfer(mech, ph, q, p, order=0).points[:, 0])(sol.q, Pd)
-            return xy, sol.converged
+        q0 = jnp.asarray(mech.guess, dtype=dtype)
+
+        def f(Pd, ph=ph, q0=q0):  # the call the README shows: one jitted solve, points included
+            sol = jl.solve(mech, ph, Pd, q0)
+            return sol.points[:, :, 0], sol.converged
 
         t = time.perf_counter()
         jax.block_until_ready(f(Pd))
@@ -215,7 +216,7 @@ def main(argv=None) -> dict:
         tbest, (xy, conv) = best_of(lambda: f(Pd), repeats)
         err = float(np.max(np.abs(np.asarray(xy, dtype=float) - ref_xy[:, 1:])))
         name = np.dtype(dtype).name
-        log(f"jaxlink solve + coupler point ({B} designs, jit)", name, B * STEPS / tbest, err)
+        log(f"jaxlink solve with points ({B} designs)", name, B * STEPS / tbest, err)
         results[f"jaxlink_{name}_positions_per_s"] = B * STEPS / tbest
         results[f"jaxlink_{name}_max_abs_error_m"] = err
         results[f"jaxlink_{name}_compile_s"] = compile_s - tbest
@@ -228,7 +229,7 @@ def main(argv=None) -> dict:
             for k in ("float64", "float32"):
                 rate = one[f"jaxlink_{k}_positions_per_s"]
                 results[f"jaxlink_{k}_positions_per_s_1core"] = rate
-                log("jaxlink solve + coupler point, 1 core", k, rate, one[f"jaxlink_{k}_max_abs_error_m"])
+                log("jaxlink solve with points, 1 core", k, rate, one[f"jaxlink_{k}_max_abs_error_m"])
     if "pylinkage_core_positions_per_s" in results:
         for k in ("float64", "float32"):
             if f"jaxlink_{k}_positions_per_s_1core" in results:

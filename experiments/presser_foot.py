@@ -30,9 +30,7 @@ jax.config.update("jax_enable_x64", True)
 import jax.numpy as jnp  # noqa: E402
 import numpy as np  # noqa: E402
 
-from jaxlink.solvers.assemble import solve  # noqa: E402
-from jaxlink.analysis.transfer import time_derivatives, transfer  # noqa: E402
-from jaxlink import load  # noqa: E402
+from jaxlink import load, solve, time_derivatives, transfer  # noqa: E402
 
 # seed 000 ch. 12
 C_SPRING = 3100.0  # N/m, spring stiffness (manufacturer)

@@ -1,21 +1,35 @@
-"""jaxlink: planar mechanisms in JAX — a vectorized, differentiable Newton loop-closure solver,
+"""jaxlink: planar mechanisms in JAX — a vectorized, differentiable loop-closure solver,
 kinematics, reactions, design search and cam-follower dynamics.
 
-The library follows the dtype of its inputs; call
-`jax.config.update("jax_enable_x64", True)` for float64 (the command line does).
+The public API (everything else is internal and may change):
+
+- files: `load`, `loads`, `Mechanism`, `MechanismError`;
+- positions: `solve`, `solve_path`, `NewtonOptions`, `Solution`, `SolveStats`, `RESULTS`;
+- kinematics: `transfer`, `Transfer`, `time_derivatives`;
+- kinetostatics: `reactions`, `solve_reactions`, `Reactions`, `body_motion`, `BodyMotion`;
+- subpackages: `jaxlink.optimize` (design search), `jaxlink.cam` (cam-follower dynamics).
+
+Every function takes `(mech, phis, …, p)` in that order. The library follows the dtype of its
+inputs: call `jax.config.update("jax_enable_x64", True)` for float64 (the command line does).
 """
 
-from .solvers.assemble import NewtonOptions as NewtonOptions
-from .solvers.assemble import solve as solve
-from .solvers.assemble import solve_path as solve_path
-from .errors import MechanismError as MechanismError
+from .analysis.kinetostatics import BodyMotion as BodyMotion
+from .analysis.kinetostatics import Reactions as Reactions
+from .analysis.kinetostatics import body_motion as body_motion
+from .analysis.kinetostatics import reactions as reactions
+from .analysis.kinetostatics import solve_reactions as solve_reactions
 from .analysis.transfer import Transfer as Transfer
 from .analysis.transfer import time_derivatives as time_derivatives
 from .analysis.transfer import transfer as transfer
-from .model.mechanism import Mechanism as Mechanism
+from .errors import MechanismError as MechanismError
 from .files.reader import load as load
 from .files.reader import loads as loads
+from .model.mechanism import Mechanism as Mechanism
 from .results import RESULTS as RESULTS
 from .results import Solution as Solution
+from .results import SolveStats as SolveStats
+from .solvers.assemble import NewtonOptions as NewtonOptions
+from .solvers.assemble import solve as solve
+from .solvers.assemble import solve_path as solve_path
 
 __version__ = "0.1.0"

@@ -161,7 +161,7 @@ def test_power_balance(name, overrides, start, step, omega, alpha):
     T, V, P = (np.asarray(x).reshape(n, len(offsets)) for x in _energies(mech)(sol.q, jnp.asarray(grid), mu, omega))
     dE_dt = omega * ((T + V)[:, 1:] @ weights) + (alpha / omega) * 2 * T[:, 0]
     q = np.asarray(sol.q).reshape(n, len(offsets), -1)[:, 0]
-    r = reactions(mech, q, phis, p, omega=omega, alpha=alpha)
+    r = reactions(mech, phis, p, q=q, omega=omega, alpha=alpha)
     assert np.all(np.asarray(r.result) == RESULTS.converged)
     drive = np.asarray(r.torque) * omega
     err = np.abs(drive + P[:, 0] - dE_dt).max()
@@ -205,7 +205,7 @@ def test_batched_designs_match_single_designs():
     phis = np.deg2rad(np.arange(0.0, 360.0, 15.0))  # the grid of the hand-derivation test: shared compiles
     ps = np.stack([mech.with_parameters(h2=25.0), mech.with_parameters(h2=30.0, h1=5.0)])
     sol = solve(mech, phis, jnp.asarray(ps))
-    rb = reactions(mech, sol.q, phis, ps, omega=60.0, converged=sol.converged)
+    rb = reactions(mech, phis, ps, q=sol.q, omega=60.0, converged=sol.converged)
     for b in range(2):
         _, r1 = solve_reactions(mech, phis, ps[b], omega=60.0)
         np.testing.assert_allclose(np.asarray(rb.force[b]), np.asarray(r1.force), rtol=1e-12, atol=1e-12)
@@ -234,6 +234,6 @@ def test_unconverged_positions_are_flagged():
     sol = solve(mech, phis)
     conv = np.ones(len(phis), bool)
     conv[1] = False
-    r = reactions(mech, sol.q, phis, omega=10.0, converged=conv)
+    r = reactions(mech, phis, q=sol.q, omega=10.0, converged=conv)
     assert list(np.asarray(r.result)[:3]) == [RESULTS.converged, RESULTS.not_assembled, RESULTS.converged]
     assert np.asarray(r.torque)[1] == 0.0 and np.asarray(r.torque)[0] != 0.0

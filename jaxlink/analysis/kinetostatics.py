@@ -267,33 +267,35 @@ def reactions_one(mech: Mechanism, mdl: _bodies.Model, q, phi, p, omega, alpha=0
 # ----------------------------------------------------------------------------- batched entry points
 
 
-def reactions(mech: Mechanism, q, phis, p=None, *, omega, alpha=0.0, converged=None,
-              singular_ratio: float | None = None) -> Reactions:
-    """Reactions and drive torque at solved positions, jitted and `vmap`ped.
-
-    **Arguments:**
-
-    - `mech`: a mechanism whose file has `[bodies]` and `[joints]` (checked when read: `jaxlink/files/bodies.py`).
-    - `q`: (N, n) solved unknowns, or (B, N, n) for a batch of designs.
-    - `phis`: (N,) inputs (rad), or (B, N).
-    - `p`: (P,) parameters SI (default: the file's), or (B, P).
-    - `omega`, `alpha` (keyword-only): input speed (rad/s) and acceleration (rad/s²); traced.
-    - `converged`: optional (…, N) bool from the position solve; positions that did not converge get
-      `RESULTS.not_assembled` and zeros.
-    - `singular_ratio`: pivot ratio below which the system counts as singular (static; default
-      max(1e-10, 1000 eps)).
-
-    **Returns:** `Reactions` with leading axes (N,) or (B, N).
-    """
-    mdl = _bodies.model(mech)
+def _floating(mech, p):
     p = jnp.asarray(mech.parameters if p is None else p)
     if not jnp.issubdtype(p.dtype, jnp.floating):
         p = p.astype(jnp.result_type(float))
-    q = jnp.asarray(q, dtype=p.dtype)
-    phis = jnp.asarray(phis, dtype=p.dtype)
-    omega = jnp.asarray(omega, dtype=p.dtype)
-    alpha = jnp.asarray(alpha, dtype=p.dtype)
-    out = _jitted(mech, mdl, p.ndim == 2, phis.ndim == 2, singular_ratio)(q, phis, p, omega, alpha)
+    return p
+
+
+def _vmapped(f, p, phis, n_args: int):
+    """`f(q, phi, p, *rest)` of one position vmapped over positions, and over designs if `p` is (B, P)."""
+    g = jax.vmap(f, in_axes=(0, 0, None) + (None,) * n_args)
+    if p.ndim == 2:
+        g = jax.vmap(g, in_axes=(0, 0 if phis.ndim == 2 else None, 0) + (None,) * n_args)
+    return g
+
+
+@functools.partial(jax.jit, static_argnames=("singular_ratio",))
+def _reactions(mech, phis, p, q, converged, omega, alpha, singular_ratio):
+    mdl = _bodies.model(mech)
+    p = _floating(mech, p)
+    phis = jnp.asarray(phis, p.dtype)
+    if q is None:
+        sol = solve(mech, phis, p, points=False)
+        q, converged = sol.q, sol.converged
+    q = jnp.asarray(q, p.dtype)
+    omega = jnp.asarray(omega, p.dtype)
+    alpha = jnp.asarray(alpha, p.dtype)
+    one = lambda qq, phi, pp, om, al: reactions_one(mech, mdl, qq, phi, pp, om, al,  # noqa: E731
+                                                    singular_ratio=singular_ratio)
+    out = _vmapped(one, p, phis, 2)(q, phis, p, omega, alpha)
     if converged is not None:
         conv = jnp.asarray(converged, dtype=bool)
         out = Reactions(
@@ -306,39 +308,84 @@ def reactions(mech: Mechanism, q, phis, p=None, *, omega, alpha=0.0, converged=N
     return out
 
 
-@functools.lru_cache(maxsize=64)
-def _jitted(mech, mdl, batch_p, batch_phi, singular_ratio):
-    def one(q, phi, p, omega, alpha):
-        return reactions_one(mech, mdl, q, phi, p, omega, alpha, singular_ratio=singular_ratio)
+def reactions(mech: Mechanism, phis, p=None, *, omega, alpha=0.0, q=None, converged=None,
+              singular_ratio: float | None = None) -> Reactions:
+    """Joint reactions and drive torque along a sequence of inputs (one jitted function).
 
-    f = jax.vmap(one, in_axes=(0, 0, None, None, None))
-    if batch_p:
-        f = jax.vmap(f, in_axes=(0, 0 if batch_phi else None, 0, None, None))
-    return jax.jit(f)
+    **Arguments:**
+
+    - `mech`: a mechanism whose file has `[bodies]` and `[joints]`.
+    - `phis`: (N,) inputs, SI (rad), or (B, N) for a batch of designs.
+    - `p`: (P,) parameters SI (default `mech.parameters`), or (B, P).
+    - `omega`, `alpha` (keyword-only): input speed (rad/s) and acceleration (rad/s²); traced.
+    - `q`: (N, n) or (B, N, n) solved positions (`Solution.q`); default: solved here by `solve`
+      (from the file's guesses), with their `converged` flags.
+    - `converged`: (…, N) bool of the position solve; positions that did not converge get
+      `RESULTS.not_assembled` and zeros.
+    - `singular_ratio`: pivot ratio below which the system counts as singular (static; default
+      max(1e-10, 1000 eps)).
+
+    **Returns:** `Reactions` (force, moment, torque, result, ratio) with leading axes (N,) or (B, N).
+    """
+    _bodies.model(mech)  # a clear error (no bodies) before tracing
+    return _reactions(mech, phis, p, q, converged, omega, alpha, singular_ratio)
 
 
 def solve_reactions(mech: Mechanism, phis, p=None, *, omega, alpha=0.0, singular_ratio: float | None = None):
-    """Solve the positions (`_assemble.solve`) and then the reactions: returns `(Solution, Reactions)`.
+    """Solve the positions (`solve`) and then the reactions: returns `(Solution, Reactions)`.
 
     `p` (P,) or (B, P) as in `solve`; `phis` (N,) in rad; `omega` rad/s."""
-    _bodies.model(mech)  # a file without bodies is refused before the (longer) position solve
+    _bodies.model(mech)  # validate before the (longer) position solve
     sol = solve(mech, phis, p)
-    pp = mech.parameters if p is None else p
-    return sol, reactions(mech, sol.q, phis, pp, omega=omega, alpha=alpha, converged=sol.converged,
+    return sol, reactions(mech, phis, p, omega=omega, alpha=alpha, q=sol.q, converged=sol.converged,
                           singular_ratio=singular_ratio)
+
+
+class BodyMotion(NamedTuple):
+    """Centroids and angles of the bodies (in the order of `[bodies]`) and their derivatives with
+    respect to the input: `centroid`, `dcentroid`, `ddcentroid` (…, nb, 2) m, m/rad, m/rad²;
+    `angle`, `dangle`, `ddangle` (…, nb) rad, 1, 1/rad (0 where the file declares none). Times:
+    v = c′ ω, a = c″ ω² + c′ α."""
+
+    centroid: jax.Array
+    dcentroid: jax.Array
+    ddcentroid: jax.Array
+    angle: jax.Array
+    dangle: jax.Array
+    ddangle: jax.Array
+
+
+@jax.jit
+def _body_motion(mech, phis, q, p):
+    mdl = _bodies.model(mech)
+    p = _floating(mech, p)
+
+    def one(qq, phi, pp):
+        (c, c1, c2), (a, a1, a2) = body_kinematics(mech, mdl, qq, phi, pp)
+        return BodyMotion(c, c1, c2, a, a1, a2)
+
+    phis = jnp.asarray(phis, p.dtype)
+    return _vmapped(one, p, phis, 0)(jnp.asarray(q, p.dtype), phis, p)
+
+
+def body_motion(mech: Mechanism, phis, q, p=None) -> BodyMotion:
+    """Centroids and angles of the bodies with their first and second derivatives with respect to
+    the input, at solved positions `q` (N, n) (or a batch, as `transfer`)."""
+    _bodies.model(mech)
+    return _body_motion(mech, phis, q, p)
 
 
 # ----------------------------------------------------------------------------- consistency of the file
 
 
-@functools.lru_cache(maxsize=64)
-def _jitted_points(mech, mdl):
+@functools.partial(jax.jit, static_argnums=(1,))
+def _jitted_points(mech, mdl, q, phis, p):
     def one(q, phi, p):
         c, a = motion(mech, mdl, q, phi, p)
         pts, _, fpts, spts = _geometry(mech, mdl, q, phi, p)
         return c, a, pts, fpts, spts
 
-    return jax.jit(jax.vmap(one, in_axes=(0, 0, None)))
+    return jax.vmap(one, in_axes=(0, 0, None))(q, phis, p)
 
 
 def rigidity_errors(mech: Mechanism, q, phis, p=None, *, rtol: float | None = None) -> list:
@@ -354,7 +401,7 @@ def rigidity_errors(mech: Mechanism, q, phis, p=None, *, rtol: float | None = No
     if rtol is None:
         rtol = max(1e-7, 1e3 * float(jnp.finfo(q.dtype).eps))
     p = np.asarray(mech.parameters if p is None else p, dtype=q.dtype)
-    c, a, pts, fpts, spts = (np.asarray(x) for x in _jitted_points(mech, mdl)(
+    c, a, pts, fpts, spts = (np.asarray(x) for x in _jitted_points(mech, mdl,
         jnp.asarray(q), jnp.asarray(phis, dtype=jnp.asarray(q).dtype), jnp.asarray(p)))
     scale = float(mech.length_scale(jnp.asarray(p)))
     unit = mech.units.length
