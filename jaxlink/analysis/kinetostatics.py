@@ -1,5 +1,5 @@
-"""Kinetostatics: joint reactions and the driving torque from the solved kinematics (seed 000 §6.1,
-the d'Alembert "release" method, A_S F_S = Q_S).
+"""Kinetostatics: joint reactions and the driving torque from the solved kinematics (the d'Alembert
+"release" method, A_S F_S = Q_S; docs/methods/kinetostatics.md).
 
 Every moving body b is released from its joints. With its centroid c_b, mass m_b, inertia J_b about
 the centroid and orientation θ_b, d'Alembert's principle gives three equations per body (forces, and

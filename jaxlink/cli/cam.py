@@ -25,12 +25,12 @@ def register(subparsers) -> None:
         "simulate",
         help="simulate a cam follower (knitting sinker) for each friction coefficient",
         description=(
-            "Integrate the sinker's equation of motion (seed eq. 4.25) over one cam passage "
+            "Integrate the sinker's equation of motion (docs/methods/sinker.md) over one cam passage "
             "for every friction coefficient f of the scene and every geometry listed in "
             "[simulate].geometry, in one batched (vmapped) JAX call. Prints the rise and "
             "descent maxima; writes the time histories as CSV (long format, one block per "
             "geometry and f; columns geometry, f, t_s, yz_m, y_m, v_m_s, a_m_s2, lag_m, N_N, "
-            "contact) and a figure like the seed's graphs 5.1-5.4 (acceleration, velocity, "
+            "contact) and a figure like the thesis's graphs 5.1-5.4 (acceleration, velocity, "
             "lift, lag; one curve per f). Exit status 1 if an integration failed."),
     )
     p.add_argument("file", metavar="FILE", help=_FILE_HELP)
@@ -157,7 +157,7 @@ def _plot(path, scene, geoms, cam, case, n_f):
         ax.axvline(t2, color="0.5", lw=0.6)
         ax.axhline(0.0, color="0.8", lw=0.5)
         ax.set_ylabel(ylabel)
-        ax.set_title(f"{ylabel.split(' (')[0]} (seed {title})", fontsize=9)
+        ax.set_title(f"{ylabel.split(' (')[0]} (cf. thesis {title})", fontsize=9)
         ax.grid(alpha=0.3)
         for x, txt in (((0 + t1) / 2, "rise"), ((t1 + t2) / 2, "arc"),
                        ((t2 + t_end) / 2, "descent")):

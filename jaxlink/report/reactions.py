@@ -92,7 +92,7 @@ def print_summary(table: ReactionsTable, out) -> None:
 
 
 def plot(path: str, mech, table: ReactionsTable) -> None:
-    """Reaction magnitudes over the input angle (like seed 000 Fig. 15.1) and the drive torque."""
+    """Reaction magnitudes over the input angle (as in the feed-mechanism thesis, Fig. 15.1) and the drive torque."""
     import matplotlib
 
     matplotlib.use("Agg")
