@@ -1,15 +1,22 @@
 """The `jaxlink` command line.
 
-Each group of commands lives in its own module with a `register(subparsers)` function that
-adds its sub-commands; a sub-command's handler takes the parsed `argparse.Namespace` and
-returns an exit status. Bad input raises `MechanismError`, printed here as one line
-(no traceback) with exit status 2.
+Each group of commands lives in its own module with a `register(subparsers)` function that adds
+its sub-commands; a sub-command's handler takes the parsed `argparse.Namespace` and returns an
+exit status.
+
+One error path: bad input (a file, an option, an output that cannot be written) raises
+`MechanismError` (or an `OSError` of the output), printed here as one line on standard error with
+exit status 2; a valid request that cannot be solved (an unassemblable design) returns 1 from its
+handler. Anything else is a bug: one "internal error" line (the traceback with `--debug`) and exit
+status 3. A closed output pipe (`jaxlink scenes | head -1`) ends quietly.
 """
 
 from __future__ import annotations
 
 import argparse
+import difflib
 import importlib
+import os
 import sys
 
 from ..errors import MechanismError
@@ -23,44 +30,70 @@ COMMAND_MODULES = (
 )
 
 
+class _Parser(argparse.ArgumentParser):
+    """argparse with "did you mean" for a mistyped command."""
+
+    def error(self, message):
+        if "invalid choice:" in message and "argument COMMAND" in message:
+            word = message.split("invalid choice:", 1)[1].split("'")[1] if "'" in message else ""
+            names = [a.dest for a in getattr(self, "_commands", [])]
+            close = difflib.get_close_matches(word, names, n=1)
+            if close:
+                message += f" — did you mean '{close[0]}'?"
+        super().error(message)
+
+
+def _version() -> str:
+    from .. import __version__
+
+    return f"jaxlink {__version__}"
+
+
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
+    parser = _Parser(
         prog="jaxlink",
         description=(
-            "Planar mechanisms (linkages, cam followers): vectorized Newton loop-closure solver "
-            "in JAX, kinematics, reactions, design search, cam-follower dynamics. "
-            "A FILE argument is a mechanism TOML file or the name of a built-in scene "
-            "(see `jaxlink scenes`)."
+            "Planar mechanisms (linkages, cam followers) in JAX: loop-closure solver (closed-form "
+            "dyads where the structure allows, else Newton with continuation), kinematics, "
+            "reactions, design search, cam-follower dynamics. A FILE argument is a mechanism TOML "
+            "file or the name of a built-in scene (see `jaxlink scenes`)."
         ),
     )
+    parser.add_argument("--version", action="version", version=_version())
+    parser.add_argument("--debug", action="store_true", help="show the traceback of an internal error")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     sub.required = True
     for name in COMMAND_MODULES:
-        try:
-            module = importlib.import_module(name)
-        except ModuleNotFoundError as exc:  # a command group not shipped in this build
-            if exc.name == name:
-                continue
-            raise
-        module.register(sub)
+        importlib.import_module(name).register(sub)
+    parser._commands = list(sub._choices_actions)  # type: ignore[attr-defined]
     return parser
 
 
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
+    name = f"jaxlink {args.command}"
     try:
         return int(args.func(args) or 0)
     except MechanismError as exc:
-        print(f"jaxlink {args.command}: error: {exc}", file=sys.stderr)
+        print(f"{name}: error: {exc}", file=sys.stderr)
         return 2
-    except (FileNotFoundError, IsADirectoryError, PermissionError) as exc:
-        print(f"jaxlink {args.command}: error: {exc}", file=sys.stderr)
+    except BrokenPipeError:
+        # the reader of our output went away (`| head`): not an error; silence the flush at exit
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+        return 0
+    except OSError as exc:  # an input or output file that cannot be read or written
+        where = f": {exc.filename}" if getattr(exc, "filename", None) else ""
+        print(f"{name}: error: {exc.strerror or exc}{where}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
-        print(f"jaxlink {args.command}: interrupted", file=sys.stderr)
+        print(f"{name}: interrupted", file=sys.stderr)
         return 130
+    except Exception as exc:  # a bug: say so in one line, the traceback only with --debug
+        if args.debug:
+            raise
+        print(f"{name}: internal error: {type(exc).__name__}: {exc} — a bug in jaxlink; please report it with "
+              f"this command line (`jaxlink --debug {args.command} …` shows the traceback)", file=sys.stderr)
+        return 3
 
-
-if __name__ == "__main__":
-    sys.exit(main())

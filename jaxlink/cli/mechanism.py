@@ -111,17 +111,17 @@ def register(sub) -> None:
     p = sub.add_parser(
         "kinematics", help="positions, velocities, accelerations over a revolution",
         description=(
-            "Solve the loop equations over the input positions (Newton with continuation) and "
+            "Solve the loop equations over the input positions (closed-form dyads where every block "
+            "of the structure is a dyad, else Newton with continuation; see `jaxlink check`) and "
             "write one row per position. CSV columns: input_deg; each unknown as NAME_rad or "
             "NAME_m; for each point P: P_x_m, P_y_m [, P_vx_m_s, P_vy_m_s] [, P_ax_m_s2, P_ay_m_s2]; "
             "converged (1/0); residual_m. Velocities and accelerations are exact (forward-mode AD, "
             "Jacobian solves) at constant input speed."
         ),
-        formatter_class=argparse.ArgumentDefaultsHelpFormatter,
     )
     add_mechanism_arguments(p)
     p.add_argument("--outputs", default="position,velocity,acceleration",
-                   help="comma-separated subset of position,velocity,acceleration")
+                   help="comma-separated subset of position,velocity,acceleration (default: all three)")
     p.add_argument("--csv", metavar="OUT", help="write the table to this CSV file (default: print a summary)")
     p.add_argument("--plot", metavar="OUT.png", help="plot the point paths and the curves over the input")
     p.add_argument("--animate", metavar="OUT.gif", help="animated GIF of the moving linkage")

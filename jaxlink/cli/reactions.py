@@ -27,7 +27,6 @@ def register(sub) -> None:
             "first); drive_torque_N_m (on the input body, counter-clockwise +). Rows that cannot be solved "
             "hold nan and make the exit status 1. Give the speed with --rpm or --omega (default 1 rad/s)."
         ),
-        formatter_class=argparse.ArgumentDefaultsHelpFormatter,
     )
     add_mechanism_arguments(p)
     p.add_argument("--csv", metavar="OUT", help="write the table to this CSV file (default: print a summary)")
