@@ -7,7 +7,6 @@ columns). Rows where the kinematics did not converge or the kinetostatic system 
 
 from __future__ import annotations
 
-import argparse
 import sys
 
 import numpy as np
