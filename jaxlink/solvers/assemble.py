@@ -49,6 +49,7 @@ ones included). Reverse mode (`jax.grad`) follows by transposition of that linea
 from __future__ import annotations
 
 import functools
+import warnings
 from typing import NamedTuple
 
 import jax
@@ -602,6 +603,24 @@ def _batch(mech, phis, p, q0, options: NewtonOptions, points: bool) -> Solution:
     return sol if batch else jax.tree_util.tree_map(lambda x: x[0], sol)
 
 
+_warned_float32 = False
+
+
+def _warn_if_float32(p) -> None:
+    """Warn once when float64 numbers (the file's, or numpy float64) meet JAX's float32 default."""
+    global _warned_float32
+    if _warned_float32 or jax.config.jax_enable_x64:
+        return
+    if p is None or np.result_type(getattr(p, "dtype", np.asarray(p).dtype)) == np.float64:
+        _warned_float32 = True
+        warnings.warn(
+            "jaxlink: JAX computes in float32 here (jax_enable_x64 is off), so positions are accurate to "
+            "about 1e-7 of the link lengths and the result is float32. For float64 call "
+            "jax.config.update(\"jax_enable_x64\", True) before solving; to keep float32, pass float32 "
+            "parameters (p=np.float32(mech.parameters)) and this warning goes away.",
+            stacklevel=3)
+
+
 @functools.partial(jax.jit, static_argnames=("options", "points"))
 def _solve_jit(mech, phis, p, q0, options, points):
     return _batch(mech, phis, p, q0, options, points)
@@ -630,6 +649,7 @@ def solve(mech: Mechanism, phis, p=None, q0=None, *, options: NewtonOptions = Ne
     of `p` (float64 needs `jax.config.update("jax_enable_x64", True)`). A batch placed on several
     devices (`jax.device_put(p, NamedSharding(...))`) is solved where it lies.
     """
+    _warn_if_float32(p)
     return _solve_jit(mech, phis, p, q0, options, points)
 
 
