@@ -1,9 +1,11 @@
 """Each kind of bad mechanism file is refused with a message naming the file, line, key and reason;
 the command line exits non-zero without a traceback."""
 
+import pathlib
 import subprocess
 import sys
 
+import numpy as np
 import pytest
 
 import jaxlink as jl
@@ -140,3 +142,26 @@ def test_locator_tables_arrays_of_tables_and_array_lines():
     assert loc.line("b.c", "z", index=1) == 10 and loc.line("b.c") == 7
     assert loc.line("d", "e") == 11  # a sub-table written as its own header
     assert loc.line("a", "nope") is None and loc.line("zz") is None
+
+
+def test_pi_and_points_from_points():
+    """`pi` is the angle π rad in any file; a point may start from a point defined above; the
+    rewritten four-bar traces the same coupler path as the scene."""
+    import jax
+
+    jax.config.update("jax_enable_x64", True)
+    import jaxlink as jl
+
+    base = (pathlib.Path(jl.__file__).parent / "scenes" / "four-bar.toml").read_text()
+    old = 'P = ["a @ phi2", "cx @ phi3", "cy @ phi3 + 90"]'
+    assert old in base
+    m = jl.loads(base.replace(old, 'A = ["a @ phi2"]\nP = ["A", "cx @ phi3", "cy @ phi3 + pi/2"]\nQ = ["-A"]'))
+    phis = np.deg2rad(np.arange(0.0, 360.0, 10.0))
+    s, s0 = jl.solve(m, phis), jl.solve(jl.load("four-bar"), phis)
+    np.testing.assert_allclose(np.asarray(s.points[:, 1]), np.asarray(s0.points[:, 0]), rtol=0, atol=1e-15)
+    np.testing.assert_allclose(np.asarray(s.points[:, 2]), -np.asarray(s.points[:, 0]), rtol=0, atol=0)
+    for bad, words in (('P = ["Z", "cx @ phi3"]', "'Z' is not a point"), ('P = ["P", "cx @ phi3"]', "before it is defined")):
+        with pytest.raises(jl.MechanismError, match=words):
+            jl.loads(base.replace(old, bad))
+    with pytest.raises(jl.MechanismError, match="reserved"):
+        jl.loads(base.replace("cx = 30.0", "pi = 30.0"))

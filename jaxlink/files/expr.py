@@ -24,6 +24,7 @@ at trace time.
 from __future__ import annotations
 
 import dataclasses
+import math
 import difflib
 from fractions import Fraction
 from typing import Callable, Mapping, Union
@@ -133,6 +134,8 @@ class Vec:
 Node = Union[Num, Name, Neg, Bin, Call, Vec]
 
 FUNCTIONS = {"sin": 1, "cos": 1, "tan": 1, "sqrt": 1, "asin": 1, "acos": 1, "atan": 1, "atan2": 2}
+# named constants: `pi` is the angle π rad (180°) in any file, whatever its angle unit
+CONSTANTS = {"pi": math.pi}
 
 
 @dataclasses.dataclass(frozen=True)
@@ -312,10 +315,11 @@ class ExprSyntaxError(Exception):
 
 
 def names_in(node: Node | None) -> list[Name]:
+    """The names an expression uses (not the constants of `CONSTANTS`)."""
     if node is None or isinstance(node, Num):
         return []
     if isinstance(node, Name):
-        return [node]
+        return [] if node.name in CONSTANTS else [node]
     if isinstance(node, Neg):
         return names_in(node.arg)
     if isinstance(node, Bin):
@@ -364,6 +368,8 @@ def dim_of(node: Node, kinds: Mapping[str, str | None]) -> Dim | None:
     yet known); raises `UnitError` when inconsistent, KeyError for an unknown kind."""
     if isinstance(node, Num):
         return None
+    if isinstance(node, Name) and node.name in CONSTANTS:
+        return ANGLE
     if isinstance(node, Name):
         k = kinds[node.name]
         if k is None:
@@ -412,6 +418,8 @@ def kind_constraints(node: Node, expected: Dim | None, kinds: dict, record: Call
             return False, None
 
     if isinstance(node, Num):
+        return
+    if isinstance(node, Name) and node.name in CONSTANTS:
         return
     if isinstance(node, Name):
         if expected is not None:
@@ -507,6 +515,8 @@ def _as(value, d: Dim | None, target: Dim, units: Units):
 def _eval(node: Node, env, kinds, units):
     if isinstance(node, Num):
         return node.value, None
+    if isinstance(node, Name) and node.name in CONSTANTS and node.name not in env:
+        return CONSTANTS[node.name], ANGLE
     if isinstance(node, Name):
         return env[node.name], KIND_DIMS[kinds[node.name]]
     if isinstance(node, Neg):

@@ -5,6 +5,7 @@ Every error names the file, the line (found in the text that was parsed) and the
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import pathlib
 import re
@@ -137,10 +138,11 @@ def loads(text: str, *, file: str = "<string>", overrides: Mapping[str, float] |
         raise err(f"the input '{input_name}' is also a parameter", "input", "name")
     if input_name in guesses:
         raise err(f"the input '{input_name}' is also an unknown", "input", "name")
-    reserved = set(_expr.FUNCTIONS)
+    reserved = set(_expr.FUNCTIONS) | set(_expr.CONSTANTS)
     for n in list(pvalues) + list(guesses) + [input_name]:
         if n in reserved:
-            raise MechanismError(f"'{n}' is a function name and cannot name a quantity", file=file)
+            raise MechanismError(f"'{n}' is reserved (a function or the constant pi) and cannot name a quantity",
+                                 file=file)
 
     # ---------------------------------------------------------------- loops and points
     def parse_terms(table: str, required: bool):
@@ -155,6 +157,21 @@ def loads(text: str, *, file: str = "<string>", overrides: Mapping[str, float] |
                 raise err(f"{table}.{lname} is empty: a {table[:-1]} needs at least one term", table, lname)
             parsed = []
             for i, t in enumerate(terms):
+                ref = re.fullmatch(r"\s*([+-]?)\s*([A-Za-z_][A-Za-z0-9_]*)\s*", t) if isinstance(t, str) else None
+                if table == "points" and ref and ref.group(2) in raw:
+                    # a point that starts from (or adds) another point: its terms, in place
+                    done = dict(out)
+                    if ref.group(2) not in done:
+                        raise err(f"point '{ref.group(2)}' is used in {table}.{lname} before it is defined "
+                                  "(or by itself); define it above", table, lname, item=str(t),
+                                  keyname=f"{table}.{lname}[{i}]")
+                    s = -1 if ref.group(1) == "-" else 1
+                    parsed.extend(dataclasses.replace(u, sign=s * u.sign) for u in done[ref.group(2)])
+                    continue
+                if table == "points" and ref:
+                    raise err(f"'{ref.group(2)}' is not a point of [points]{_expr.suggest(ref.group(2), raw)}; a term "
+                              "is 'LENGTH @ ANGLE', '(X, Y)' or the name of a point defined above", table, lname,
+                              item=str(t), keyname=f"{table}.{lname}[{i}]")
                 try:
                     parsed.append(_expr.parse_term(t))
                 except ExprSyntaxError as exc:
