@@ -35,7 +35,10 @@ CLI = DOCS / "reference" / "cli.md"
 
 # examples that cannot pass yet, with the reason (strict: an example that passes fails the test,
 # so that the mark is removed)
-XFAIL = {"reactions": "jaxlink.reactions not merged yet"}
+XFAIL = {
+    "reactions": "jaxlink.reactions not merged yet",
+    "kinetostatics-reactions": "jaxlink.reactions not merged yet",
+}
 
 _FENCE = re.compile(r"^```(\w*)[^\n]*\n(.*?)^```[ \t]*$", re.S | re.M)
 _NAME = re.compile(r"#\s*example:\s*(\S+)\s*$")
@@ -237,3 +240,35 @@ def test_cli_reference_names_every_command_and_option():
                 if action.metavar and action.metavar not in section:
                     missing.append(f"{command} {action.metavar}")
     assert not missing, f"docs/reference/cli.md does not document {missing}"
+
+
+# ----------------------------------------------------------------------------- links
+
+
+def _slug(heading: str) -> str:
+    """The anchor GitHub gives a heading: lower case, punctuation dropped, spaces to hyphens."""
+    return re.sub(r"[^\w\- ]", "", heading.strip().lower()).replace(" ", "-")
+
+
+def _anchors(path: pathlib.Path) -> set:
+    text = re.sub(r"^```.*?^```", "", path.read_text(encoding="utf-8"), flags=re.S | re.M)
+    return {_slug(m.group(1)) for m in re.finditer(r"^#+\s+(.+?)\s*$", text, re.M)}
+
+
+def test_links_between_docs_resolve():
+    """Every relative link of docs/ points to an existing file, and to an existing heading of a
+    markdown file when it names one."""
+    broken = []
+    for path in sorted(DOCS.rglob("*.md")):
+        text = re.sub(r"^```.*?^```", "", path.read_text(encoding="utf-8"), flags=re.S | re.M)
+        for m in re.finditer(r"\]\(([^)\s]+)\)", text):
+            target = m.group(1)
+            if re.match(r"[a-z]+:", target):
+                continue
+            file, _, anchor = target.partition("#")
+            dest = (path.parent / file).resolve() if file else path
+            if not dest.exists():
+                broken.append(f"{path.relative_to(DOCS.parent)}: {target}")
+            elif anchor and dest.suffix == ".md" and anchor not in _anchors(dest):
+                broken.append(f"{path.relative_to(DOCS.parent)}: {target} (no such heading)")
+    assert not broken, broken
