@@ -178,7 +178,12 @@ def test_loop_drawn_from_the_origin_matches_the_scene():
     ids=[e[0] for e in PYTHON_EXAMPLES],
 )
 def test_python_example(name, code, where, tmp_path, monkeypatch, capsys):
+    from jaxlink.optimize import OBJECTIVES
+
     monkeypatch.chdir(tmp_path)
+    # an example may register an objective: it is forgotten after the example
+    monkeypatch.setattr(OBJECTIVES, "_factories", dict(OBJECTIVES._factories))
+    monkeypatch.setattr(OBJECTIVES, "_keys", dict(OBJECTIVES._keys))
     exec(compile(code, where, "exec"), {"__name__": f"docs_example_{name}"})
 
 
