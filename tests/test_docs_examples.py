@@ -3,8 +3,8 @@ documentation cannot silently go stale.
 
 - Every ```toml block of docs/reference/file-format.md whose first line is `# example: NAME` is
   a complete file. A good one must load (`jaxlink.loads`; a cam-follower scene with the scene
-  loader), pass the checks `jaxlink reactions` and `jaxlink optimize` make of its `[bodies]` /
-  `[optimize]` tables, and assemble at its `[input] start`. A bad one (second line
+  loader), pass the checks `jaxlink optimize` makes of its `[optimize]` table, and assemble at
+  its `[input] start`. A bad one (second line
   `# error: TEXT`) must raise `MechanismError` with TEXT in the message.
 - Every ```python block of docs/ whose first line is `# example: NAME` is run, with float64
   enabled, in a fresh namespace and a temporary working directory.
@@ -79,20 +79,14 @@ def test_examples_are_found_and_named_uniquely():
 # ----------------------------------------------------------------------------- file examples
 
 
-def _check_file(name: str, text: str, tmp_path):
+def _check_file(name: str, text: str):
     """Read a file as the commands would; returns the mechanism (None for a cam-follower scene)."""
     if re.search(r'^kind\s*=\s*"cam-follower"', text, re.M):
-        from jaxlink.cam.scene import load_scene
+        from jaxlink.cam.scene import loads_scene
 
-        path = tmp_path / f"{name}.toml"
-        path.write_text(text, encoding="utf-8")
-        load_scene(str(path))
+        loads_scene(text, file=f"{name}.toml")
         return None
-    mech = jl.loads(text, file=f"{name}.toml")
-    if "bodies" in mech.tables or "joints" in mech.tables:
-        from jaxlink.model.bodies import model
-
-        model(mech)
+    mech = jl.loads(text, file=f"{name}.toml")   # every table but [optimize]
     if "optimize" in mech.tables:
         from jaxlink.optimize import OBJECTIVES, problem_from
 
@@ -101,13 +95,13 @@ def _check_file(name: str, text: str, tmp_path):
 
 
 @pytest.mark.parametrize("name,text,where,error", TOML_EXAMPLES, ids=[e[0] for e in TOML_EXAMPLES])
-def test_file_format_example(name, text, where, error, tmp_path):
+def test_file_format_example(name, text, where, error):
     if error is not None:
         with pytest.raises(jl.MechanismError) as info:
-            _check_file(name, text, tmp_path)
+            _check_file(name, text)
         assert error in str(info.value), f"{where}: the message is {str(info.value)!r}"
         return
-    mech = _check_file(name, text, tmp_path)
+    mech = _check_file(name, text)
     if mech is None:
         return
     # the guesses hold at [input] start: the file assembles there
@@ -206,8 +200,7 @@ def test_python_api_names_every_export(module):
 
 def test_file_format_names_every_table_and_key():
     from jaxlink.cam import scene
-    from jaxlink.files import reader
-    from jaxlink.model import bodies
+    from jaxlink.files import bodies, reader
     from jaxlink.optimize import OBJECTIVES, problem
 
     text = FILE_FORMAT.read_text(encoding="utf-8")
