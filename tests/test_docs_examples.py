@@ -35,10 +35,7 @@ CLI = DOCS / "reference" / "cli.md"
 
 # examples that cannot pass yet, with the reason (strict: an example that passes fails the test,
 # so that the mark is removed)
-XFAIL = {
-    "reactions": "jaxlink.reactions not merged yet",
-    "kinetostatics-reactions": "jaxlink.reactions not merged yet",
-}
+XFAIL: dict[str, str] = {}
 
 _FENCE = re.compile(r"^```(\w*)[^\n]*\n(.*?)^```[ \t]*$", re.S | re.M)
 _NAME = re.compile(r"#\s*example:\s*(\S+)\s*$")
