@@ -96,7 +96,7 @@ class Solution(NamedTuple):
     """
 
     q: jax.Array
-    points: jax.Array
+    points: jax.Array | None
     result: jax.Array
     stats: SolveStats
 

@@ -69,7 +69,7 @@ def read_bodies(
     *,
     file: str,
     err: Callable[..., MechanismError],
-    kinds: Mapping[str, str],
+    kinds: Mapping[str, str | None],
     length_unit: float,
     input_name: str,
     input_body: str | None,
@@ -251,7 +251,7 @@ def read_bodies(
         table = f"loads.{lname}"
         if not isinstance(ld, dict):
             raise err("a load must be a table [loads.NAME] with a kind", "loads", lname)
-        kind = ld.get("kind")
+        kind = ld.get("kind")  # type: ignore[assignment]
         if kind not in LOAD_KEYS:
             raise err(f"load kind {kind!r}{_expr.suggest(str(kind), LOAD_KEYS)}: use one of {', '.join(LOAD_KEYS)}",
                       table, "kind" if "kind" in ld else None)

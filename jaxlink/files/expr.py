@@ -448,6 +448,7 @@ def kind_constraints(node: Node, expected: Dim | None, kinds: dict, record: Call
         dr = dr or NUMBER if okr else None
         if expected is not None:
             if okl and not okr:
+                assert dl is not None
                 other = (
                     (expected[0] - dl[0], expected[1] - dl[1])
                     if node.op == "*"
@@ -455,6 +456,7 @@ def kind_constraints(node: Node, expected: Dim | None, kinds: dict, record: Call
                 )
                 kind_constraints(node.right, other, kinds, record)
             elif okr and not okl:
+                assert dr is not None
                 other = (
                     (expected[0] - dr[0], expected[1] - dr[1])
                     if node.op == "*"

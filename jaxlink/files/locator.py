@@ -30,7 +30,7 @@ class Locator:
 
     def __init__(self, text: str):
         self.lines = text.splitlines()
-        heads = [(0, "", None, None)]
+        heads: list[tuple[int, str, int | None, int | None]] = [(0, "", None, None)]
         count: dict[str, int] = {}
         for i, raw in enumerate(self.lines):
             m = _HEADER.match(raw.strip())

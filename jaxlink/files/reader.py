@@ -149,13 +149,13 @@ def loads(text: str, *, file: str = "<string>", overrides: Mapping[str, float] |
         raw = data.get(table, {})
         if not isinstance(raw, dict) or (required and not raw):
             raise err(f"[{table}] must be a table of NAME = [\"term\", ...]", table)
-        out = []
+        out: list = []
         for lname, terms in raw.items():
             if not isinstance(terms, list):
                 raise err(f"{table}.{lname} must be a list of terms like \"a @ phi2\"", table, lname)
             if not terms:
                 raise err(f"{table}.{lname} is empty: a {table[:-1]} needs at least one term", table, lname)
-            parsed = []
+            parsed: list = []
             for i, t in enumerate(terms):
                 ref = re.fullmatch(r"\s*([+-]?)\s*([A-Za-z_][A-Za-z0-9_]*)\s*", t) if isinstance(t, str) else None
                 if table == "points" and ref and ref.group(2) in raw:
@@ -293,9 +293,9 @@ def loads(text: str, *, file: str = "<string>", overrides: Mapping[str, float] |
                     file=file,
                 )
             pvalues[k] = _num(v, err, "parameters", k)
-    fac = {"length": units.length, "angle": units.angle, "number": 1.0}
-    p_si = np.array([pvalues[n] * fac[kinds[n]] for n in pnames], dtype=float)
-    q_si = np.array([guesses[n] * fac[kinds[n]] for n in guesses], dtype=float)
+    fac: dict[str | None, float] = {"length": units.length, "angle": units.angle, "number": 1.0}
+    p_si = np.asarray([pvalues[n] * fac[kinds[n]] for n in pnames], dtype=np.float64)
+    q_si = np.asarray([guesses[n] * fac[kinds[n]] for n in guesses], dtype=np.float64)
 
     # a parameter standing alone as the LENGTH of a term is a link length: it must be >= 0
     for _, group in (("loops", loops), ("points", points)):

@@ -111,9 +111,11 @@ class Structure:
         """(x, y) of one term in SI. `trig` optionally maps names to known (cos, sin) of their
         value, so that angles like `q + c` need no new trigonometry (see `unit_vector`)."""
         if term.polar:
+            assert term.length is not None and term.angle is not None
             length = _expr.evaluate(term.length, env, self.kinds, self.units, LENGTH)
             c, s = self.unit_vector(term.angle, env, trig)
             return term.sign * length * c, term.sign * length * s
+        assert term.x is not None and term.y is not None
         x = _expr.evaluate(term.x, env, self.kinds, self.units, LENGTH)
         y = _expr.evaluate(term.y, env, self.kinds, self.units, LENGTH)
         return term.sign * x, term.sign * y

@@ -62,7 +62,7 @@ def blocks(mech: Mechanism) -> tuple:
     remaining = list(range(len(mech.loops)))
     uses = {i: _unknowns_of(mech, mech.loops[i][1]) for i in remaining}
     known: set = set()
-    out = []
+    out: list[tuple[tuple[int, ...], tuple[int, ...]]] = []
     progress = True
     while remaining and progress:
         progress = False

@@ -609,7 +609,7 @@ _warned_float32 = False
 def _warn_if_float32(p) -> None:
     """Warn once when float64 numbers (the file's, or numpy float64) meet JAX's float32 default."""
     global _warned_float32
-    if _warned_float32 or jax.config.jax_enable_x64:
+    if _warned_float32 or jax.config.read("jax_enable_x64"):
         return
     if p is None or np.result_type(getattr(p, "dtype", np.asarray(p).dtype)) == np.float64:
         _warned_float32 = True
