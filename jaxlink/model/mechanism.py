@@ -175,12 +175,13 @@ class Structure:
             out.extend(self._sum(terms, env, "var", trig))
         return _stack(out, q) + const
 
-    def point_positions(self, q, phi, p):
-        """Positions of the points of interest, shape (n_points, 2), metres."""
+    def point_positions(self, q, phi, p, trig=None):
+        """Positions of the points of interest, shape (n_points, 2), metres. `trig` optionally
+        maps names to known (cos, sin) of their values (see `unit_vector`)."""
         if not self.points:
             return jnp.zeros((0, 2), dtype=jnp.result_type(q))
         env = self.env(q, phi, p)
-        rows = [jnp.stack(_broadcast(*self._sum(terms, env, "all"), like=q)) for _, terms in self.points]
+        rows = [jnp.stack(_broadcast(*self._sum(terms, env, "all", trig), like=q)) for _, terms in self.points]
         return jnp.stack(rows)
 
     def length_scale(self, p):

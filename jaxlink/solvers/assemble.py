@@ -310,7 +310,7 @@ def method_for(mech: Mechanism, opts: "NewtonOptions") -> str:
     return opts.method
 
 
-def _closed_form_path(mech, p, phis, q0, tol, trig_in, trig_p, thr, phi_ref):
+def _closed_form_path(mech, p, phis, q0, tol, trig_in, trig_p, thr, phi_ref, points: bool = False):
     """Every position of one design in closed form, on the branches nearest to the guess q0 at
     the input `phi_ref` where it holds (`_dyads.solve_nearest`): no Newton, no continuation.
 
@@ -327,13 +327,15 @@ def _closed_form_path(mech, p, phis, q0, tol, trig_in, trig_p, thr, phi_ref):
     q_ref = jnp.where(jnp.isfinite(q0), q0, 0.0)
 
     def one(phi, t_in):
-        q, ok, rn, sine = _dyads.solve(mech, dyads, sigma, q_ref, phi, p, {**t_in, **trig_p})
+        q, ok, rn, sine, trig = _dyads.solve_with_trig(mech, dyads, sigma, q_ref, phi, p, {**t_in, **trig_p})
+        # (cos, sin) of the solved angles, for the points (no new trigonometry there)
+        trig_q = {n: trig[n] for n, k in zip(mech.unknown_names, mech.unknown_kinds) if k == "angle"} if points else None
         conv = (rn <= tol) & ref_ok
         code = jnp.where(conv, jnp.where(sine < thr, RESULTS.singular, RESULTS.converged),
                          jnp.where(~ref_ok | ~jnp.isfinite(rn), RESULTS.nonfinite,
                                    jnp.where(ok, RESULTS.max_steps, RESULTS.cannot_assemble)))
         q = jnp.where(jnp.all(jnp.isfinite(q)), q, q_ref)
-        return q, rn, code.astype(jnp.int8), jnp.zeros((), jnp.int32)
+        return q, rn, code.astype(jnp.int8), jnp.zeros((), jnp.int32), trig_q
 
     return jax.vmap(one)(phis, trig_in)
 
@@ -482,9 +484,10 @@ def _lead_in(mech: Mechanism, opts: NewtonOptions, p, phi_a, phi_b, q0, tol, kw)
     return out[1]
 
 
-def _solve_batch_impl(mech: Mechanism, opts: NewtonOptions, P, phis, Q0, phi_ref):
+def _solve_batch_impl(mech: Mechanism, opts: NewtonOptions, points: bool, P, phis, Q0, phi_ref):
     """P (B, P), phis (N,) shared by all designs or (B, N), Q0 (B, n) holding at the inputs
-    `phi_ref` (B,) (None: at the first input) -> q (B, N, n), rnorm, result, steps (B, N)."""
+    `phi_ref` (B,) (None: at the first input) -> q (B, N, n), rnorm, result, steps (B, N), and the
+    points (B, N, n_points, 2) if `points` (else None)."""
     dtype = jnp.result_type(Q0)
     B = P.shape[0]
     shared = phis.ndim == 1
@@ -501,8 +504,18 @@ def _solve_batch_impl(mech: Mechanism, opts: NewtonOptions, P, phis, Q0, phi_ref
         # (B) is computed once, not inside every fused kernel.
         ref = phi0 if phi_ref is None else phi_ref
         trig_in, trig_p = materialize((_dyads.input_trig(mech, phis), _dyads.parameter_trig(mech, P)))
-        return jax.vmap(lambda p, ph, q0, t, ti, tp, r: _closed_form_path(mech, p, ph, q0, t, ti, tp, thr, r),
-                        in_axes=(0, ax, 0, 0, ax, 0, 0))(P, phis, Q0, tol, trig_in, trig_p, ref)
+        q, rn, code, k, trig_q = jax.vmap(
+            lambda p, ph, q0, t, ti, tp, r: _closed_form_path(mech, p, ph, q0, t, ti, tp, thr, r, points),
+            in_axes=(0, ax, 0, 0, ax, 0, 0))(P, phis, Q0, tol, trig_in, trig_p, ref)
+        if not points:
+            return q, rn, code, k, None
+        # the points from the stored q and its sines and cosines: a separate kernel that reads them
+        # (fused with the solve, XLA on CPU would compute the solve once per output)
+        q, trig_q = materialize((q, trig_q))
+        pts = jax.vmap(jax.vmap(lambda qq, phi, p, ti, tp, tq: mech.point_positions(qq, phi, p, {**ti, **tp, **tq}),
+                                in_axes=(0, 0, None, 0 if ax is None else 0, None, 0)),
+                       in_axes=(0, ax, 0, ax, 0, 0))(q, phis, P, trig_in, trig_p, trig_q)
+        return q, rn, code, k, pts
     # Newton: a design whose tolerance is not finite (a NaN or infinite length, even one that only
     # a point uses) or whose guess is not finite (it selects no branch) is `nonfinite` at every
     # position, without iterating (a NaN tolerance makes `newton` stop at once)
@@ -513,6 +526,19 @@ def _solve_batch_impl(mech: Mechanism, opts: NewtonOptions, P, phis, Q0, phi_ref
         Q0 = jax.vmap(lambda p, a, b, q0, t, tp: _lead_in(mech, opts, p, a, b, q0, t, _newton_kw(rtol, thr, tp)))(
             P, phi_ref, phi0, Q0, tol, trig_p)
     first = _first_positions(mech, opts, P, phi0, Q0, tol, rtol, thr, trig_p)
+    q1, r1, c1, k1, _ = first
+    out = _newton_path(mech, opts, P, phis, Q0, tol, rtol, thr, trig_p, first, N, method)
+    if not points:
+        return out + (None,)
+    # the points, with the sines and cosines of the angle parameters known
+    pts = jax.vmap(jax.vmap(lambda q, phi, p, tp: mech.point_positions(q, phi, p, tp), in_axes=(0, 0, None, None)),
+                   in_axes=(0, ax, 0, 0))(out[0], phis, P, trig_p)
+    return out + (pts,)
+
+
+def _newton_path(mech, opts, P, phis, Q0, tol, rtol, thr, trig_p, first, N, method):
+    """The positions after the first by Newton (continuation or independent)."""
+    ax = None if phis.ndim == 1 else 0
     q1, r1, c1, k1, _ = first
 
     def join(first, rest):
@@ -531,22 +557,22 @@ def _solve_batch_impl(mech: Mechanism, opts: NewtonOptions, P, phis, Q0, phi_ref
     return join((q1, r1, c1, k1), rest)
 
 
-@functools.partial(jax.custom_jvp, nondiff_argnums=(0, 1))
-def _solve_batch(structure, opts: NewtonOptions, P, phis, Q0, phi_ref):
+@functools.partial(jax.custom_jvp, nondiff_argnums=(0, 1, 2))
+def _solve_batch(structure, opts: NewtonOptions, points: bool, P, phis, Q0, phi_ref):
     """The differentiable batched solve: (P (B,P), phis (N,) or (B,N), Q0 (B,n), phi_ref (B,) or
-    None) -> (q, rnorm, result, steps). `structure` and `opts` are static."""
-    return _solve_batch_impl(structure, opts, P, phis, Q0, phi_ref)
+    None) -> (q, rnorm, result, steps, points or None). `structure`, `opts`, `points` are static."""
+    return _solve_batch_impl(structure, opts, points, P, phis, Q0, phi_ref)
 
 
 @_solve_batch.defjvp
-def _solve_batch_jvp(structure, opts, primals, tangents):
+def _solve_batch_jvp(structure, opts, points, primals, tangents):
     """Implicit differentiation: dq = −Φ_q⁻¹ (Φ_p dp + Φ_φ dφ) at every converged position (zero
     elsewhere); the guesses and the reference input select a branch and carry no derivative."""
     P, phis, Q0, phi_ref = primals
     dP, dphis = tangents[0], tangents[1]
     mech = structure
-    out = _solve_batch(structure, opts, P, phis, Q0, phi_ref)
-    q, rn, code, k = out
+    out = _solve_batch(structure, opts, points, P, phis, Q0, phi_ref)
+    q, rn, code, k, _ = out
     lin = _linear_solve(mech)
 
     def one(p, dp, qk, phik, dphik, ok):
@@ -562,17 +588,22 @@ def _solve_batch_jvp(structure, opts, primals, tangents):
     per_pos = jax.vmap(one, in_axes=(None, None, 0, 0, 0, 0))
     ax = None if phis.ndim == 1 else 0
     dq = jax.vmap(per_pos, in_axes=(0, 0, 0, ax, ax, 0))(P, dP, q, phis, dphis, code == RESULTS.converged)
-    return out, (dq, jnp.zeros_like(rn), _float0(code), _float0(k))
+    dpts = None
+    if points:
+        def dpoint(p, dp, qk, dqk, phik, dphik):
+            return jax.jvp(lambda qq, ph, pp: mech.point_positions(qq, ph, pp), (qk, phik, p), (dqk, dphik, dp))[1]
+
+        dpts = jax.vmap(jax.vmap(dpoint, in_axes=(None, None, 0, 0, 0, 0)), in_axes=(0, 0, 0, 0, ax, ax))(
+            P, dP, q, dq, phis, dphis)
+    return out, (dq, jnp.zeros_like(rn), _float0(code), _float0(k), dpts)
 
 
 def _float0(x):
     return np.zeros(np.shape(x), dtype=jax.dtypes.float0)
 
 
-def _points(structure, q, phis, P, code):
-    """Points of interest (B, N, n_points, 2) at solved positions; NaN where not assembled."""
-    ax = None if phis.ndim == 1 else 0
-    pts = jax.vmap(jax.vmap(structure.point_positions, in_axes=(0, 0, None)), in_axes=(0, ax, 0))(q, phis, P)
+def _mask_points(pts, code):
+    """Points where the position assembled (converged or singular), NaN elsewhere."""
     assembled = (code == RESULTS.converged) | (code == RESULTS.singular)
     return jnp.where(assembled[..., None, None], pts, jnp.nan)
 
@@ -597,8 +628,8 @@ def _batch(mech, phis, p, q0, options: NewtonOptions, points: bool) -> Solution:
     Q0 = q0 if q0.ndim == 2 else jnp.broadcast_to(q0, (B,) + q0.shape)
     phi_ref = jnp.full((B,), mech.input_start, dtype) if from_start else None
     structure = mech.structure if isinstance(mech, Mechanism) else mech
-    q, rn, code, k = _solve_batch(structure, options, P, phis, Q0, phi_ref)
-    pts = _points(structure, q, phis, P, code) if points else None
+    q, rn, code, k, pts = _solve_batch(structure, options, points, P, phis, Q0, phi_ref)
+    pts = _mask_points(pts, code) if points else None
     sol = Solution(q=q, points=pts, result=code, stats=SolveStats(residual=rn, steps=k))
     return sol if batch else jax.tree_util.tree_map(lambda x: x[0], sol)
 

@@ -208,6 +208,13 @@ def solve(mech: Mechanism, dyads, sigma, q_ref, phi, p, trig=None):
     return q, ok, resid, sine
 
 
+def solve_with_trig(mech: Mechanism, dyads, sigma, q_ref, phi, p, trig=None):
+    """`solve`, and the (cos, sin) of every angle it used, keyed by name (the input, the angle
+    parameters given in `trig`, the solved angles): `(q, assemblable, residual, sine, trig)`."""
+    q, ok, resid, _, sine, trig_all = _solve(mech, dyads, sigma, q_ref, phi, p, trig, with_trig=True)
+    return q, ok, resid, sine, trig_all
+
+
 def solve_nearest(mech: Mechanism, dyads, q_guess, phi, p, trig=None):
     """The closed-form configuration nearest to a guess, and its branches.
 
@@ -221,7 +228,7 @@ def solve_nearest(mech: Mechanism, dyads, q_guess, phi, p, trig=None):
     return q, ok, resid, sig
 
 
-def _solve(mech, dyads, sigma, q_ref, phi, p, trig):
+def _solve(mech, dyads, sigma, q_ref, phi, p, trig, with_trig: bool = False):
     ok_all = jnp.asarray(True)
     resid = None
     sine = None
@@ -293,4 +300,6 @@ def _solve(mech, dyads, sigma, q_ref, phi, p, trig):
         for i, (n, k) in enumerate(zip(mech.unknown_names, mech.unknown_kinds))
     ])
     sig = jnp.stack(sig_used) if sig_used else jnp.zeros((0,), q_ref.dtype)
+    if with_trig:
+        return q, ok_all, resid, sig, sine, trig
     return q, ok_all, resid, sig, sine

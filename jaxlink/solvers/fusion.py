@@ -35,3 +35,4 @@ def materialize(tree):
         return i + 1, jax.tree_util.tree_map(lambda v: v * one.astype(v.dtype), t)
 
     return jax.lax.while_loop(lambda s: s[0] < trips, body, (jnp.zeros((), jnp.int32), tree))[1]
+
