@@ -1,9 +1,11 @@
 """Dwell metrics of the ARACHNE needle six-bar against spec/needle-six-bar.md §3 (the table of
-metrics computed there by an independent numpy/scipy model) and the reference CSV."""
+metrics computed there by an independent numpy/scipy model) and the reference CSV; the roles
+that the file's [optimize] section names; the `dwell` objective and its command-line search."""
 
 import json
 import math
 import pathlib
+import re
 
 import jax
 import jax.numpy as jnp
@@ -11,7 +13,9 @@ import numpy as np
 import pytest
 
 import jaxlink
+import jaxlink.scenes
 from jaxlink.analysis import dwell as _dwell
+from jaxlink.scenes import needle_dwell
 
 REF = pathlib.Path(__file__).resolve().parent / "data" / "reference" / "needle_chosen_stroke.csv"
 
@@ -97,15 +101,15 @@ def test_spec_optimum(both):
 
 def test_dwell_score():
     """The objective's exact constraint check and penalty (spec §4 constraints)."""
-    opts = dict(_dwell.DWELL_OPTIONS)
+    opts = dict(needle_dwell.DWELL_OPTIONS)
     good = {"stroke_file": 20.005, "dwell_abs_deg": 55.0, "dwell_1pct_deg": 80.0, "acc_sign_changes": 2,
             "amax_rel": 1.95, "mu_min_deg": 40.0, "rod_angle_max_deg": 45.0, "toggle_clear_deg": 1.0,
             "grashof_margin_rel": 0.5}
-    j, ok = _dwell.dwell_score({k: jnp.asarray(v) for k, v in good.items()}, opts)
+    j, ok = needle_dwell.dwell_score({k: jnp.asarray(v) for k, v in good.items()}, opts)
     assert bool(ok) and float(j) == pytest.approx(-(55.0 + 0.3 * 80.0) / 100)
     for key, bad in (("stroke_file", 20.02), ("acc_sign_changes", 4), ("amax_rel", 1.96), ("mu_min_deg", 39.9),
                      ("rod_angle_max_deg", 45.1), ("toggle_clear_deg", 0.9), ("grashof_margin_rel", -0.1)):
-        jb, okb = _dwell.dwell_score({k: jnp.asarray(bad if k == key else v) for k, v in good.items()}, opts)
+        jb, okb = needle_dwell.dwell_score({k: jnp.asarray(bad if k == key else v) for k, v in good.items()}, opts)
         assert not bool(okb), key
         assert float(jb) > float(j), key
 
@@ -160,6 +164,85 @@ def test_scaled_chosen_in_crank_units(chosen, a34):
         assert got[key] == pytest.approx(chosen[1][key], abs=1e-6)
     assert got["dwell_005mm_deg"] == pytest.approx(got["dwell_025pct_deg"])
     assert got["stroke_rel"] * 12.5 == pytest.approx(chosen[1]["stroke_mm"], abs=1e-9)
+
+
+# ----------------------------------------------------------------------------- roles (the [optimize] keys)
+
+RENAMED_ROLES = """
+[optimize]
+slider = "y"
+guide_angle = 90.0
+coupler = "th3"
+rocker = "th4"
+rod = "th5"
+arm_offset = "gam"
+crank = "r2"
+four_bar = "crank_rocker"
+"""
+
+
+def _renamed_chosen():
+    """The chosen design's kinematics (scene needle-arachne, up to its kinetostatics) with every
+    name that the dwell metrics read changed, and the roles naming the new names."""
+    text = jaxlink.scenes.scene_paths()["needle-arachne"].read_text()
+    text = text[:text.index("# ---------------------------------------------------------------- kinetostatics")]
+    for old, new in (("phi3", "th3"), ("psi", "th4"), ("phi5", "th5"), ("beta", "gam"), ("l2", "r2"),
+                     ("four_bar", "crank_rocker"), ("s", "y")):
+        text = re.sub(rf"\b{old}\b", new, text)
+    return text
+
+
+def test_roles_name_the_unknowns_parameters_and_loop(chosen):
+    """The metrics read the mechanism only through the roles: renamed unknowns, parameters and
+    four-bar loop give the same numbers as the chosen design."""
+    mech = jaxlink.loads(_renamed_chosen() + RENAMED_ROLES, file="renamed.toml")
+    assert "phi3" not in mech.unknown_names and "l2" not in mech.parameter_names
+    roles = _dwell.dwell_roles(mech)
+    assert (roles.coupler, roles.arm_offset, roles.crank, roles.four_bar) == ("th3", "gam", "r2", "crank_rocker")
+    assert roles.guide == pytest.approx(math.pi / 2, rel=1e-15)
+    got = _dwell.needle_metrics(mech)
+    want = chosen[1]
+    assert set(got) == set(want)
+    for key, v in want.items():
+        assert got[key] == pytest.approx(v, rel=1e-12, abs=1e-12), key
+
+
+@pytest.mark.parametrize("key, value, words", [
+    ("coupler", None, "need 'coupler'"),
+    ("coupler", "phi9", "not an unknown"),
+    ("rocker", "s", "length"),               # an unknown, but a length where an angle is wanted
+    ("crank", "l9", "not a parameter"),
+    ("crank", "beta", "angle"),
+    ("arm_offset", "gamma", "not a parameter"),
+    ("slider", "B", "not an unknown"),       # a point, not an unknown
+    ("guide_angle", "up", "guide_angle"),
+    ("four_bar", "needle", "parameters only"),  # a loop, but not a four-bar of constant bars
+    ("four_bar", "fourbar", "did you mean 'four_bar'"),
+])
+def test_bad_roles_name_the_file_and_key(key, value, words):
+    mech = jaxlink.load("needle-arachne")
+    table = dict(mech.tables["optimize"])
+    if value is None:
+        table.pop(key)
+    else:
+        table[key] = value
+    with pytest.raises(jaxlink.MechanismError) as exc:
+        _dwell.dwell_roles(mech, table)
+    assert exc.value.key == f"optimize.{key}"
+    assert exc.value.file.endswith("needle-arachne.toml")
+    assert words in str(exc.value)
+
+
+def test_dwell_objective_checks_the_roles():
+    """`jaxlink optimize` on a file whose roles name a missing unknown: the error names the key."""
+    from jaxlink.optimize import problem_from
+    from jaxlink.optimize.objectives import OBJECTIVES
+
+    mech = jaxlink.load("needle-dwell")
+    with pytest.raises(jaxlink.MechanismError) as exc:
+        OBJECTIVES.build(problem_from(mech, {"rod": "phi6"}))
+    assert exc.value.key == "optimize.rod" and "phi6" in str(exc.value)
+    assert exc.value.file.endswith("needle-dwell.toml")
 
 
 # ----------------------------------------------------------------------------- the primitives

@@ -1,5 +1,19 @@
-"""Dwell metrics of a needle stroke (seed 003, spec/needle-six-bar.md §3) and the `dwell` design
-objective.
+"""Dwell metrics of a slider stroke driven by a crank-rocker four-bar and a rod: how long the
+slider stands (almost) still at its top dead centre, and the quality figures of the linkage.
+
+**Roles.** The metrics read the mechanism through the roles that its file's `[optimize]`
+section names (`dwell_roles`, `DwellRoles`; the needle six-bars `jaxlink/scenes/needle-*.toml`
+set them):
+
+- `slider`: the unknown whose value is the slider's position s along its guide (TDC = max s);
+- `guide_angle`: direction of the guide (file angle unit);
+- `coupler`, `rocker`, `rod`: the unknown angles of the four-bar's coupler and rocker and of the
+  rod D→B that drives the slider;
+- `arm_offset` (optional): a parameter β; the arm C₀→D that carries the rod is the rocker turned
+  by −β (a bell crank). Without it the arm is the rocker itself (D = C);
+- `crank`: the parameter that is the crank length l₂ (peaks per crank length);
+- `four_bar`: the loop of the crank-rocker four-bar; its four terms are the bars, the crank being
+  the term that the input turns (Grashof margin).
 
 Everything is computed from the solved stroke s(φ) at N equally spaced crank angles together with
 its exact input derivatives s'(φ), s''(φ) (`jaxlink.transfer`: forward-mode AD of the loop
@@ -22,14 +36,16 @@ figures. With Δφ = 2π/N:
 - **amax_rel**, **vmax_rel**: max|s''|/l₂, max|s'|/l₂ (peak acceleration / (l₂ω²)).
 - **mu_min_deg**: min over the cycle of the four-bar transmission angle μ (between coupler and
   rocker), folded to min(μ, 180° − μ).
-- **rod_angle_max_deg**: max angle between the rod D→B and the slider axis (pressure angle).
+- **rod_angle_max_deg**: max angle between the rod D→B and the slider's guide (pressure angle).
 - **toggle_clear_deg**: min angle between the arm C₀→D and the rod D→B; 0 when the signed angle
   changes sign over the cycle (the linkage passes through its stretched position).
+- **grashof_margin_rel**: min((p + q) − (s + l), shortest other bar − crank) / crank of the
+  four-bar (> 0: a crank-rocker whose crank is the shortest bar).
 
 Lengths: `length_to_mm` converts the solved s (SI) to mm. For a dimensionless design (crank = 1,
 `needle-arachne-unit`) pass `stroke_mm = 20.0` instead: s is scaled so that h = 20 mm, i.e. the
-absolute 0.05 mm tolerance is 0.25 % of the stroke and the sag is in mm at a 20 mm stroke (the
-spec's convention). amax_rel/vmax_rel are per crank length and never rescaled.
+absolute 0.05 mm tolerance is 0.25 % of the stroke and the sag is in mm at a 20 mm stroke.
+amax_rel/vmax_rel are per crank length and never rescaled. docs/dwell.md.
 """
 
 from __future__ import annotations
@@ -41,6 +57,10 @@ from typing import NamedTuple
 import jax
 import jax.numpy as jnp
 import numpy as np
+
+from ..errors import MechanismError
+from ..files import expr as _expr
+from ..files.expr import LENGTH
 
 # relative tolerances (fractions of the stroke) reported as dwell_<x>pct_deg
 REL_TOLERANCES = (("025", 0.0025), ("05", 0.005), ("1", 0.01), ("2", 0.02))
@@ -181,6 +201,112 @@ def sag(s, ds):
     return jnp.where(jnp.sum(pair) >= 2, ss[half] - low, 0.0)
 
 
+# ----------------------------------------------------------------------------- roles
+
+
+#: the `[optimize]` keys of the roles (see the module doc); all but `arm_offset` are required
+ROLE_KEYS = ("slider", "guide_angle", "coupler", "rocker", "rod", "arm_offset", "crank", "four_bar")
+
+
+class DwellRoles(NamedTuple):
+    """Which unknowns, parameters and loop of a mechanism play the roles of the dwell metrics
+    (names, see the module doc; `guide` in rad). Read from a file by `dwell_roles`."""
+
+    slider: str
+    guide: float
+    coupler: str
+    rocker: str
+    rod: str
+    arm_offset: str | None
+    crank: str
+    four_bar: str
+
+
+_ROLE_HELP = {
+    "slider": ("unknown", "length", "the slider's position along its guide"),
+    "coupler": ("unknown", "angle", "the coupler angle of the four-bar"),
+    "rocker": ("unknown", "angle", "the rocker angle of the four-bar"),
+    "rod": ("unknown", "angle", "the angle of the rod that drives the slider"),
+    "arm_offset": ("parameter", "angle", "the angle by which the arm carrying the rod is turned back from the rocker"),
+    "crank": ("parameter", "length", "the crank length"),
+}
+
+
+def dwell_roles(mech, table=None) -> DwellRoles:
+    """The roles named by `table` (default: the file's `[optimize]` section), checked against
+    the mechanism. Raises `MechanismError` naming the file and the key (`optimize.<key>`) when a
+    key is missing or names no unknown, parameter or loop of the right kind."""
+    table = (mech.tables.get("optimize") or {}) if table is None else table
+
+    def err(msg, key):
+        return MechanismError(msg, file=mech.file, key=f"optimize.{key}")
+
+    def name(key, *, optional=False):
+        what, kind, role = _ROLE_HELP[key]
+        v = table.get(key)
+        if v is None and optional:
+            return None
+        if v is None:
+            raise err(f"the dwell metrics need '{key}': the name of the {what} that is {role} "
+                      f"(jaxlink/analysis/dwell.py)", key)
+        names = mech.unknown_names if what == "unknown" else mech.parameter_names
+        if not isinstance(v, str) or v not in names:
+            hint = _expr.suggest(v, names) if isinstance(v, str) else ""
+            raise err(f"{v!r} is not {_a(what)} of the mechanism{hint}; {what}s: {', '.join(names)}", key)
+        if mech.kinds[v] != kind:
+            raise err(f"'{v}' is {_a(mech.kinds[v])}; '{key}' must name {_a(what)} that is {_a(kind)} ({role})",
+                      key)
+        return v
+
+    roles = {k: name(k, optional=k == "arm_offset") for k in _ROLE_HELP}
+    guide = table.get("guide_angle")
+    if isinstance(guide, bool) or not isinstance(guide, (int, float)) or not math.isfinite(guide):
+        raise err(f"'guide_angle' must be the direction of the slider's guide (a number, file angle unit), "
+                  f"got {guide!r}", "guide_angle")
+    loop = table.get("four_bar")
+    loops = dict(mech.loops)
+    if not isinstance(loop, str) or loop not in loops:
+        hint = _expr.suggest(loop, loops) if isinstance(loop, str) else ""
+        raise err(f"'four_bar' must name the loop of the crank-rocker four-bar{hint}; loops: {', '.join(loops)}",
+                  "four_bar")
+    _four_bar_terms(mech, loops[loop], lambda msg: err(f"loop '{loop}': {msg}", "four_bar"))
+    return DwellRoles(guide=float(guide) * mech.units.angle, four_bar=loop, **roles)
+
+
+def _a(noun: str) -> str:
+    return ("an " if noun[0] in "aeiou" else "a ") + noun
+
+
+def _four_bar_terms(mech, terms, err):
+    """(crank term, the other three terms) of a four-bar loop: the crank is the one term whose
+    angle contains the input; the others in the order (the term before the crank, the term after
+    it, the opposite term) — around the loop crank, coupler, rocker, frame: (frame, coupler,
+    rocker). Every bar length must depend on the parameters only."""
+    if len(terms) != 4:
+        raise err(f"a four-bar loop has 4 terms, this one {len(terms)}")
+    fixed = set(mech.parameter_names)
+    for t in terms:
+        lengths = (t.length,) if t.polar else (t.x, t.y)
+        if any(n.name not in fixed for node in lengths for n in _expr.names_in(node)):
+            raise err(f"the length of '{t.text}' must depend on parameters only")
+    cranks = [t for t in terms if t.polar and any(n.name == mech.input_name for n in _expr.names_in(t.angle))]
+    if len(cranks) != 1:
+        raise err(f"exactly one term must be turned by the input '{mech.input_name}' (the crank), "
+                  f"found {len(cranks)}")
+    i = next(k for k, t in enumerate(terms) if t is cranks[0])
+    return cranks[0], [terms[(i - 1) % 4], terms[(i + 1) % 4], terms[(i + 2) % 4]]
+
+
+def _bar_length(mech, term, env):
+    """Length (SI) of a bar of the four-bar: the value of LENGTH of a `LENGTH @ ANGLE` term (a
+    bar's length is positive), the norm of an `(X, Y)` term."""
+    if term.polar:
+        return _expr.evaluate(term.length, env, mech.kinds, mech.units, LENGTH)
+    x = _expr.evaluate(term.x, env, mech.kinds, mech.units, LENGTH)
+    y = _expr.evaluate(term.y, env, mech.kinds, mech.units, LENGTH)
+    return jnp.hypot(x, y)
+
+
 # ----------------------------------------------------------------------------- linkage angles
 
 
@@ -188,55 +314,69 @@ def _wrap(a):
     return (a + jnp.pi) % (2 * jnp.pi) - jnp.pi
 
 
-def needle_angles(mech, q, p):
-    """(coupler, rocker, rod, arm) angles (…, N) of a needle six-bar solution q (…, N, n).
-
-    The unknowns must be named `phi3` (coupler), `psi` (rocker), `phi5` (rod); the arm C₀→D is
-    the rocker turned by −`beta` if the mechanism has that parameter (bell crank), else the rocker
-    itself (the original design, D = C). `p` (…, P) SI parameters.
-    """
+def linkage_angles(mech, roles: DwellRoles, q, p):
+    """(coupler, rocker, rod, arm) angles (…, N) of a solution q (…, N, n) with parameters
+    p (…, P) (SI). The arm is the rocker turned by −`arm_offset`, or the rocker itself."""
     names = mech.unknown_names
-    phi3, psi, phi5 = (q[..., names.index(n)] for n in ("phi3", "psi", "phi5"))
-    if "beta" in mech.parameter_names:
-        beta = p[..., mech.parameter_index("beta")]
-        arm = psi - jnp.asarray(beta)[..., None]
+    coupler, rocker, rod = (q[..., names.index(n)] for n in (roles.coupler, roles.rocker, roles.rod))
+    if roles.arm_offset is not None:
+        offset = p[..., mech.parameter_index(roles.arm_offset)]
+        arm = rocker - jnp.asarray(offset)[..., None]
     else:
-        arm = psi
-    return phi3, psi, phi5, arm
+        arm = rocker
+    return coupler, rocker, rod, arm
 
 
-def angle_metrics(phi3, psi, phi5, arm, *, axis=0.5 * math.pi):
-    """mu_min_deg, rod_angle_max_deg, toggle_clear_deg (jax; (N,) angles in rad)."""
+def angle_metrics(coupler, rocker, rod, arm, *, axis=0.5 * math.pi):
+    """mu_min_deg, rod_angle_max_deg, toggle_clear_deg (jax; (N,) angles in rad; `axis`: the
+    direction of the slider's guide)."""
     deg = 180.0 / math.pi
-    mu = jnp.abs(_wrap(phi3 - psi))
+    mu = jnp.abs(_wrap(coupler - rocker))
     mu = jnp.minimum(mu, jnp.pi - mu)
-    rod = jnp.abs(_wrap(phi5 - axis))
-    rod = jnp.minimum(rod, jnp.pi - rod)
-    tog = _wrap(phi5 - arm)
+    rod_angle = jnp.abs(_wrap(rod - axis))
+    rod_angle = jnp.minimum(rod_angle, jnp.pi - rod_angle)
+    tog = _wrap(rod - arm)
     crosses = (jnp.max(tog) > 0) & (jnp.min(tog) < 0)
     return {
         "mu_min_deg": jnp.min(mu) * deg,
-        "rod_angle_max_deg": jnp.max(rod) * deg,
+        "rod_angle_max_deg": jnp.max(rod_angle) * deg,
         "toggle_clear_deg": jnp.where(crosses, 0.0, jnp.min(jnp.abs(tog))) * deg,
         "toggle_signed_min_deg": jnp.min(jnp.abs(tog)) * deg * jnp.sign(tog[jnp.argmin(jnp.abs(tog))]),
     }
 
 
+def grashof_margin(mech, roles: DwellRoles, p):
+    """(p + q) − (s + l) over the bars of the four-bar loop `roles.four_bar` (their term lengths;
+    the crank is the term that the input turns), divided by the crank, with the crank required
+    to be the shortest (negative margin otherwise). `p` (…, P) SI."""
+    terms = dict(mech.loops)[roles.four_bar]
+    crank_term, other_terms = _four_bar_terms(mech, terms, MechanismError)
+    env = {n: p[..., i] for i, n in enumerate(mech.parameter_names)}
+    crank = _bar_length(mech, crank_term, env)
+    others = jnp.stack([_bar_length(mech, t, env) for t in other_terms], axis=-1)
+    longest = jnp.max(others, axis=-1)
+    shortest_other = jnp.min(others, axis=-1)
+    margin = jnp.sum(others, axis=-1) - longest - crank - longest  # (p + q) − (s + l)
+    return jnp.minimum(margin, shortest_other - crank) / crank
+
+
 # ----------------------------------------------------------------------------- whole mechanism
 
 
-def solve_stroke(mech, p=None, samples: int = 7200, *, phi0: float = 0.0, s_name: str = "s"):
-    """Solve the needle over a revolution (closed-form dyads, batched if p is (B, P)).
+def solve_stroke(mech, p=None, samples: int = 7200, *, phi0: float = 0.0, roles: DwellRoles | None = None):
+    """Solve the mechanism over a revolution (batched if p is (B, P)); the stroke is the unknown
+    `roles.slider` (default roles: `dwell_roles(mech)`).
 
     **Returns:** (phis (N,), q (…, N, n), s, ds, dds (…, N), converged (…,)).
     """
+    roles = dwell_roles(mech) if roles is None else roles
     p = mech.parameters if p is None else p
     phis = phi0 + 2 * np.pi * np.arange(samples) / samples
     sol = _solve(mech, phis, p)
     import jaxlink
 
     t = jaxlink.transfer(mech, phis, sol.q, p, order=2)
-    j = mech.unknown_names.index(s_name)
+    j = mech.unknown_names.index(roles.slider)
     conv = jnp.all(sol.converged, axis=-1)
     return phis, sol.q, sol.q[..., j], t.mu[..., j], t.nu[..., j], conv
 
@@ -244,23 +384,25 @@ def solve_stroke(mech, p=None, samples: int = 7200, *, phi0: float = 0.0, s_name
 def _solve(mech, phis, p):
     import jaxlink
 
-    return jaxlink.solve(mech, phis, p)
+    return jaxlink.solve(mech, phis, p=p)
 
 
 def needle_metrics(mech, p=None, *, samples: int = 7200, scale: StrokeScale = StrokeScale(),
-                   crank_name: str = "l2"):
+                   roles: DwellRoles | None = None):
     """All exact metrics of a design (python numbers) — the report of a design.
 
     `p`: SI parameters (P,) (default: the file's) → one dict; or a batch (B, P) → a list of B
-    dicts, solved and measured in one vectorized pass. See the module doc for the definitions;
-    an unassemblable design gives `{"converged": False}`.
+    dicts, solved and measured in one vectorized pass. `roles`: default `dwell_roles(mech)` (the
+    file's `[optimize]` keys). See the module doc for the definitions; an unassemblable design
+    gives `{"converged": False}`.
     """
+    roles = dwell_roles(mech) if roles is None else roles
     p = np.asarray(mech.parameters if p is None else p, dtype=float)
     batch = p.ndim == 2
     pb = p if batch else p[None]
-    phis, q, s, ds, dds, conv = solve_stroke(mech, pb, samples)
-    crank = pb[:, mech.parameter_index(crank_name)]
-    vals = _jitted_metrics(mech, scale)(q, s, ds, dds, jnp.asarray(pb), jnp.asarray(crank))
+    phis, q, s, ds, dds, conv = solve_stroke(mech, pb, samples, roles=roles)
+    crank = pb[:, mech.parameter_index(roles.crank)]
+    vals = _jitted_metrics(mech, scale, roles)(q, s, ds, dds, jnp.asarray(pb), jnp.asarray(crank))
     vals = {k: np.asarray(v) for k, v in vals.items()}
     s, ds, conv = np.asarray(s), np.asarray(ds), np.asarray(conv)
     out = []
@@ -276,126 +418,21 @@ def needle_metrics(mech, p=None, *, samples: int = 7200, scale: StrokeScale = St
 
 
 @functools.lru_cache(maxsize=16)
-def _jitted_metrics(mech, scale):
+def _jitted_metrics(mech, scale, roles):
     def one(q, s, ds, dds, p, crank):
         out = stroke_metrics(s, ds, dds, crank, scale=scale)
-        out.update(angle_metrics(*needle_angles(mech, q, p)))
-        out["grashof_margin_rel"] = grashof_margin(mech, p)
+        out.update(angle_metrics(*linkage_angles(mech, roles, q, p), axis=roles.guide))
+        out["grashof_margin_rel"] = grashof_margin(mech, roles, p)
         return out
 
     return jax.jit(jax.vmap(one))
-
-
-def grashof_margin(mech, p):
-    """(p + q) − (s + l) over the crank-rocker's four bars l1, l2, l3, l4r (or l4), divided by
-    the crank, with the crank required to be the shortest (negative margin otherwise)."""
-    idx = mech.parameter_index
-    rocker = "l4r" if "l4r" in mech.parameter_names else "l4"
-    if "l6" in mech.parameter_names:  # the original design: frame C0 at (l1, l6)
-        frame = jnp.hypot(p[..., idx("l1")], p[..., idx("l6")])
-    else:
-        frame = p[..., idx("l1")]
-    crank, coupler, rock = p[..., idx("l2")], p[..., idx("l3")], p[..., idx(rocker)]
-    others = jnp.stack([frame, coupler, rock], axis=-1)
-    longest = jnp.max(others, axis=-1)
-    shortest_other = jnp.min(others, axis=-1)
-    margin = jnp.sum(others, axis=-1) - longest - crank - longest  # (p + q) − (s + l)
-    return jnp.minimum(margin, shortest_other - crank) / crank
-
-
-# ----------------------------------------------------------------------------- the `dwell` objective
-
-#: `[optimize]` keys of the dwell objective (file units: mm, degrees) and their defaults.
-DWELL_OPTIONS = {
-    "stroke": 20.0,            # required stroke h (file length units)
-    "stroke_tol": 0.01,        # |h − stroke| allowed in the exact check (file length units)
-    "dwell_weight": 0.3,       # objective: maximize dwell(abs_tol) + dwell_weight · dwell(1 %)
-    "abs_tol": 0.05,           # the absolute band (file length units), 0.05 mm
-    "mu_min": 40.0,            # transmission angle ≥ (deg)
-    "rod_max": 45.0,           # rod (pressure) angle ≤ (deg)
-    "toggle_min": 1.0,         # toggle clearance ≥ (deg)
-    "amax_max": 1.95,          # peak |s''| / l2 ≤
-    "sign_changes": 2,         # acceleration sign changes per revolution (exactly)
-    "penalty": 10.0,           # weight ρ of the squared, normalized constraint violations
-}
-#: the constraints, in the order of `dwell_constraints` (the stroke is the one equality)
-CONSTRAINTS = ("stroke", "mu", "rod", "toggle", "amax", "grashof", "sign")
-# normalization of each constraint violation, and the margin the smooth search keeps inside each
-# inequality (the exact check has none) so that its optimum meets the exact constraints
-_SCALE = {"stroke": 2.0, "mu": 10.0, "rod": 10.0, "toggle": 1.0, "amax": 0.1, "grashof": 0.1, "sign": 1.0}
-_MARGIN = {"mu": 0.01, "rod": 0.01, "toggle": 0.002, "amax": 0.0005, "grashof": 0.0}
-
-
-def _relu(x):
-    return jnp.maximum(x, 0.0)
-
-
-def _sign_surrogate(s, dds):
-    """Smooth stand-in for "exactly 2 sign changes of s''": s'' should be ≤ 0 on the upper quarter
-    of the stroke and ≥ 0 on the lower quarter (a sag or a wiggle breaks one of them). Returns a
-    violation ≥ 0 normalized by max|s''| (0 for a clean stroke), with logistic weights (width 2 %
-    of the stroke) so that it is differentiable."""
-    h = jnp.max(s) - jnp.min(s)
-    z = (s - jnp.min(s)) / h
-    a = dds / jnp.max(jnp.abs(dds))
-    top = jax.nn.sigmoid((z - 0.75) / 0.02)
-    bottom = jax.nn.sigmoid((0.25 - z) / 0.02)
-    return jnp.sqrt(jnp.mean(top * _relu(a) ** 2 + bottom * _relu(-a) ** 2) + 1e-30)
-
-
-def dwell_score(m, opts, *, smooth_sign=None):
-    """(objective J to minimize, constraints-met flag) from metrics `m` (exact or smooth).
-
-    J = −(dwell_abs + w · dwell_1%)/100 + ρ Σ_i (violation_i / scale_i)², the violations of
-    |h − stroke| ≤ stroke_tol, μ_min ≥ mu_min, rod ≤ rod_max, toggle ≥ toggle_min, amax ≤ amax_max,
-    Grashof crank-rocker (crank shortest) and the sign-change count (`smooth_sign`: the surrogate
-    violation instead of |count − 2|, the stroke without its tolerance and the margins `_MARGIN`).
-    The flag is the exact check of every constraint.
-    """
-    margin = _MARGIN if smooth_sign is not None else dict.fromkeys(_MARGIN, 0.0)
-    v = {
-        "stroke": _relu(jnp.abs(m["stroke_file"] - opts["stroke"]) - (0.0 if smooth_sign is not None else opts["stroke_tol"])),
-        "mu": _relu(opts["mu_min"] + margin["mu"] - m["mu_min_deg"]),
-        "rod": _relu(m["rod_angle_max_deg"] - opts["rod_max"] + margin["rod"]),
-        "toggle": _relu(opts["toggle_min"] + margin["toggle"] - m["toggle_clear_deg"]),
-        "amax": _relu(m["amax_rel"] - opts["amax_max"] + margin["amax"]),
-        "grashof": _relu(margin["grashof"] - m["grashof_margin_rel"]),
-        "sign": (smooth_sign if smooth_sign is not None
-                 else jnp.abs(m["acc_sign_changes"] - opts["sign_changes"]).astype(float)),
-    }
-    pen = sum((v[k] / _SCALE[k]) ** 2 for k in v)
-    dwell = m["dwell_abs_deg"] + opts["dwell_weight"] * m["dwell_1pct_deg"]
-    j = -dwell / 100.0 + opts["penalty"] * pen
-    exact = dict(v)
-    exact["stroke"] = _relu(jnp.abs(m["stroke_file"] - opts["stroke"]) - opts["stroke_tol"])
-    ok = jnp.all(jnp.stack([exact[k] <= 0 for k in exact if k != "sign"])) & (m["acc_sign_changes"] == opts["sign_changes"])
-    return j, ok
-
-
-def dwell_constraints(m, opts, sign_violation):
-    """(f, c) for the constrained gradient search: f = −(dwell_abs + w · dwell_1%)/100 and the
-    normalized constraints c (7,) in the order of `CONSTRAINTS`: c[0] = (h − stroke)/2 mm = 0, and
-    c[1:] ≤ 0 for the transmission angle, rod angle, toggle clearance (signed), peak acceleration
-    and Grashof margin, each with its margin `_MARGIN`, and the sign-change surrogate."""
-    mg = _MARGIN
-    c = jnp.stack([
-        (m["stroke_file"] - opts["stroke"]) / _SCALE["stroke"],
-        (opts["mu_min"] + mg["mu"] - m["mu_min_deg"]) / _SCALE["mu"],
-        (m["rod_angle_max_deg"] - opts["rod_max"] + mg["rod"]) / _SCALE["rod"],
-        (opts["toggle_min"] + mg["toggle"] - m["toggle_signed_deg"]) / _SCALE["toggle"],
-        (m["amax_rel"] - opts["amax_max"] + mg["amax"]) / _SCALE["amax"],
-        (mg["grashof"] - m["grashof_margin_rel"]) / _SCALE["grashof"],
-        sign_violation / _SCALE["sign"],
-    ])
-    f = -(m["dwell_abs_deg"] + opts["dwell_weight"] * m["dwell_1pct_deg"]) / 100.0
-    return f, c
 
 
 def spectral_derivatives(s):
     """s'(φ), s''(φ) of a periodic signal sampled at N equally spaced φ over a revolution, by FFT
     (exact for a trigonometric polynomial of degree < N/2; for a linkage's smooth stroke the error
     is that of the truncated Fourier series: ~1e-10 relative at N = 720 for the needle designs,
-    `tests/test_dwell.py`). The spec's reference model computes its derivatives this way."""
+    `tests/test_dwell.py`)."""
     n = s.shape[0]
     k = jnp.fft.rfftfreq(n, 1.0 / n)
     if n % 2 == 0:
@@ -420,23 +457,24 @@ def peak(x, *, refined: bool = True):
     return b + jnp.where(ok, (c - a) ** 2 / (8.0 * jnp.where(ok, den, 1.0)), 0.0)
 
 
-def design_metrics(mech, q, s, ds, dds, p, crank, abs_tol, *, refined: bool):
-    """The metrics the objective needs (jax, one design; s, crank and abs_tol in the same length
-    unit). `refined`: the peak acceleration and the extreme angles are parabola-refined extrema
-    (`peak`) instead of the extreme samples — what the search uses, so that a 0.5° search grid
-    sees the extremes that the 0.05° report grid measures, with a smooth dependence on the
-    design. `toggle_signed_deg` is the clearance with a sign (negative when the linkage passes
-    its stretched position); `toggle_clear_deg` is the spec's (0 then)."""
+def design_metrics(mech, roles: DwellRoles, q, s, ds, dds, p, crank, abs_tol, *, refined: bool):
+    """The metrics a dwell objective needs (jax, one design; s, crank and abs_tol in the same
+    length unit; q (N, n) and p (P,) SI). `refined`: the peak acceleration and the extreme angles
+    are parabola-refined extrema (`peak`) instead of the extreme samples — what a search uses, so
+    that a 0.5° search grid sees the extremes that a 0.05° report grid measures, with a smooth
+    dependence on the design. `toggle_signed_deg` is the clearance with a sign (negative when
+    the linkage passes its stretched position); `toggle_clear_deg` is 0 then (as in
+    `angle_metrics`)."""
     deg = 180.0 / math.pi
     h = jnp.max(s) - jnp.min(s)
     eps = jnp.stack([jnp.asarray(abs_tol, s.dtype), 0.01 * h])
     w = jax.vmap(band_width, in_axes=(None, None, 0))(s, ds, eps) * deg
-    phi3, psi, phi5, arm = needle_angles(mech, q, p)
-    mu = jnp.abs(_wrap(phi3 - psi))
+    coupler, rocker, rod, arm = linkage_angles(mech, roles, q, p)
+    mu = jnp.abs(_wrap(coupler - rocker))
     mu = jnp.minimum(mu, jnp.pi - mu)
-    rod = jnp.abs(_wrap(phi5 - 0.5 * jnp.pi))
-    rod = jnp.minimum(rod, jnp.pi - rod)
-    tog = _wrap(phi5 - arm)
+    rod_angle = jnp.abs(_wrap(rod - roles.guide))
+    rod_angle = jnp.minimum(rod_angle, jnp.pi - rod_angle)
+    tog = _wrap(rod - arm)
     crosses = (jnp.max(tog) > 0) & (jnp.min(tog) < 0)
     side = jnp.where(jnp.mean(tog) >= 0, 1.0, -1.0)
     signed = -peak(-side * tog, refined=refined) * deg
@@ -445,107 +483,8 @@ def design_metrics(mech, q, s, ds, dds, p, crank, abs_tol, *, refined: bool):
         "acc_sign_changes": sign_changes(dds),
         "amax_rel": peak(jnp.abs(dds), refined=refined) / crank,
         "mu_min_deg": -peak(-mu, refined=refined) * deg,
-        "rod_angle_max_deg": peak(rod, refined=refined) * deg,
+        "rod_angle_max_deg": peak(rod_angle, refined=refined) * deg,
         "toggle_signed_deg": signed,
         "toggle_clear_deg": jnp.where(crosses, 0.0, signed),
-        "grashof_margin_rel": grashof_margin(mech, p),
+        "grashof_margin_rel": grashof_margin(mech, roles, p),
     }
-
-
-def dwell_objective(problem):
-    """Factory of the registry objective `dwell` (`jaxlink.optimize` `OBJECTIVES`).
-
-    The design search hands it the path of the `[optimize]` point (the needle B, whose y is the
-    slider position s, file units), the solved unknowns q and the parameters p (`PathData`). The
-    search solves positions only and takes s', s'' spectrally from the samples
-    (`spectral_derivatives`, agreeing with the exact transfer functions to ~1e-10: the gradient
-    call is ~10× cheaper than through the second-order transfer functions); the report re-solves
-    at `report_samples` with the exact transfer functions. From them:
-
-    - `value`: the exact J of `dwell_score` (+10 when a constraint is missed, so every design
-      that meets the constraints ranks first), with parabola-refined extremes (`design_metrics`);
-    - `rank` (picks the gradient search's starts): (value, the same J without the +10: a long
-      dwell at the wrong stroke is a good start);
-    - `smooth`: the quadratic-penalty J with the sign-change surrogate and the margins;
-    - `constraints`: (f, c) of `dwell_constraints` for the augmented-Lagrangian gradient search;
-    - `metrics` (the report): stroke, all dwell widths, sign changes, peaks and angles exactly as
-      `needle_metrics` measures them (extreme samples of the report grid), the Grashof margin,
-      the sag and `constraints_met` (1/0), the exact check of every constraint on those numbers.
-
-    The crank is the parameter `l2`; amax is max|s''|/l2.
-    """
-    from ..optimize.objectives import Objective
-
-    mech = problem.mech
-    for name in ("l2", "beta") if "beta" in mech.parameter_names else ("l2",):
-        if name not in mech.parameter_names:
-            raise problem.error(f"the dwell objective needs the parameter '{name}' (the crank l2; "
-                                "the bell crank's arm angle beta)", "objective")
-    for name in ("phi3", "psi", "phi5"):
-        if name not in mech.unknown_names:
-            raise problem.error(f"the dwell objective needs the unknown '{name}' (coupler phi3, rocker psi, "
-                                "rod phi5: spec/needle-six-bar.md)", "objective")
-    opts = {k: problem.option(k, d) for k, d in DWELL_OPTIONS.items()}
-    for k, v in opts.items():
-        if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
-            raise problem.error(f"'{k}' must be a finite number, got {v!r}", k)
-    lf = mech.units.length
-    crank_index = mech.parameter_index("l2")
-
-    def measured(path, refined):
-        if path.q is None or path.p is None:
-            raise ValueError("the dwell objective needs the solved configuration q and the parameters p (PathData)")
-        s = path.xy[:, 1]
-        if path.dxy is None or path.ddxy is None:  # the search: spectral derivatives of the samples
-            ds, dds = spectral_derivatives(s)
-        else:  # the report: the exact transfer functions
-            ds, dds = path.dxy[:, 1], path.ddxy[:, 1]
-        crank = path.p[crank_index] / lf
-        return design_metrics(mech, path.q, s, ds, dds, path.p, crank, opts["abs_tol"], refined=refined), s, ds, dds
-
-    def score(path):
-        m, _, _, _ = measured(path, True)
-        return dwell_score(m, opts)
-
-    def value(path):
-        j, ok = score(path)
-        return jnp.where(ok, j, j + 10.0)
-
-    def rank(path):
-        j, ok = score(path)
-        return jnp.where(ok, j, j + 10.0), j
-
-    def smooth(path):
-        m, s, _, dds = measured(path, True)
-        m = dict(m, toggle_clear_deg=m["toggle_signed_deg"])
-        return dwell_score(m, opts, smooth_sign=_sign_surrogate(s, dds))[0]
-
-    def constraints(path):
-        m, s, _, dds = measured(path, True)
-        f, c = dwell_constraints(m, opts, _sign_surrogate(s, dds))
-        j, ok = dwell_score(m, opts)
-        return f, c, jnp.where(ok, j, j + 10.0)
-
-    def metrics(path):
-        m, s, ds, dds = measured(path, False)
-        crank = path.p[crank_index] / lf
-        out = stroke_metrics(s, ds, dds, crank, scale=StrokeScale(length_to_mm=lf * 1e3))
-        out.pop("stroke_rel")
-        out.update({k: m[k] for k in ("mu_min_deg", "rod_angle_max_deg", "toggle_clear_deg", "grashof_margin_rel")})
-        out["constraints_met"] = dwell_score(m, opts)[1].astype(float)
-        return out
-
-    # the search solves positions only (order 0: s', s'' spectral); the report adds the exact
-    # transfer functions (report_order 2)
-    return Objective("dwell", 0, value, smooth, metrics, report_order=2, constraints=constraints, equalities=1,
-                     rank=rank)
-
-
-def _register():
-    from ..optimize.objectives import OBJECTIVES
-
-    if "dwell" not in OBJECTIVES:
-        OBJECTIVES.register("dwell", keys=tuple(DWELL_OPTIONS))(dwell_objective)
-
-
-_register()

@@ -11,7 +11,7 @@ circuits = "file"                             # "file": keep the file's assembly
                                               # every circuit of a closed-form (dyad) mechanism
 ```
 
-Objective-specific keys (`axes`, `targets`, …) are read by the objective (`_objectives.py`); search
+Objective-specific keys (`axes`, `targets`, …) are read by the objective (`objectives/`); search
 knobs (`starts`, `iterations`, `uniform`, `chunk`) by the searches (`_search.py`).
 """
 

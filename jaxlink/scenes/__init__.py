@@ -2,6 +2,11 @@
 
 Every scene file has a `[mechanism]` table with `name` and `description`; `jaxlink scenes`
 lists them. A FILE argument on the command line is either a path or one of these names.
+
+Code that belongs to one family of scenes lives beside them, in a scene module: its design
+objectives and their defaults (`sewing_feed.py`: `feed`; `needle_dwell.py`: `dwell`), registered
+by the objective registry (`jaxlink/optimize/objectives/__init__.py`) through each module's
+`register_objectives`. Importing this package imports none of them.
 """
 
 from __future__ import annotations
