@@ -61,6 +61,8 @@ import numpy as np
 from ..errors import MechanismError
 from ..files import expr as _expr
 from ..files.expr import LENGTH
+from ..solvers.assemble import solve
+from .transfer import transfer
 
 # relative tolerances (fractions of the stroke) reported as dwell_<x>pct_deg
 REL_TOLERANCES = (("025", 0.0025), ("05", 0.005), ("1", 0.01), ("2", 0.02))
@@ -372,19 +374,11 @@ def solve_stroke(mech, p=None, samples: int = 7200, *, phi0: float = 0.0, roles:
     roles = dwell_roles(mech) if roles is None else roles
     p = mech.parameters if p is None else p
     phis = phi0 + 2 * np.pi * np.arange(samples) / samples
-    sol = _solve(mech, phis, p)
-    import jaxlink
-
-    t = jaxlink.transfer(mech, phis, sol.q, p, order=2)
+    sol = solve(mech, phis, p, points=False)
+    t = transfer(mech, phis, sol.q, p, order=2)
     j = mech.unknown_names.index(roles.slider)
     conv = jnp.all(sol.converged, axis=-1)
     return phis, sol.q, sol.q[..., j], t.mu[..., j], t.nu[..., j], conv
-
-
-def _solve(mech, phis, p):
-    import jaxlink
-
-    return jaxlink.solve(mech, phis, p=p)
 
 
 def needle_metrics(mech, p=None, *, samples: int = 7200, scale: StrokeScale = StrokeScale(),
@@ -402,7 +396,7 @@ def needle_metrics(mech, p=None, *, samples: int = 7200, scale: StrokeScale = St
     pb = p if batch else p[None]
     phis, q, s, ds, dds, conv = solve_stroke(mech, pb, samples, roles=roles)
     crank = pb[:, mech.parameter_index(roles.crank)]
-    vals = _jitted_metrics(mech, scale, roles)(q, s, ds, dds, jnp.asarray(pb), jnp.asarray(crank))
+    vals = _metrics(mech, q, s, ds, dds, jnp.asarray(pb), jnp.asarray(crank), scale=scale, roles=roles)
     vals = {k: np.asarray(v) for k, v in vals.items()}
     s, ds, conv = np.asarray(s), np.asarray(ds), np.asarray(conv)
     out = []
@@ -417,15 +411,15 @@ def needle_metrics(mech, p=None, *, samples: int = 7200, scale: StrokeScale = St
     return out if batch else out[0]
 
 
-@functools.lru_cache(maxsize=16)
-def _jitted_metrics(mech, scale, roles):
+@functools.partial(jax.jit, static_argnames=("scale", "roles"))
+def _metrics(mech, q, s, ds, dds, p, crank, *, scale, roles):
     def one(q, s, ds, dds, p, crank):
         out = stroke_metrics(s, ds, dds, crank, scale=scale)
         out.update(angle_metrics(*linkage_angles(mech, roles, q, p), axis=roles.guide))
         out["grashof_margin_rel"] = grashof_margin(mech, roles, p)
         return out
 
-    return jax.jit(jax.vmap(one))
+    return jax.vmap(one)(q, s, ds, dds, p, crank)
 
 
 def spectral_derivatives(s):
