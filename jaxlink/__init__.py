@@ -7,12 +7,18 @@ The public API (everything else is internal and may change):
 - positions: `solve`, `solve_path`, `NewtonOptions`, `Solution`, `SolveStats`, `RESULTS`;
 - kinematics: `transfer`, `Transfer`, `time_derivatives`;
 - kinetostatics: `reactions`, `solve_reactions`, `Reactions`, `body_motion`, `BodyMotion`;
+- dwell (a slider that stands still): `dwell_metrics`, `solve_stroke`, `dwell_roles`, `StrokeScale`, `DwellRoles`;
 - subpackages: `jaxlink.optimize` (design search), `jaxlink.cam` (cam-follower dynamics).
 
 Every function takes `(mech, phis, …, p)` in that order. The library follows the dtype of its
 inputs: call `jax.config.update("jax_enable_x64", True)` for float64 (the command line does).
 """
 
+from .analysis.dwell import DwellRoles as DwellRoles
+from .analysis.dwell import StrokeScale as StrokeScale
+from .analysis.dwell import dwell_roles as dwell_roles
+from .analysis.dwell import needle_metrics as dwell_metrics
+from .analysis.dwell import solve_stroke as solve_stroke
 from .analysis.kinetostatics import BodyMotion as BodyMotion
 from .analysis.kinetostatics import Reactions as Reactions
 from .analysis.kinetostatics import body_motion as body_motion

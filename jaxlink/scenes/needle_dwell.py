@@ -24,7 +24,7 @@ from ..analysis.dwell import (
     spectral_derivatives,
     stroke_metrics,
 )
-from ..optimize.objectives import Objective
+from ..optimize.objectives.base import Objective
 
 
 def register_objectives(register) -> None:

@@ -12,7 +12,7 @@ from __future__ import annotations
 import jax
 import jax.numpy as jnp
 
-from ..optimize.objectives import Objective, number
+from ..optimize.objectives.base import Objective, number
 from ..optimize.objectives.path import flatness, input_speed, shape_metrics
 
 #: `[optimize]` keys of the `feed` objective and their defaults (file units: mm; m/s²; rpm)

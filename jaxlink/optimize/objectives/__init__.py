@@ -31,39 +31,12 @@ A further objective plugs in with `register(name, factory, keys=...)`.
 
 from __future__ import annotations
 
-import math
-from typing import Any, Callable, Iterable, NamedTuple
+from typing import Callable, Iterable
 
-import jax
-import numpy as np
-
-
-class PathData(NamedTuple):
-    """The traced path of the point, file length units, and the solved configuration.
-
-    - `xy`: (N, 2) positions at the sampled inputs (a full revolution, equally spaced).
-    - `dxy`, `ddxy`: (N, 2) first and second derivatives w.r.t. the input (per rad), or None.
-    - `q`: (N, n) the solved unknowns at the same inputs (SI: rad, m), or None.
-    - `p`: (P,) the design's parameters (SI), or None.
-    """
-
-    xy: jax.Array
-    dxy: jax.Array | None = None
-    ddxy: jax.Array | None = None
-    q: jax.Array | None = None
-    p: jax.Array | None = None
-
-
-class Objective(NamedTuple):
-    name: str
-    order: int
-    value: Callable
-    smooth: Callable
-    metrics: Callable
-    report_order: int = 0
-    constraints: Callable | None = None
-    equalities: int = 0
-    rank: Callable | None = None
+from .base import Objective as Objective
+from .base import PathData as PathData
+from .base import number as number
+from .base import to_python as to_python
 
 
 def _builtin_modules() -> tuple:
@@ -135,25 +108,3 @@ def register(name: str, factory: Callable, *, keys: Iterable[str] = ()) -> Calla
     """Register `factory(problem) -> Objective` under `name` in `OBJECTIVES`; `keys`: the
     `[optimize]` keys it reads. Returns `factory`."""
     return OBJECTIVES.register(name, factory, keys=keys)
-
-
-def number(problem, key: str, default: float | None = None, *, positive: bool = False) -> float:
-    """The `[optimize]` option `key` as a finite (`positive`: > 0) float; `default` when the
-    file does not set it (None: the key is required). Raises the problem's `MechanismError`
-    naming the key."""
-    v = problem.option(key, default)
-    if v is None:
-        raise problem.error(f"the objective '{problem.objective}' needs '{key}' "
-                            f"(a {'positive ' if positive else ''}number)", key)
-    if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or (positive and v <= 0):
-        raise problem.error(f"'{key}' must be a {'positive ' if positive else ''}finite number, got {v!r}", key)
-    return float(v)
-
-
-def to_python(tree) -> Any:
-    """Arrays → floats (JSON-ready); non-finite → None."""
-    def conv(v):
-        v = float(np.asarray(v))
-        return v if math.isfinite(v) else None
-
-    return {k: conv(v) for k, v in tree.items()}

@@ -15,7 +15,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from . import Objective, number
+from .base import Objective, number
 
 
 def register_objectives(register) -> None:
