@@ -1,0 +1,67 @@
+"""The public solve: one jitted entry point that gives the same answer eagerly, under an outer
+`jit` (the mechanism passed as a pytree) and under `vmap`, continuing from `[input] start` to the
+first input; its points equal the transfer module's."""
+
+import pathlib
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import jaxlink as jl
+
+FOURBAR = (pathlib.Path(jl.__file__).parent / "scenes" / "four-bar.toml").read_text()
+
+
+def _started_at_90():
+    """The four-bar scene with its guesses given at φ = 90° (`[input] start = 90`)."""
+    m0 = jl.load("four-bar")
+    q90 = np.rad2deg(np.asarray(jl.solve(m0, np.deg2rad([0.0, 45.0, 90.0])).q[-1]))
+    text = FOURBAR.replace('name = "phi2"', 'name = "phi2"\nstart = 90.0')
+    text = text.replace("phi3 = 30.0", f"phi3 = {float(q90[0])!r}").replace("phi4 = 80.0", f"phi4 = {float(q90[1])!r}")
+    assert text != FOURBAR and "start = 90.0" in text
+    return m0, jl.loads(text)
+
+
+@pytest.mark.parametrize("method", ["auto", "continuation"])
+def test_same_answer_eager_jit_and_from_another_start(method):
+    m0, m = _started_at_90()
+    assert m.input_start == pytest.approx(np.pi / 2)
+    opts = jl.NewtonOptions(method=method)
+    phis = np.deg2rad(np.arange(0.0, 360.0, 10.0))  # the lead-in runs backwards from 90° to 0°
+    eager = jl.solve(m, phis, options=opts)
+    jitted = jax.jit(lambda mm, ph: jl.solve(mm, ph, options=opts))(m, jnp.asarray(phis))
+    assert bool(np.all(np.asarray(eager.converged)))
+    np.testing.assert_array_equal(np.asarray(eager.q), np.asarray(jitted.q))
+    np.testing.assert_array_equal(np.asarray(eager.result), np.asarray(jitted.result))
+    # the same assembly branch as the scene whose guesses hold at 0°
+    ref = jl.solve(m0, phis, options=opts)
+    np.testing.assert_allclose(np.asarray(eager.q), np.asarray(ref.q), rtol=0, atol=1e-12)
+    # the points: the transfer module's
+    tr = jl.transfer(m, phis, eager.q, order=0)
+    np.testing.assert_allclose(np.asarray(eager.points), np.asarray(tr.points), rtol=0, atol=1e-15)
+
+
+def test_batch_equals_vmap_of_solve_path_and_numbers_are_leaves():
+    m = jl.load("four-bar")
+    phis = jnp.asarray(np.deg2rad(np.arange(0.0, 360.0, 15.0)))
+    P = jnp.asarray(m.parameters) * jnp.asarray([[1.0], [1.01], [0.99]])
+    batch = jl.solve(m, phis, P)
+    mapped = jax.vmap(lambda p: jl.solve_path(m, phis, p, points=True))(P)
+    np.testing.assert_allclose(np.asarray(batch.q), np.asarray(mapped.q), rtol=0, atol=1e-15)
+    np.testing.assert_allclose(np.asarray(batch.points), np.asarray(mapped.points), rtol=0, atol=1e-15)
+    # a mechanism with other numbers (replace) is solved by the same compiled function
+    m2 = m.replace(parameters=np.asarray(P[1]))
+    assert m2.structure is m.structure
+    np.testing.assert_allclose(np.asarray(jl.solve(m2, phis).q), np.asarray(batch.q[1]), rtol=0, atol=1e-15)
+    assert len(jax.tree_util.tree_leaves(m)) == 2
+
+
+def test_points_nan_where_not_assembled():
+    m = jl.load("four-bar", overrides={"b": 40.0, "c": 30.0})  # cannot reach part of the revolution
+    phis = np.deg2rad(np.arange(0.0, 360.0, 5.0))
+    sol = jl.solve(m, phis)
+    bad = ~np.isin(np.asarray(sol.result), [jl.RESULTS.converged, jl.RESULTS.singular])
+    assert bad.any() and (~bad).any()
+    assert np.all(np.isnan(np.asarray(sol.points)[bad])) and np.all(np.isfinite(np.asarray(sol.points)[~bad]))
