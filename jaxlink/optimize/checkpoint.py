@@ -23,6 +23,7 @@ import hashlib
 import json
 import os
 import pathlib
+from typing import Any
 
 import jax
 import numpy as np
@@ -51,7 +52,7 @@ def write_json_atomic(path: pathlib.Path, data) -> None:
     os.replace(tmp, path)
 
 
-def _named_leaves(state) -> list[tuple[str, object]]:
+def _named_leaves(state) -> list[tuple[str, Any]]:
     leaves, _ = jax.tree_util.tree_flatten_with_path(state)
     return [(jax.tree_util.keystr(path, simple=True, separator="."), leaf) for path, leaf in leaves]
 
@@ -59,7 +60,8 @@ def _named_leaves(state) -> list[tuple[str, object]]:
 def save_state(path: pathlib.Path, state, fingerprint: str) -> None:
     """Write the search state `state` (a pytree of arrays) and its `fingerprint` atomically."""
     tmp = path.with_name(path.name + ".tmp.npz")
-    np.savez(tmp, fingerprint=np.asarray(fingerprint), **{k: np.asarray(v) for k, v in _named_leaves(state)})
+    arrays: dict[str, Any] = {k: np.asarray(v) for k, v in _named_leaves(state)}
+    np.savez(tmp, fingerprint=np.asarray(fingerprint), **arrays)
     os.replace(tmp, path)
 
 

@@ -17,7 +17,10 @@
   when s·y > 10⁻¹⁰ |s| |y|. A direction that is not a descent direction, or one from no pair,
   is replaced by −∇Φ with a first step of at most `step0` in v (the memory is forgotten); after
   `max_backtracks` failed trials a start forgets its pairs and steps along −∇Φ. After a
-  multiplier update the pairs are kept (Φ changed only by the multiplier terms).
+  multiplier update the pairs are kept (Φ changed only by the multiplier terms). An accepted
+  step without a stored pair, and a multiplier update, give optax's state the new point without
+  a pair (`lbfgs.anchored`): optax then writes an empty pair (into the oldest pair's slot) and
+  that one direction starts from H₀ = I instead of (s·y / y·y) I.
 - The exact objective of every trial point comes with its gradient call (one path solve): the
   best exact value seen decides the result, at no extra evaluations.
 - The batched value-and-gradient is compiled in a thread while the presample runs; an error
@@ -89,9 +92,9 @@ def merit_value_and_grad(ev: Evaluator):
 
 class ALState(NamedTuple):
     progress: Progress
-    phase: np.ndarray  # 0 presample, 1 search
+    phase: np.int64  # 0 presample, 1 search
     pool: Pool
-    iteration: np.ndarray  # batched calls made
+    iteration: np.int64  # batched calls made
     c: np.ndarray  # (S,) circuits
     lam: np.ndarray  # (S, K) multipliers
     v: np.ndarray  # (S, V) current points (unbounded variables)
@@ -102,7 +105,7 @@ class ALState(NamedTuple):
     slope: np.ndarray  # (S,) ∇Φ·direction
     step: np.ndarray  # (S,) the next trial step along the direction
     backtracks: np.ndarray  # (S,) failed trials since the last accepted one
-    since: np.ndarray  # calls since the last multiplier update
+    since: np.int64  # calls since the last multiplier update
     lbfgs: Any  # optax's ScaleByLBFGSState, leading axis = starts (remembers (v, ∇Φ))
 
 

@@ -24,15 +24,15 @@ from ..evaluator import Evaluator
 class Progress(NamedTuple):
     """Counters and the best design so far (every search)."""
 
-    chunk: np.ndarray  # chunks done
-    evaluations: np.ndarray  # mechanism evaluations (see the module doc)
-    designs: np.ndarray  # designs evaluated
-    infeasible: np.ndarray  # of which infeasible
-    best_value: np.ndarray  # exact objective of the best design; +inf until a feasible one is seen
+    chunk: np.int64  # chunks done
+    evaluations: np.int64  # mechanism evaluations (see the module doc)
+    designs: np.int64  # designs evaluated
+    infeasible: np.int64  # of which infeasible
+    best_value: np.float64  # exact objective of the best design; +inf until a feasible one is seen
     best_u: np.ndarray  # (V,) its normalized design (zeros while best_value is +inf)
-    best_circuit: np.ndarray  # its circuit
-    wall_s: np.ndarray  # seconds spent in `step`
-    done: np.ndarray  # the search ended by itself
+    best_circuit: np.int64  # its circuit
+    wall_s: np.float64  # seconds spent in `step`
+    done: np.bool_  # the search ended by itself
 
     @property
     def found(self) -> bool:
@@ -121,7 +121,7 @@ class Pool(NamedTuple):
     value: np.ndarray  # (S,) ranking values, +inf for empty slots
     u: np.ndarray  # (S, V)
     circuit: np.ndarray  # (S,)
-    n: np.ndarray  # designs presampled so far
+    n: np.int64  # designs presampled so far
 
 
 def empty_pool(starts: int, n_variables: int) -> Pool:

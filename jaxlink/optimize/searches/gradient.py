@@ -50,9 +50,9 @@ def smooth_value_and_grad(ev: Evaluator):
 
 class GradientState(NamedTuple):
     progress: Progress
-    phase: np.ndarray  # 0 presample, 1 search
+    phase: np.int64  # 0 presample, 1 search
     pool: Pool
-    iteration: np.ndarray
+    iteration: np.int64
     v: np.ndarray  # (S, V) iterates (unbounded variables)
     c: np.ndarray  # (S,) their circuits
     value: np.ndarray  # (S,) smoothed objective at v
@@ -127,7 +127,8 @@ class Gradient(PresampledStarts):
         U2 = np.clip(pr.to_unit(X), 0.0, 1.0)
         b2 = evaluate(ev, U2, b.circuit[ok])
         p = recorded(p, U2, b2)
-        both = Batch(*(np.concatenate([x, y]) for x, y in zip(b[:3], b2[:3])), None, b.evaluations + b2.evaluations)
+        both = Batch(np.concatenate([b.value, b2.value]), np.concatenate([b.feasible, b2.feasible]),
+                     np.concatenate([b.circuit, b2.circuit]), None, b.evaluations + b2.evaluations)
         return p, np.concatenate([U, U2]), both
 
     # ------------------------------------------------------------------ search

@@ -52,8 +52,8 @@ class UniformGrid:
 class CoordinateState(NamedTuple):
     progress: Progress
     center: np.ndarray  # (V,) the design the sweeps go through
-    half: np.ndarray  # half-width of the sweep (normalized); ≥ 0.5: the whole range
-    axis: np.ndarray  # the variable swept next
+    half: np.float64  # half-width of the sweep (normalized); ≥ 0.5: the whole range
+    axis: np.int64  # the variable swept next
 
 
 class UniformCoordinate:
