@@ -26,8 +26,7 @@ jax.config.update("jax_enable_x64", True)
 import numpy as np  # noqa: E402
 
 from jaxlink import load  # noqa: E402
-from jaxlink.optimize import Evaluator, problem_from  # noqa: E402
-from jaxlink.optimize.search import run  # noqa: E402
+from jaxlink.optimize import Evaluator, problem_from, run  # noqa: E402
 
 PUBLISHED = {"two_a": 5.1158, "two_b": 2.2676, "sx": -10.6925, "sy": 55.27, "dx": 0.235}
 
@@ -127,7 +126,7 @@ def main(argv=None):
     rows = [("seed 2.1/0.9/2", seed_design, su["evaluations"], float("nan"))]
     for method, variant, kw in runs:
         t0 = time.perf_counter()
-        r = run(ev, method, seed=args.seed, **kw)
+        r = run(ev, method, seed=args.seed, **kw).to_json()
         r["wall_total_s"] = time.perf_counter() - t0
         results[method + (f"_{variant}" if variant else "")] = r
         rows.append((method + (f" ({variant})" if variant else ""), r["best"], r["evaluations"], r["wall_s"]))
@@ -155,7 +154,7 @@ def main(argv=None):
         evb = Evaluator(prb, chunk=256)
         ref = evb.report(prb.to_unit([nom[n] for n in var]))
         t0 = time.perf_counter()
-        rb = run(evb, "gradient", budget=6000, seed=args.seed, starts=16)
+        rb = run(evb, "gradient", budget=6000, seed=args.seed, starts=16).to_json()
         wall = time.perf_counter() - t0
         mb, mr = rb["best"]["metrics"], ref["metrics"]
         me = results["gradient"]["best"]["metrics"]

@@ -34,8 +34,7 @@ from scipy.optimize import differential_evolution  # noqa: E402
 
 import jaxlink  # noqa: E402
 from jaxlink.analysis import dwell as _dwell  # noqa: E402
-from jaxlink.optimize import Evaluator, problem_from  # noqa: E402
-from jaxlink.optimize.search import run  # noqa: E402
+from jaxlink.optimize import Evaluator, problem_from, run  # noqa: E402
 
 COLS = ("stroke_mm", "dwell_025pct_deg", "dwell_05pct_deg", "dwell_1pct_deg", "dwell_2pct_deg", "dwell_005mm_deg",
         "acc_sign_changes", "sag_mm", "amax_rel", "vmax_rel", "mu_min_deg", "rod_angle_max_deg", "toggle_clear_deg")
@@ -133,7 +132,7 @@ def search(ev, method, *, budget, seed, **knobs):
     trace of the best design (from the run's checkpoint log)."""
     with tempfile.TemporaryDirectory() as tmp:
         out = pathlib.Path(tmp) / "r.json"
-        res = run(ev, method, budget=budget, seed=seed, out=out, **knobs)
+        res = run(ev, method, budget=budget, seed=seed, out=out, **knobs).to_json()
         trace = []
         for line in out.with_suffix(".log.jsonl").read_text().splitlines():
             r = json.loads(line)

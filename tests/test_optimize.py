@@ -11,11 +11,11 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from jaxlink.errors import MechanismError
 from jaxlink import load, loads
-from jaxlink.optimize import Evaluator, PathData, problem_from
+from jaxlink.errors import MechanismError
+from jaxlink.optimize import Evaluator, PathData, SearchResult, problem_from, run
 from jaxlink.optimize.objectives import OBJECTIVES
-from jaxlink.optimize.search import _u_of_v, _v_of_u, run
+from jaxlink.optimize.searches.lbfgs import u_of_v, v_of_u
 
 ROOT = pathlib.Path(__file__).resolve().parents[1]
 CASES = ROOT / "experiments" / "fourbar_cases"
@@ -111,8 +111,8 @@ targets = [[30, 40], [10, 50]]
     x = pr.to_file_units(U)
     a, b, c, d = x[:, 0], x[:, 1], 45.0, 55.0
     lengths = np.stack([a, b, np.full_like(a, c), np.full_like(a, d)], axis=1)
-    s, l = lengths.min(1), lengths.max(1)
-    grashof_crank = (a == s) & (s + l <= lengths.sum(1) - s - l)
+    s, big = lengths.min(1), lengths.max(1)
+    grashof_crank = (a == s) & (s + big <= lengths.sum(1) - s - big)
     assert not np.any(np.isnan(res["value"]))
     assert np.array_equal(res["feasible"], grashof_crank)  # no design wrongly infeasible (or feasible)
     assert np.all(np.isinf(res["value"][~res["feasible"]]))
@@ -120,14 +120,13 @@ targets = [[30, 40], [10, 50]]
 
 
 def test_gradient_matches_finite_differences(feed):
-    from jaxlink.optimize.search import Gradient
+    from jaxlink.optimize.searches.gradient import smooth_value_and_grad
 
-    g = Gradient(feed, budget=100, seed=0, starts=4)
     designs = [[2.0, 0.7, 5.0], [2.6, 1.3, -8.0], [1.0, 3.0, 25.0], [3.5, 0.2, -29.0]]
-    v = jnp.asarray(_v_of_u(feed.problem.to_unit(np.array(designs))))
+    v = jnp.asarray(v_of_u(feed.problem.to_unit(np.array(designs))))
     c = jnp.zeros(4, int)
-    value, grad = g._vg(v, c)
-    f = jax.jit(jax.vmap(lambda vv, cc: feed.smooth_single(_u_of_v(vv), cc)))
+    value, grad = smooth_value_and_grad(feed)(v, c)
+    f = jax.jit(jax.vmap(lambda vv, cc: feed.smooth_single(u_of_v(vv), cc)))
     h = 1e-6
     for j in range(3):
         e = jnp.zeros(3).at[j].set(h)
@@ -142,10 +141,10 @@ def test_gradient_beats_sampling_with_ten_times_fewer_evaluations(feed):
     mc = run(feed, "montecarlo", budget=2000, seed=3)
     grid = run(feed, "uniform", budget=2000, seed=3)
     gr = run(feed, "gradient", budget=200, seed=3, starts=4)
-    assert gr["evaluations"] <= 200
-    assert gr["best"]["objective"] <= min(mc["best"]["objective"], grid["best"]["objective"])
+    assert gr.evaluations <= 200
+    assert gr.value <= min(mc.value, grid.value)
     # the stationary point found satisfies the seed's bounds on the path
-    m = gr["best"]["metrics"]
+    m = gr.metrics
     assert 4.9 < m["two_a"] < 5.1 and 1.9 < m["two_b"] < 2.1
 
 
@@ -154,13 +153,14 @@ def test_killed_and_resumed_search_ends_with_the_same_best(feed, tmp_path, metho
     kw = dict(budget=300, seed=7, starts=4) if method == "gradient" else dict(budget=300, seed=7)
     whole = run(feed, method, out=tmp_path / "whole.json", **kw)
     part = run(feed, method, out=tmp_path / "part.json", stop_after_chunks=2, **kw)
-    assert not part["complete"]
+    assert not part.complete
     assert json.loads((tmp_path / "part.json").read_text())["complete"] is False
     done = run(feed, method, out=tmp_path / "part.json", resume=True, **kw)
-    assert done["complete"]
-    assert done["evaluations"] == whole["evaluations"]
-    assert done["best"]["parameters"] == whole["best"]["parameters"]
-    assert done["best"]["objective"] == whole["best"]["objective"]
+    assert done.complete
+    assert done.evaluations == whole.evaluations
+    assert done.parameters == whole.parameters
+    assert done.value == whole.value
+    assert json.loads((tmp_path / "part.json").read_text()) == done.to_json()
     log = [json.loads(x) for x in (tmp_path / "part.log.jsonl").read_text().splitlines()]
     assert [r["chunk"] for r in log] == list(range(1, len(log) + 1))  # nothing lost or repeated
 
@@ -196,6 +196,69 @@ def test_cli_writes_the_spec_json(tmp_path, capsys):
     assert set(data["best"]["parameters"]) == {"l2", "l22", "gamma"}
     assert data["evaluations"] == 64 and data["method"] == "montecarlo"
     assert main(["optimize", "four-bar", "--method", "uniform"]) == 2  # no [optimize] section
+    # the public entry point on the problem gives the same document (but the time)
+    res = run(problem_from(load("sewing-feed-opt")), "montecarlo", budget=64, seed=0, chunk=64)
+    assert isinstance(res, SearchResult) and res.parameters == data["best"]["parameters"]
+    doc = res.to_json()
+    assert list(doc) == list(data) and {**doc, "wall_s": 0} == {**data, "wall_s": 0}
+
+
+def test_resuming_another_search_is_refused(feed, tmp_path):
+    out = tmp_path / "r.json"
+    run(feed, "montecarlo", budget=64, seed=1, out=out)
+    with pytest.raises(MechanismError, match="another search"):
+        run(feed, "montecarlo", budget=64, seed=2, out=out, resume=True)
+    with pytest.raises(MechanismError, match="another search"):
+        run(feed, "uniform", budget=64, seed=1, out=out, resume=True)
+
+
+_KILLED = r"""
+import sys
+from jaxlink.cli import main
+sys.exit(main(["optimize", "sewing-feed-opt", "--method", "montecarlo", "--budget", sys.argv[1], "--seed", "5",
+               "--chunk", "64", "--out", sys.argv[2], "--progress", "off"]))
+"""
+
+
+def test_kill_9_then_resume_gives_the_uninterrupted_result(feed, tmp_path):
+    """A Monte Carlo search of the CLI killed (SIGKILL) after a few checkpoints and resumed ends
+    with exactly the best design, value and counts of an uninterrupted search."""
+    import os
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    budget = 64 * 300
+    out = tmp_path / "r.json"
+    log = tmp_path / "r.log.jsonl"
+    proc = subprocess.Popen([sys.executable, "-c", _KILLED, str(budget), str(out)], cwd=ROOT)
+    t0 = time.monotonic()
+    while (not log.exists() or len(log.read_text().splitlines()) < 3) and time.monotonic() - t0 < 240:
+        assert proc.poll() is None, "the search ended before it was killed"
+        time.sleep(0.01)
+    os.kill(proc.pid, signal.SIGKILL)
+    proc.wait()
+    killed = json.loads(out.read_text())
+    assert killed["complete"] is False and 0 < killed["evaluations"] < budget
+    # resumed here (the same file, [optimize], chunk, method, seed and budget as the CLI's search)
+    done = run(feed, "montecarlo", budget=budget, seed=5, out=out, resume=True)
+    whole = run(feed, "montecarlo", budget=budget, seed=5)
+    assert done.complete and done.evaluations == whole.evaluations == budget
+    assert done.designs == whole.designs and done.infeasible_fraction == whole.infeasible_fraction
+    assert done.parameters == whole.parameters and done.search_value == whole.search_value
+    assert json.loads(out.read_text()) == done.to_json()
+
+
+def test_background_compilation_errors_reach_the_caller():
+    from jaxlink.optimize.searches.base import compile_ahead
+
+    def broken(x):
+        raise ValueError("no such objective term")
+
+    future = compile_ahead(jax.jit(broken), np.zeros(3))
+    with pytest.raises(ValueError, match="no such objective term"):
+        future.result()
 
 
 # ----------------------------------------------------------------------------- starts, sharding
@@ -207,14 +270,15 @@ jax.config.update("jax_enable_x64", True)
 assert len(jax.devices()) == 4, jax.devices()
 from jaxlink import load
 from jaxlink.optimize import Evaluator, problem_from
-from jaxlink.optimize.search import searcher
+from jaxlink.optimize.searches import searcher
 ev = Evaluator(problem_from(load("sewing-feed-opt")), chunk=64)
 assert ev.n_devices == 4
 s = searcher(ev, "montecarlo", budget=256, seed=11)
 st = s.init()
 while not s.done(st):
     st = s.step(st)
-print(json.dumps([st["best_u"].tolist(), float(st["best_value"]), int(st["evaluations"])]))
+p = st.progress
+print(json.dumps([p.best_u.tolist(), float(p.best_value), int(p.evaluations)]))
 """
 
 
@@ -223,7 +287,7 @@ def test_sharded_run_equals_single_device_run(feed):
     import subprocess
     import sys
 
-    from jaxlink.optimize.search import searcher
+    from jaxlink.optimize.searches import searcher
 
     env = dict(os.environ, XLA_FLAGS="--xla_force_host_platform_device_count=4", JAX_PLATFORMS="cpu")
     proc = subprocess.run([sys.executable, "-c", _SHARDED], env=env, capture_output=True, text=True,
@@ -235,9 +299,10 @@ def test_sharded_run_equals_single_device_run(feed):
     st = s.init()
     while not s.done(st):
         st = s.step(st)
-    assert evaluations == int(st["evaluations"]) == 256
-    np.testing.assert_array_equal(np.asarray(best_u), st["best_u"])
-    assert best_value == pytest.approx(float(st["best_value"]), rel=1e-13)
+    p = st.progress
+    assert evaluations == int(p.evaluations) == 256
+    np.testing.assert_array_equal(np.asarray(best_u), p.best_u)
+    assert best_value == pytest.approx(float(p.best_value), rel=1e-13)
 
 
 def _feed_assemblable(l2, l22, gamma, p, sigma1, phis):

@@ -46,8 +46,7 @@ def cmd_optimize(args) -> int:
     from .mechanism import enable_dtype, load_from_args
 
     enable_dtype(args.dtype)
-    from ..optimize import Evaluator, problem_from
-    from ..optimize.search import run
+    from ..optimize import Evaluator, problem_from, run
 
     mech = load_from_args(args)
     problem = problem_from(mech)
@@ -75,17 +74,16 @@ def cmd_optimize(args) -> int:
     ev = Evaluator(problem, chunk=chunk)
     result = run(ev, args.method, budget=budget, seed=seed, out=args.out, resume=args.resume,
                  progress=progress, **knobs)
-    best = result["best"]
-    print(f"method      {result['method']}" + (f" ({knobs['uniform']})" if "uniform" in knobs else ""))
-    if best.get("parameters"):
-        print("best        " + ", ".join(f"{k} = {v:.6g}" for k, v in best["parameters"].items()))
-        print(f"objective   {best['objective']:.10g}" if best["objective"] is not None else "objective   -")
-        if best.get("metrics"):
-            print("metrics     " + ", ".join(f"{k} = {v:.6g}" for k, v in best["metrics"].items() if v is not None))
+    print(f"method      {result.method}" + (f" ({knobs['uniform']})" if "uniform" in knobs else ""))
+    if result.parameters:
+        print("best        " + ", ".join(f"{k} = {v:.6g}" for k, v in result.parameters.items()))
+        print(f"objective   {result.value:.10g}" if result.value is not None else "objective   -")
+        if result.metrics:
+            print("metrics     " + ", ".join(f"{k} = {v:.6g}" for k, v in result.metrics.items() if v is not None))
     else:
         print("best        none: no feasible design found")
-    print(f"evaluations {result['evaluations']} ({result['designs']} designs, "
-          f"{100 * result['infeasible_fraction']:.1f} % infeasible), {result['wall_s']:.2f} s")
+    print(f"evaluations {result.evaluations} ({result.designs} designs, "
+          f"{100 * result.infeasible_fraction:.1f} % infeasible), {result.wall_s:.2f} s")
     if args.out:
         print(f"wrote {args.out}")
-    return 0 if best.get("parameters") else 1
+    return 0 if result.parameters else 1

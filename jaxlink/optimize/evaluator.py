@@ -20,19 +20,18 @@ One *mechanism evaluation* = one design solved over its revolution (on one circu
 from __future__ import annotations
 
 import copy
-import functools
-import math
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ..solvers.assemble import NewtonOptions, default_rtol, solve_path
 from ..analysis.transfer import transfer_one
+from ..solvers import dyads as _dyads
+from ..solvers.assemble import NewtonOptions, default_rtol, solve_path
 from .objectives import OBJECTIVES, PathData, to_python
 from .problem import Problem
 from .sharding import design_sharding, pad_rows, put
-from .start import circuit_signs, closed_form_start, continuation_start, dyads_of, file_configuration
+from .start import circuit_signs, closed_form_start, continuation_start, file_configuration
 
 
 class Evaluator:
@@ -57,7 +56,7 @@ class Evaluator:
         phi0 = float(problem.phis[0])
         self.phi0 = phi0
         self.q_file = file_configuration(mech, phi0)
-        self.dyads = dyads_of(mech)
+        self.dyads = _dyads.classify(mech)
         method = problem.start_method
         if method == "auto":
             method = "closed_form" if self.dyads is not None else "continuation"
@@ -76,6 +75,15 @@ class Evaluator:
         self.report_samples = int(problem.option("report_samples", default_report))
         self.evaluations = 0  # mechanism evaluations made through this object
         self.infeasible = 0
+        self._compiled: dict = {}
+
+    def compiled(self, key, build):
+        """`build()` made once per evaluator under `key` (a hashable tuple): every jitted batch
+        function of the evaluator and of the searches run on it is kept here, so a second search
+        on the same evaluator compiles nothing."""
+        if key not in self._compiled:
+            self._compiled[key] = build()
+        return self._compiled[key]
 
     # ------------------------------------------------------------------ single design (traced)
     def params(self, u):
@@ -137,19 +145,22 @@ class Evaluator:
         return f, cons, jnp.where(feas & jnp.isfinite(v), v, jnp.inf), feas
 
     # ------------------------------------------------------------------ batched (jitted)
-    @functools.lru_cache(maxsize=4)
     def _values(self, all_circuits: bool, rank: bool):
         """Jitted batch of `value_single`: (U) -> (value, ok, circuit[, rank]), the best of every
         circuit of each design, or (U, circuits) -> (value, ok[, rank])."""
-        if not all_circuits:
-            return jax.jit(jax.vmap(lambda u, c: self.value_single(u, c, rank)))
 
-        def one(u):
-            out = jax.vmap(lambda c: self.value_single(u, c, rank))(jnp.arange(self.n_circuits))
-            i = jnp.argmin(out[0])
-            return (out[0][i], out[1][i], i) + tuple(o[i] for o in out[2:])
+        def build():
+            if not all_circuits:
+                return jax.jit(jax.vmap(lambda u, c: self.value_single(u, c, rank)))
 
-        return jax.jit(jax.vmap(one))
+            def one(u):
+                out = jax.vmap(lambda c: self.value_single(u, c, rank))(jnp.arange(self.n_circuits))
+                i = jnp.argmin(out[0])
+                return (out[0][i], out[1][i], i) + tuple(o[i] for o in out[2:])
+
+            return jax.jit(jax.vmap(one))
+
+        return self.compiled(("values", bool(all_circuits), bool(rank)), build)
 
     def evaluate(self, U, circuits=None, *, rank: bool = False):
         """Objective of a batch of designs.
@@ -223,7 +234,6 @@ class Evaluator:
             out["metrics"] = {}
         return out
 
-    @functools.lru_cache(maxsize=16)
     def _report_fn(self, c: int, samples: int, order: int):
         path_fn = self._path_fn(c, samples, order)
 
@@ -231,15 +241,14 @@ class Evaluator:
             path, feas = path_fn(uu)
             return feas, self.objective.value(path), self.objective.metrics(path)
 
-        return jax.jit(one)
+        return self.compiled(("report", c, samples, order), lambda: jax.jit(one))
 
-    @functools.cached_property
     def _paths_batch(self):
         def one(u, c):
             path, feas = self.path(u, c, jnp.asarray(self.problem.phis, u.dtype), 0)
             return path.xy, feas
 
-        return jax.jit(jax.vmap(one))
+        return self.compiled(("paths",), lambda: jax.jit(jax.vmap(one)))
 
     def paths(self, U, circuits) -> tuple[np.ndarray, np.ndarray]:
         """(B, N, 2) paths at the search samples (file units) and (B,) feasibility; counts B
@@ -249,7 +258,7 @@ class Evaluator:
         for s in range(0, len(U), self.chunk):
             part, n = pad_rows(U[s:s + self.chunk], self.chunk)
             cc, _ = pad_rows(np.asarray(circuits[s:s + self.chunk]), self.chunk)
-            xy, ok = self._paths_batch(*put((jnp.asarray(part), jnp.asarray(cc)), self.sharding))
+            xy, ok = self._paths_batch()(*put((jnp.asarray(part), jnp.asarray(cc)), self.sharding))
             xs.append(np.asarray(xy)[:n])
             oks.append(np.asarray(ok)[:n])
             self.evaluations += n
@@ -261,16 +270,8 @@ class Evaluator:
         path, _ = self._path_fn(int(c), n, 0)(jnp.asarray(u, dtype=float))
         return np.asarray(path.xy)
 
-    @functools.lru_cache(maxsize=16)
     def _path_fn(self, c: int, samples: int, order: int):
         phis = self.problem.phis[0] + 2 * np.pi * np.arange(samples) / samples
-        return jax.jit(lambda uu: self.path(uu, c, jnp.asarray(phis, uu.dtype), order))
+        return self.compiled(("path", c, samples, order),
+                             lambda: jax.jit(lambda uu: self.path(uu, c, jnp.asarray(phis, uu.dtype), order)))
 
-
-def evaluation_count_note() -> str:
-    return ("one evaluation = one design solved over its revolution on one circuit; a gradient "
-            "(value and gradient of one design) counts 2 (forward + backward pass)")
-
-
-def _isfinite(x) -> bool:
-    return math.isfinite(float(x))

@@ -24,10 +24,10 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from ..results import RESULTS
 from ..solvers import dyads as _dyads
 from ..solvers.assemble import solve
 from ..solvers.linalg import solve_small
-from ..results import RESULTS
 
 
 def file_configuration(mech, phi0) -> np.ndarray:
@@ -41,10 +41,6 @@ def file_configuration(mech, phi0) -> np.ndarray:
             f"({RESULTS.messages[int(sol.result[0])]}); the search needs an assemblable design in the "
             "file to define the assembly branch", file=mech.file, key="parameters")
     return np.asarray(sol.q[0])
-
-
-def dyads_of(mech):
-    return _dyads.classify(mech)
 
 
 def circuit_signs(mech, q_file, phi0, *, all_circuits: bool) -> np.ndarray:

@@ -1,0 +1,191 @@
+"""What every search shares: its progress record, the counting of mechanism evaluations, the
+best-so-far update, and the presampled-starts skeleton of the gradient searches.
+
+A search is an object with `init() -> state`, `done(state) -> bool` and `step(state) -> state`
+(one deterministic chunk). Its state is a NamedTuple of numpy arrays (a pytree of fixed
+structure from `init` on, so a checkpoint is its leaves) whose `progress` field is a `Progress`.
+
+**Counting.** One mechanism evaluation = one design solved over its revolution on one circuit
+(with `circuits = "all"` and no circuit given, one per circuit); a value and gradient of one
+design = 2 (the forward solve and the backward pass of the implicit differentiation, which costs
+about one more solve). Under `vmap` every start is charged for every trial it is given.
+"""
+
+from __future__ import annotations
+
+from concurrent.futures import Future, ThreadPoolExecutor
+from typing import NamedTuple, Protocol
+
+import numpy as np
+
+from ..evaluator import Evaluator
+
+
+class Progress(NamedTuple):
+    """Counters and the best design so far (every search)."""
+
+    chunk: np.int64  # chunks done
+    evaluations: np.int64  # mechanism evaluations (see the module doc)
+    designs: np.int64  # designs evaluated
+    infeasible: np.int64  # of which infeasible
+    best_value: np.float64  # exact objective of the best design; +inf until a feasible one is seen
+    best_u: np.ndarray  # (V,) its normalized design (zeros while best_value is +inf)
+    best_circuit: np.int64  # its circuit
+    wall_s: np.float64  # seconds spent in `step`
+    done: np.bool_  # the search ended by itself
+
+    @property
+    def found(self) -> bool:
+        return bool(np.isfinite(self.best_value))
+
+
+def progress_start(n_variables: int) -> Progress:
+    return Progress(chunk=np.int64(0), evaluations=np.int64(0), designs=np.int64(0), infeasible=np.int64(0),
+                    best_value=np.float64(np.inf), best_u=np.zeros(n_variables), best_circuit=np.int64(0),
+                    wall_s=np.float64(0.0), done=np.bool_(False))
+
+
+class Search(Protocol):
+    name: str
+
+    def init(self): ...
+
+    def done(self, state) -> bool: ...
+
+    def step(self, state): ...
+
+
+class Batch(NamedTuple):
+    """Exact objective of a batch of designs (`Evaluator.evaluate`) and what it cost."""
+
+    value: np.ndarray  # (B,), +inf if infeasible
+    feasible: np.ndarray  # (B,)
+    circuit: np.ndarray  # (B,) the circuit evaluated (the best one with circuits = "all")
+    rank: np.ndarray | None  # (B,) the objective's start-ranking value, if asked for
+    evaluations: int
+
+
+def evaluate(ev: Evaluator, U, circuits=None, *, rank: bool = False) -> Batch:
+    res = ev.evaluate(U, circuits, rank=rank)
+    per = ev.n_circuits if circuits is None and ev.n_circuits > 1 else 1
+    return Batch(res["value"], res["feasible"], res["circuit"], res.get("rank"), len(res["value"]) * per)
+
+
+def improved(p: Progress, U, value, circuit) -> Progress:
+    """`p` with the best of the designs `U` (values `value`, circuits `circuit`) if it is better
+    (the first of equal values: deterministic)."""
+    if len(value) == 0:
+        return p
+    i = int(np.argmin(value))
+    if np.isfinite(value[i]) and value[i] < p.best_value:
+        return p._replace(best_value=np.float64(value[i]), best_u=np.asarray(U[i], dtype=np.float64),
+                          best_circuit=np.int64(circuit[i]))
+    return p
+
+
+def counted(p: Progress, evaluations: int, feasible=None) -> Progress:
+    """`p` with `evaluations` more, and the designs `feasible` (B,) counted if given."""
+    p = p._replace(evaluations=p.evaluations + np.int64(evaluations))
+    if feasible is not None:
+        p = p._replace(designs=p.designs + np.int64(len(feasible)),
+                       infeasible=p.infeasible + np.int64((~np.asarray(feasible)).sum()))
+    return p
+
+
+def recorded(p: Progress, U, batch: Batch) -> Progress:
+    """`p` after the evaluated batch: counted, and its best design kept."""
+    return improved(counted(p, batch.evaluations, batch.feasible), U, batch.value, batch.circuit)
+
+
+def next_chunk(p: Progress) -> Progress:
+    return p._replace(chunk=p.chunk + 1)
+
+
+def compile_ahead(fn, *args) -> Future:
+    """Compile the jitted `fn` for `args` in a thread (XLA compiles without holding the GIL, so
+    the caller goes on evaluating meanwhile). The future's `result()` is the compiled executable,
+    or raises what the tracing or compilation raised."""
+    executor = ThreadPoolExecutor(max_workers=1, thread_name_prefix="jaxlink-compile")
+    try:
+        return executor.submit(lambda: fn.lower(*args).compile())
+    finally:
+        executor.shutdown(wait=False)
+
+
+# ----------------------------------------------------------------------------- presampled starts
+
+
+class Pool(NamedTuple):
+    """The `S` best presampled designs (by ranking value, then by arrival)."""
+
+    value: np.ndarray  # (S,) ranking values, +inf for empty slots
+    u: np.ndarray  # (S, V)
+    circuit: np.ndarray  # (S,)
+    n: np.int64  # designs presampled so far
+
+
+def empty_pool(starts: int, n_variables: int) -> Pool:
+    return Pool(np.full(starts, np.inf), np.zeros((starts, n_variables)), np.zeros(starts, np.int64), np.int64(0))
+
+
+def pooled(pool: Pool, U, values, circuits) -> Pool:
+    """`pool` with the designs `U` (ranking values `values`) competing for its slots."""
+    vals = np.concatenate([pool.value, values])
+    order = np.argsort(vals, kind="stable")[: len(pool.value)]
+    return Pool(vals[order], np.concatenate([pool.u, U])[order], np.concatenate([pool.circuit, circuits])[order],
+                pool.n)
+
+
+def start_indices(pool: Pool) -> np.ndarray | None:
+    """(S,) pool rows to start from: every feasible one, the empty slots filled with repeats of
+    the best (they then move alike; harmless); None if none is feasible."""
+    ok = np.isfinite(pool.value)
+    if not ok.any():
+        return None
+    S = len(ok)
+    return np.where(ok, np.arange(S), np.flatnonzero(ok)[np.arange(S) % ok.sum()])
+
+
+class PresampledStarts:
+    """Skeleton of the gradient searches. Phase 0 draws a seeded Monte Carlo presample (numpy
+    PCG64 seeded by (seed, 1000003, chunk)) in chunks and pools the `S` best designs; then
+    `started` begins phase 1, whose chunks `searched` runs. The state has the fields `progress`,
+    `phase` (0 presample, 1 search) and `pool`; subclasses set `ev`, `budget`, `seed`, `S`,
+    `presample` and define `presampled`, `started` and `searched`."""
+
+    ev: Evaluator
+    budget: int
+    seed: int
+    S: int
+    presample: int
+
+    def done(self, st) -> bool:
+        return bool(st.progress.done)
+
+    def step(self, st):
+        return self._presample_chunk(st) if int(st.phase) == 0 else self.searched(st)
+
+    def presampled(self, st, U):
+        """Evaluate (and count) presampled designs: (state, designs to pool, their ranking values,
+        their circuits)."""
+        raise NotImplementedError
+
+    def started(self, st):
+        raise NotImplementedError
+
+    def searched(self, st):
+        raise NotImplementedError
+
+    def _presample_chunk(self, st):
+        ev = self.ev
+        p = st.progress
+        n = min(ev.chunk, self.presample - int(st.pool.n), max(0, (self.budget - int(p.evaluations)) // ev.n_circuits))
+        if n > 0:
+            rng = np.random.default_rng([self.seed, 1_000_003, int(p.chunk)])
+            U = rng.random((ev.chunk, ev.problem.n_variables))[:n]
+            st, U, values, circuits = self.presampled(st, U)
+            st = st._replace(pool=pooled(st.pool, U, values, circuits)._replace(n=st.pool.n + np.int64(n)))
+        st = st._replace(progress=next_chunk(st.progress))
+        if int(st.pool.n) >= self.presample or n == 0:
+            st = self.started(st)
+        return st
