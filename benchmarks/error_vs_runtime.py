@@ -187,11 +187,6 @@ def path_cases(repeats, log, designs=200):
 
 
 def dwell_cases(repeats, log, designs=64):
-    try:
-        from jaxlink.analysis import dwell as _dwell
-    except Exception as e:  # noqa: BLE001 (the dwell module is optional while in progress)
-        print(f"dwell metrics not available ({e}); skipped")
-        return []
     mech = jl.load("needle-arachne")
     rng = np.random.default_rng(2)
     P = np.repeat(mech.parameters[None], designs, axis=0)
@@ -200,7 +195,7 @@ def dwell_cases(repeats, log, designs=64):
     key = "dwell_05pct_deg"
 
     def metric(n):
-        rows = _dwell.needle_metrics(mech, P, samples=n)
+        rows = jl.dwell_metrics(mech, P, samples=n)
         return np.array([r.get(key, np.nan) if r.get("converged") else np.nan for r in rows])
 
     ref = metric(14400 if QUICK else 28800)

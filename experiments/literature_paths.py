@@ -12,8 +12,6 @@ lengths and the coupler point are the variables, both circuits are searched.
 from __future__ import annotations
 
 import argparse
-import contextlib
-import io
 import json
 import math
 import pathlib
@@ -29,18 +27,16 @@ CASES = ("mkh1", "mkh2", "mkh3", "mcgarva", "ullah", "yu1", "yu2", "wu3")
 
 
 def run_cli(case: str, budget: int, seed: int, out: pathlib.Path) -> tuple[dict, float]:
-    """`jaxlink optimize CASE --method gradient` in this process; returns (result, wall s incl.
-    compilation)."""
-    from jaxlink.cli import main
+    """What `jaxlink optimize CASE --method gradient` runs, through the Python API in this process;
+    returns (the JSON document, wall s incl. compilation)."""
+    import jaxlink
+    import jaxlink.optimize
 
     t0 = time.perf_counter()
-    with contextlib.redirect_stdout(io.StringIO()):
-        code = main(["optimize", str(CASES_DIR / f"{case}.toml"), "--method", "gradient", "--budget", str(budget),
-                     "--seed", str(seed), "--out", str(out), "--progress", "off"])
+    problem = jaxlink.optimize.problem_from(jaxlink.load(CASES_DIR / f"{case}.toml"))
+    result = jaxlink.optimize.run(problem, "gradient", budget=budget, seed=seed, out=out)
     wall = time.perf_counter() - t0
-    if code not in (0, 1):
-        raise SystemExit(f"jaxlink optimize failed on {case} (exit {code})")
-    return json.loads(out.read_text()), wall
+    return result.to_json(), wall
 
 
 # ----------------------------------------------------------------------------- pylinkage

@@ -33,7 +33,6 @@ import numpy as np  # noqa: E402
 from scipy.optimize import differential_evolution  # noqa: E402
 
 import jaxlink  # noqa: E402
-from jaxlink.analysis import dwell as _dwell  # noqa: E402
 from jaxlink.optimize import Evaluator, problem_from, run  # noqa: E402
 
 COLS = ("stroke_mm", "dwell_025pct_deg", "dwell_05pct_deg", "dwell_1pct_deg", "dwell_2pct_deg", "dwell_005mm_deg",
@@ -63,11 +62,11 @@ TARGET = {"dwell_005mm_deg": 55.0, "dwell_1pct_deg": 80.0}
 
 def metrics_table():
     rows = {}
-    rows["original"] = (_dwell.needle_metrics(jaxlink.load("needle-arachne-original")), SPEC["original"])
-    rows["chosen (66°)"] = (_dwell.needle_metrics(jaxlink.load("needle-arachne")), SPEC["chosen (66°)"])
+    rows["original"] = (jaxlink.dwell_metrics(jaxlink.load("needle-arachne-original")), SPEC["original"])
+    rows["chosen (66°)"] = (jaxlink.dwell_metrics(jaxlink.load("needle-arachne")), SPEC["chosen (66°)"])
     unit = jaxlink.load("needle-arachne-unit")
     P = np.stack([unit.with_parameters(l5=a, l7=b, beta=c, l4a=d) for (a, b, c, d), _ in ROWS.values()])
-    got = _dwell.needle_metrics(unit, P, scale=_dwell.StrokeScale(stroke_mm=20.0))
+    got = jaxlink.dwell_metrics(unit, P, scale=jaxlink.StrokeScale(stroke_mm=20.0))
     for (name, (_, spec)), g in zip(ROWS.items(), got):
         g = dict(g)
         g["stroke_mm"] = g["stroke_rel"]  # the spec lists the dimensionless stroke for these rows
@@ -239,7 +238,7 @@ def main():
 
     t = time.perf_counter()
     rows = metrics_table() if not args.quick else {
-        "original": (_dwell.needle_metrics(jaxlink.load("needle-arachne-original")), SPEC["original"])}
+        "original": (jaxlink.dwell_metrics(jaxlink.load("needle-arachne-original")), SPEC["original"])}
     print(f"== metrics (0.05° grid) vs spec §3 ({time.perf_counter() - t:.1f} s)")
     worst = print_table(rows)
     out["table"] = {k: {"ours": g, "spec": dict(zip(COLS, s))} for k, (g, s) in rows.items()}
@@ -305,7 +304,7 @@ def main():
                             ("1966 chosen", jaxlink.load("needle-arachne"), None),
                             ("optimized", mech, mech.with_parameters(**best["parameters"]))):
             p = np.asarray(mm.parameters if p is None else p)
-            phi, q, s, ds, dds, conv = _dwell.solve_stroke(mm, p[None], 7200)
+            phi, q, s, ds, dds, conv = jaxlink.solve_stroke(mm, p[None], 7200)
             curves[name] = (phi, np.asarray(s[0]), np.asarray(ds[0]), np.asarray(dds[0]),
                             float(p[mm.parameter_index("l2")]))
         plot(args.plot, curves)

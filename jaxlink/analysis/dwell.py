@@ -411,6 +411,9 @@ def needle_metrics(mech, p=None, *, samples: int = 7200, scale: StrokeScale = St
     return out if batch else out[0]
 
 
+dwell_metrics = needle_metrics  # the public name (`jaxlink.dwell_metrics`)
+
+
 @functools.partial(jax.jit, static_argnames=("scale", "roles"))
 def _metrics(mech, q, s, ds, dds, p, crank, *, scale, roles):
     def one(q, s, ds, dds, p, crank):
