@@ -244,7 +244,8 @@ def main(argv=None) -> dict:
     for name, dt, rate, err in rows:
         print(f"{name:48s} {dt:8s} {rate:12.4g} {'' if err is None else f'{err:10.2e}'}")
     if "ratio_float64_vs_pylinkage_core" in results:
-        print(f"jaxlink float64 = {results['ratio_float64_vs_pylinkage_core']:.2f}x pylinkage's numba core over designs "
+        print(f"jaxlink float64 = {results['ratio_float64_vs_pylinkage_core']:.2f}x pylinkage's numba core "
+              f"over designs "
               f"({results['ratio_float64_vs_pylinkage_step_fast']:.2f}x its step_fast); float32 "
               f"{results['ratio_float32_vs_pylinkage_core']:.2f}x")
     if "ratio_float64_1core_vs_pylinkage_core" in results:

@@ -58,7 +58,8 @@ lo, hi = np.append(pr.lower, 0.0), np.append(pr.upper, 1.0)
 X = lo + (hi - lo) * rng.uniform(size=(n, len(lo)))
 one(X[0])
 t = time.perf_counter(); v = np.array([one(x) for x in X]); dt = time.perf_counter() - t
-print(json.dumps({"evaluations": n, "seconds": dt, "evals_per_s": n / dt, "unbuildable_fraction": float(np.mean(v >= 1e9))}))
+print(json.dumps({"evaluations": n, "seconds": dt, "evals_per_s": n / dt,
+                  "unbuildable_fraction": float(np.mean(v >= 1e9))}))
 """
 
 
@@ -88,7 +89,8 @@ def optimizer_rates(quick):
         import pylinkage  # noqa: F401
 
         rc, so, se, _ = sh([PY, "-c", OPT_CHILD, os.path.join(ROOT, "experiments"), "300" if quick else "2000"])
-        out["pylinkage"] = json.loads(so.strip().splitlines()[-1]) if rc == 0 else {"error": se.strip().splitlines()[-3:]}
+        out["pylinkage"] = (json.loads(so.strip().splitlines()[-1]) if rc == 0
+                            else {"error": se.strip().splitlines()[-3:]})
     except ImportError:
         out["pylinkage"] = {"error": "pylinkage not installed"}
     if "evals_per_s" in out["jaxlink"] and "evals_per_s" in out.get("pylinkage", {}):
@@ -202,7 +204,8 @@ def main(argv=None):
         L += ["", f"Defaults on their front: {', '.join(ev['defaults_on_front']) or '-'}; "
               f"not: {', '.join(ev['defaults_off_front']) or '-'}.", ""]
     if sc:
-        L += ["## Scaling (`scaling.json`)", "", "| positions | devices | positions/s | peak RSS MB |", "|---|---|---|---|"]
+        L += ["## Scaling (`scaling.json`)", "", "| positions | devices | positions/s | peak RSS MB |",
+              "|---|---|---|---|"]
         for r in sc["rows"]:
             if "error" not in r:
                 L.append(f"| {r['positions']} | {r['devices']} | {r['positions_per_s']:.3g} | {r['peak_rss_mb']:.0f} |")

@@ -252,7 +252,8 @@ def main(argv=None) -> dict:
     fs_rate = n_fs * len(phis) / t_fs
     one_core = None
     if args.cores is None:  # jaxlink pinned to one core, in a subprocess (the baselines use one)
-        extra = ["--jaxlink-only", "--designs", str(B), "--angles", str(args.angles)] + (["--quick"] if args.quick else [])
+        extra = ["--jaxlink-only", "--designs", str(B), "--angles", str(args.angles)]
+        extra += ["--quick"] if args.quick else []
         one_core = run_pinned(os.path.abspath(__file__), extra, 1)
         if one_core:
             rows.append(("jaxlink closed-form dyads (auto), 1 core", "float64", pos / one_core["positions_per_s"], pos,

@@ -54,13 +54,16 @@ def seed_uniform(ev):
     evals = 0
     l2s = 1.5 + 0.3 * np.arange(12)
     k, m1, n = stage([[v, 0.3, 14.0] for v in l2s], lambda m: m["two_a"] >= 5.0)
-    l2 = float(l2s[k]); evals += n
+    l2 = float(l2s[k])
+    evals += n
     l22s = 0.3 + 0.2 * np.arange(15)
     k, m2, n = stage([[l2, v, 14.0] for v in l22s], lambda m: m["two_b"] >= 2.0)
-    l22 = float(l22s[k]); evals += n
+    l22 = float(l22s[k])
+    evals += n
     gs = 14.0 - 4.0 * np.arange(12)
     k, m3, n = stage([[l2, l22, v] for v in gs], lambda m: m["dx"] <= 0.3)
-    g = float(gs[k]); evals += n
+    g = float(gs[k])
+    evals += n
     return {"l2": l2, "l22": l22, "gamma": g, "stage1": m1, "stage2": m2, "final": m3, "evaluations": evals}
 
 
@@ -159,7 +162,8 @@ def main(argv=None):
         mb, mr = rb["best"]["metrics"], ref["metrics"]
         me = results["gradient"]["best"]["metrics"]
         print("\nBeyond the seed (objective 'feed': flat working part, low peak acceleration, stroke >= 5 mm, "
-              f"lift >= 2 mm; 10 variables, gradient, {rb['evaluations']} evaluations, {wall:.1f} s incl. compilation):")
+              f"lift >= 2 mm; 10 variables, gradient, {rb['evaluations']} evaluations, "
+              f"{wall:.1f} s incl. compilation):")
         print("  " + ", ".join(f"{k} = {v:.4g}" for k, v in rb["best"]["parameters"].items()))
         print(f"  {'':<48}{'seed 2.1/0.9/2':>16}{'ellipse optimum':>17}{'new':>10}{'vs seed':>9}")
         for key, label in (("flatness", "working-part flatness (RMS height, mm)"),

@@ -76,7 +76,8 @@ def main() -> None:
     torque = np.asarray(r.torque)
     deg = np.rad2deg(phis)
 
-    print(f"Feed six-bar reactions at omega = {OMEGA:g} rad/s, {len(phis)} positions from 75 deg, step {args.step:g} deg")
+    print(f"Feed six-bar reactions at omega = {OMEGA:g} rad/s, {len(phis)} positions from 75 deg, "
+          f"step {args.step:g} deg")
     for b, (label, design) in enumerate(DESIGNS.items()):
         spec_peaks, spec_torque = SPEC[design]
         print(f"\nDesign l2 / l22 / gamma = {label}")
@@ -123,7 +124,8 @@ def power_balance_error(mech, mdl, q, phis, p, torque) -> float:
     m = np.array([b.mass for b in mdl.bodies])
     J = np.array([b.inertia for b in mdl.bodies])
     g = np.asarray(mdl.gravity)
-    T = 0.5 * OMEGA**2 * (np.sum(m[None] * np.sum(np.asarray(c1) ** 2, -1), -1) + np.sum(J[None] * np.asarray(a1) ** 2, -1))
+    T = 0.5 * OMEGA**2 * (np.sum(m[None] * np.sum(np.asarray(c1) ** 2, -1), -1)
+                          + np.sum(J[None] * np.asarray(a1) ** 2, -1))
     V = -np.sum(m[None] * (np.asarray(c) @ g), -1)
     E = T + V
     n = len(E)

@@ -178,7 +178,7 @@ def plot(path, curves):
     import matplotlib.pyplot as plt
 
     fig, ax = plt.subplots(3, 1, figsize=(8, 9), sharex=True)
-    for name, (phi, s, ds, dds, l2) in curves.items():
+    for _name, (phi, s, _ds, _dds, _l2) in curves.items():
         k0 = int(np.argmax(s))
         x = (np.degrees(phi - phi[k0]) + 180.0) % 360.0 - 180.0
         o = np.argsort(x)
@@ -195,7 +195,7 @@ def plot(path, curves):
         a.axvline(0, color="k", lw=0.5)
     ax[0].legend()
     inset = ax[0].inset_axes([0.62, 0.08, 0.35, 0.45])
-    for name, (phi, s, ds, dds, l2) in curves.items():
+    for _name, (phi, s, _ds, _dds, _l2) in curves.items():
         k0 = int(np.argmax(s))
         x = (np.degrees(phi - phi[k0]) + 180.0) % 360.0 - 180.0
         o = np.argsort(x)
@@ -211,7 +211,8 @@ def plot(path, curves):
 def row(name, res, *, first=None, warm=None, compile_s=None):
     m = res["best"]["metrics"]
     return {"method": name, "evaluations": res["evaluations"], "wall_s": res["wall_s"], "wall_warm_s": warm,
-            "compile_s": compile_s, "dwell_005mm_deg": m.get("dwell_005mm_deg"), "dwell_1pct_deg": m.get("dwell_1pct_deg"),
+            "compile_s": compile_s, "dwell_005mm_deg": m.get("dwell_005mm_deg"),
+            "dwell_1pct_deg": m.get("dwell_1pct_deg"),
             "constraints_met": bool(m.get("constraints_met")), "target_met": meets_target(m), "first_target": first}
 
 

@@ -104,7 +104,8 @@ def main() -> None:
     print(f"\nMinimum preload, seed eq. (12.11), y0 > (m a_2 − m g)/c − b with a_2 = {a2:.2f} m/s²:")
     for label, b in (("the seed's b = 1.3 mm (design limit)", B_SEED), ("the actual b = 1.13 mm", B_ACTUAL)):
         print(f"  {label:<38}: y0 > {1e3 * preload_bound(a2, b):.3f} mm")
-    print("  (the seed prints y0 > 1.9 mm: it used b = 1.3 mm; with the actual 1.13 mm its chosen y0 = 2.0 mm is short)")
+    print("  (the seed prints y0 > 1.9 mm: it used b = 1.3 mm; with the actual 1.13 mm its chosen y0 = 2.0 mm "
+          "is short)")
 
     f1, f2a, f3 = seed_lifting_forces(Y0_CHOSEN, B_ACTUAL, a2, ay3)
     print(f"\nLifting force with y0 = {1e3 * Y0_CHOSEN:g} mm, seed's formulas (12.3), (12.6), (12.9):")

@@ -16,8 +16,8 @@ inputs: call `jax.config.update("jax_enable_x64", True)` for float64 (the comman
 
 from .analysis.dwell import DwellRoles as DwellRoles
 from .analysis.dwell import StrokeScale as StrokeScale
-from .analysis.dwell import dwell_roles as dwell_roles
 from .analysis.dwell import dwell_metrics as dwell_metrics
+from .analysis.dwell import dwell_roles as dwell_roles
 from .analysis.dwell import solve_stroke as solve_stroke
 from .analysis.kinetostatics import BodyMotion as BodyMotion
 from .analysis.kinetostatics import Reactions as Reactions

@@ -160,7 +160,8 @@ def test_pi_and_points_from_points():
     s, s0 = jl.solve(m, phis), jl.solve(jl.load("four-bar"), phis)
     np.testing.assert_allclose(np.asarray(s.points[:, 1]), np.asarray(s0.points[:, 0]), rtol=0, atol=1e-15)
     np.testing.assert_allclose(np.asarray(s.points[:, 2]), -np.asarray(s.points[:, 0]), rtol=0, atol=0)
-    for bad, words in (('P = ["Z", "cx @ phi3"]', "'Z' is not a point"), ('P = ["P", "cx @ phi3"]', "before it is defined")):
+    for bad, words in (('P = ["Z", "cx @ phi3"]', "'Z' is not a point"),
+                       ('P = ["P", "cx @ phi3"]', "before it is defined")):
         with pytest.raises(jl.MechanismError, match=words):
             jl.loads(base.replace(old, bad))
     with pytest.raises(jl.MechanismError, match="reserved"):

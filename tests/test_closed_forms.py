@@ -5,9 +5,9 @@ differences of the closed forms."""
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from closed_forms import fourbar_freudenstein, slider_crank_offset
 
 import jaxlink as jl
-from closed_forms import fourbar_freudenstein, slider_crank_offset
 
 
 def _wrap(x):

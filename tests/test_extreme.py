@@ -23,9 +23,9 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from closed_forms import fourbar_freudenstein
 
 import jaxlink as jl
-from closed_forms import fourbar_freudenstein
 
 R = jl.RESULTS
 DTYPES = [np.float64, np.float32]

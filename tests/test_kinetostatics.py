@@ -9,13 +9,12 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from jaxlink.model import bodies as _bodies
-from jaxlink.files import expr as _expr
-from jaxlink.solvers.assemble import solve
-from jaxlink.analysis.transfer import transfer
-from jaxlink import RESULTS
+from jaxlink import RESULTS, load
 from jaxlink.analysis.kinetostatics import reactions, solve_reactions
-from jaxlink import load
+from jaxlink.analysis.transfer import transfer
+from jaxlink.files import expr as _expr
+from jaxlink.model import bodies as _bodies
+from jaxlink.solvers.assemble import solve
 
 G = 9.81
 

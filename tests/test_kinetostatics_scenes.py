@@ -9,11 +9,9 @@ import sys
 
 import numpy as np
 
-from jaxlink import RESULTS
+from jaxlink import RESULTS, load
 from jaxlink.analysis.kinetostatics import solve_reactions
-from jaxlink import load
 from jaxlink.scenes import scene_paths
-
 
 REFERENCE = pathlib.Path(__file__).resolve().parent / "data" / "reference" / "needle_chosen_stroke.csv"
 

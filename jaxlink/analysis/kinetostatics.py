@@ -15,7 +15,8 @@ the left normal n = (−sin a, cos a) of its axis a, at P_j, and a moment M. The
 on the input body (from the ground). Unknowns F_S = (F_1x, F_1y, …, τ) number 2·joints + 1, equations
 3·bodies; they agree when Grübler's mobility is 1 (checked when the file is read). The accelerations
 come from the transfer functions μ = dq/dφ, ν = d²q/dφ² (`analysis/transfer.py`): c̈ = c'' ω² + c' α with
-c' = dc/dφ, c'' = d²c/dφ² by forward AD along the solution curve, likewise θ̈. Moment rows and moment unknowns are scaled by the mechanism's length
+c' = dc/dφ, c'' = d²c/dφ² by forward AD along the solution curve, likewise θ̈. Moment rows and
+moment unknowns are scaled by the mechanism's length
 scale so that A_S is O(1) in any unit.
 
 Power balance (a check, `tests/test_kinetostatics.py`): τ ω + Σ P_loads = d(T + V_gravity + V_springs)/dt.
@@ -36,14 +37,14 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ..model import bodies as _bodies
 from ..files import expr as _expr
-from ..solvers.assemble import solve
 from ..files.expr import ANGLE
-from ..solvers.linalg import UNROLL_MAX, solve_small
-from .transfer import along, rates
+from ..model import bodies as _bodies
 from ..model.mechanism import Mechanism
 from ..results import RESULTS
+from ..solvers.assemble import solve
+from ..solvers.linalg import UNROLL_MAX, solve_small
+from .transfer import along, rates
 
 
 class Reactions(NamedTuple):

@@ -19,8 +19,8 @@ from typing import NamedTuple
 import jax
 import jax.numpy as jnp
 
-from ..solvers.linalg import solve_small
 from ..model.mechanism import Mechanism
+from ..solvers.linalg import solve_small
 
 
 class Transfer(NamedTuple):

@@ -24,13 +24,12 @@ at trace time.
 from __future__ import annotations
 
 import dataclasses
-import math
 import difflib
+import math
 from fractions import Fraction
 from typing import Callable, Mapping, Union
 
 import jax.numpy as jnp
-
 
 # ----------------------------------------------------------------------------- tokens
 

@@ -56,12 +56,12 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from . import dyads as _dyads
 from ..model import structure as _structure
-from .fusion import materialize
-from .linalg import solve_block_lower, solve_small
 from ..model.mechanism import Mechanism
 from ..results import RESULTS, Solution, SolveStats
+from . import dyads as _dyads
+from .fusion import materialize
+from .linalg import solve_block_lower, solve_small
 
 
 class NewtonOptions(NamedTuple):
@@ -329,7 +329,8 @@ def _closed_form_path(mech, p, phis, q0, tol, trig_in, trig_p, thr, phi_ref, poi
     def one(phi, t_in):
         q, ok, rn, sine, trig = _dyads.solve_with_trig(mech, dyads, sigma, q_ref, phi, p, {**t_in, **trig_p})
         # (cos, sin) of the solved angles, for the points (no new trigonometry there)
-        trig_q = {n: trig[n] for n, k in zip(mech.unknown_names, mech.unknown_kinds) if k == "angle"} if points else None
+        angles = [n for n, k in zip(mech.unknown_names, mech.unknown_kinds) if k == "angle"]
+        trig_q = {n: trig[n] for n in angles} if points else None
         conv = (rn <= tol) & ref_ok
         code = jnp.where(conv, jnp.where(sine < thr, RESULTS.singular, RESULTS.converged),
                          jnp.where(~ref_ok | ~jnp.isfinite(rn), RESULTS.nonfinite,
