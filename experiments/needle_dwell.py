@@ -178,7 +178,7 @@ def plot(path, curves):
     import matplotlib.pyplot as plt
 
     fig, ax = plt.subplots(3, 1, figsize=(8, 9), sharex=True)
-    for _name, (phi, s, _ds, _dds, _l2) in curves.items():
+    for name, (phi, s, ds, dds, l2) in curves.items():
         k0 = int(np.argmax(s))
         x = (np.degrees(phi - phi[k0]) + 180.0) % 360.0 - 180.0
         o = np.argsort(x)
