@@ -378,6 +378,7 @@ def solve_stroke(mech, p=None, samples: int = 7200, *, phi0: float = 0.0, roles:
     t = transfer(mech, phis, sol.q, p, order=2)
     j = mech.unknown_names.index(roles.slider)
     conv = jnp.all(sol.converged, axis=-1)
+    assert t.mu is not None and t.nu is not None
     return phis, sol.q, sol.q[..., j], t.mu[..., j], t.nu[..., j], conv
 
 
@@ -399,7 +400,7 @@ def needle_metrics(mech, p=None, *, samples: int = 7200, scale: StrokeScale = St
     vals = _metrics(mech, q, s, ds, dds, jnp.asarray(pb), jnp.asarray(crank), scale=scale, roles=roles)
     vals = {k: np.asarray(v) for k, v in vals.items()}
     s, ds, conv = np.asarray(s), np.asarray(ds), np.asarray(conv)
-    out = []
+    out: list[dict] = []
     for b in range(len(pb)):
         if not conv[b]:
             out.append({"converged": False})

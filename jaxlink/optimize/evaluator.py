@@ -200,7 +200,7 @@ class Evaluator:
         }
         if rank:
             out["rank"] = np.concatenate(rs) if rs else np.zeros(0)
-        self.infeasible += int((~out["feasible"]).sum())
+        self.infeasible += int(np.count_nonzero(~np.asarray(out["feasible"], dtype=bool)))
         return out
 
     # ------------------------------------------------------------------ reports

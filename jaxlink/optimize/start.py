@@ -52,7 +52,7 @@ def circuit_signs(mech, q_file, phi0, *, all_circuits: bool) -> np.ndarray:
     if not all_circuits:
         return own[None]
     combos = [own]
-    for signs in itertools.product((1.0, -1.0), repeat=len(dyads)):
+    for signs in itertools.product((1.0, -1.0), repeat=len(own)):
         s = np.asarray(signs) * own
         if not any(np.array_equal(s, c) for c in combos):
             combos.append(s)

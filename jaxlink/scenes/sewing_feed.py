@@ -54,6 +54,7 @@ def feed_objective(problem) -> Objective:
     aref = number(problem, "acceleration_ref", opt["acceleration_ref"], positive=True)
     pen = number(problem, "penalty", opt["penalty"], positive=True)
     omega = input_speed(problem, opt["rpm"])
+    assert omega is not None  # the feed options always give an rpm
     lf = problem.mech.units.length
 
     def j(path, soft: bool):
@@ -61,6 +62,7 @@ def feed_objective(problem) -> Objective:
         n = jnp.mean(y)
         w = jax.nn.sigmoid((y - n) / (0.025 * lift)) if soft else (y >= n).astype(x.dtype)
         sag = flatness(y, w)
+        assert path.ddxy is not None  # the feed objective asks for order 2
         acc = jnp.sqrt(jnp.sum(path.ddxy**2, axis=-1) + 1e-30) * omega**2 * lf
         peak = jnp.mean(acc**8) ** (1 / 8) if soft else jnp.max(acc)
         two_a, two_b = jnp.max(x) - jnp.min(x), jnp.max(y) - jnp.min(y)
