@@ -46,3 +46,16 @@ def run_pinned(script: str, args: list[str], n: int = 1, timeout: float = 1800) 
             return None
         with open(out) as fh:
             return json.load(fh)
+
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+RECORDED = os.path.join(HERE, "results")  # the results the docs quote (tracked)
+LATEST = os.path.join(HERE, "results", "latest")  # every other run (ignored by git)
+
+
+def default_output(name: str) -> str:
+    """Where a benchmark writes `name` by default: `results/latest/` (untracked), or the recorded
+    `results/` when `JAXLINK_BENCH_UPDATE=1` (set by `suite.py --update`)."""
+    folder = RECORDED if os.environ.get("JAXLINK_BENCH_UPDATE") == "1" else LATEST
+    os.makedirs(folder, exist_ok=True)
+    return os.path.join(folder, name)

@@ -39,6 +39,7 @@ import jax
 jax.config.update("jax_enable_x64", True)
 import jax.numpy as jnp  # noqa: E402
 import numpy as np  # noqa: E402
+from _cores import default_output  # noqa: E402
 
 import jaxlink as jl  # noqa: E402
 
@@ -299,10 +300,12 @@ def main(argv=None) -> dict:
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--quick", action="store_true", help="smaller batches, fewer repeats (~1-2 minutes)")
     ap.add_argument("--designs", type=int, default=None, help="feed designs (default 4000; quick 1000)")
-    ap.add_argument("--json", default=os.path.join(RESULTS_DIR, "error_vs_runtime.json"))
-    ap.add_argument("--png", default=os.path.join(RESULTS_DIR, "error_vs_runtime.png"))
+    ap.add_argument("--json", default=None, help="JSON output (default results/latest/error_vs_runtime.json)")
+    ap.add_argument("--png", default=None, help="plot (default results/latest/error_vs_runtime.png)")
     ap.add_argument("--only", default=None, help="comma-separated groups: feed,path,dwell,sinker")
     args = ap.parse_args(argv)
+    args.json = args.json or default_output("error_vs_runtime.json")
+    args.png = args.png or default_output("error_vs_runtime.png")
     global QUICK
     QUICK = args.quick
     B = args.designs or (1000 if args.quick else 4000)
@@ -327,7 +330,8 @@ def main(argv=None) -> dict:
             print(f"[{name}: {sections[name]:.1f} s]", flush=True)
     pareto(cases)
 
-    print(f"\nerror against run time ({os.cpu_count()} cores, jax {jax.__version__}); * = default, P = on its knob's front")
+    print(f"\nerror against run time ({os.cpu_count()} cores, jax {jax.__version__}); "
+          "* = default, P = on its knob's front")
     print(f"{'knob':18s} {'setting':>20s} {'':2s} {'error':>10s} {'seconds':>10s} {'front':>5s}  unit")
     for c in cases:
         print(f"{c['knob']:18s} {c['setting']:>20s} {'*' if c['default'] else ' ':2s} {c['error']:10.3e} "

@@ -32,7 +32,7 @@ import sys
 import time
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from _cores import cores, pin_from_argv, run_pinned  # noqa: E402
+from _cores import cores, default_output, pin_from_argv, run_pinned  # noqa: E402
 
 pin_from_argv()  # --cores N: before JAX starts its threads
 import jax  # noqa: E402
@@ -155,12 +155,13 @@ def main(argv=None) -> dict:
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--quick", action="store_true", help="fewer designs and repeats (< 1 minute)")
     ap.add_argument("--designs", type=int, default=None, help="designs (default 5000; quick 1000)")
-    ap.add_argument("--json", default=os.path.join(HERE, "results", "fourbar_vs_pylinkage.json"))
+    ap.add_argument("--json", default=None, help="JSON output (default results/latest/fourbar_vs_pylinkage.json)")
     ap.add_argument("--cores", type=int, default=None,
                     help="pin this run to N cores (default: all; without it, jaxlink is also measured "
                          "pinned to one core in a subprocess: pylinkage's numba loop runs on one)")
     ap.add_argument("--jaxlink-only", action="store_true", help="skip pylinkage")
     args = ap.parse_args(argv)
+    args.json = args.json or default_output("fourbar_vs_pylinkage.json")
     B = args.designs or (1000 if args.quick else 5000)
     repeats = 3 if args.quick else 7
     mech = jl.load("four-bar")

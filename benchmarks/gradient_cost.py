@@ -22,6 +22,7 @@ import jax
 jax.config.update("jax_enable_x64", True)
 import jax.numpy as jnp  # noqa: E402
 import numpy as np  # noqa: E402
+from _cores import default_output  # noqa: E402
 
 import jaxlink as jl  # noqa: E402
 
@@ -40,8 +41,9 @@ def best_of(f, repeats):
 def main(argv=None) -> dict:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--quick", action="store_true")
-    ap.add_argument("--json", default=os.path.join(HERE, "results", "gradient_cost.json"))
+    ap.add_argument("--json", default=None, help="JSON output (default results/latest/gradient_cost.json)")
     args = ap.parse_args(argv)
+    args.json = args.json or default_output("gradient_cost.json")
     B = 64 if args.quick else 512
     repeats = 3 if args.quick else 7
     mech = jl.load("sewing-feed")

@@ -17,6 +17,8 @@ import os
 import subprocess
 import sys
 
+from _cores import default_output
+
 HERE = os.path.dirname(os.path.abspath(__file__))
 
 CHILD = r"""
@@ -64,8 +66,9 @@ def run(positions, devices):
 def main(argv=None) -> dict:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--quick", action="store_true", help="1e2, 1e4, 1e6 only")
-    ap.add_argument("--json", default=os.path.join(HERE, "results", "scaling.json"))
+    ap.add_argument("--json", default=None, help="JSON output (default results/latest/scaling.json)")
     args = ap.parse_args(argv)
+    args.json = args.json or default_output("scaling.json")
     sizes = [100, 10_000, 1_000_000] if args.quick else [100, 1_000, 10_000, 100_000, 1_000_000]
     rows = []
     print(f"{'positions':>10s} {'devices':>7s} {'positions/s':>12s} {'seconds':>9s} {'peak RSS MB':>11s}")

@@ -31,7 +31,7 @@ import time
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 ROOT = os.path.dirname(HERE)
-RES = os.path.join(HERE, "results")
+RES = os.path.join(HERE, "results", "latest")  # untracked; --update writes the recorded results/
 PY = sys.executable
 
 
@@ -101,9 +101,15 @@ def optimizer_rates(quick):
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--quick", action="store_true", help="under 5 minutes on 2 cores")
+    ap.add_argument("--update", action="store_true",
+                    help="write the recorded results (benchmarks/results/, quoted by the docs) instead of "
+                         "benchmarks/results/latest/ (untracked)")
     ap.add_argument("--only", default=None, help="comma-separated: throughput,gradient,optimizer,fourbar,error,scaling")
     args = ap.parse_args(argv)
     global RES
+    if args.update:
+        RES = os.path.join(HERE, "results")
+        os.environ["JAXLINK_BENCH_UPDATE"] = "1"
     if args.quick:  # quick results go to their own folder: they never overwrite the full ones
         RES = os.path.join(RES, "quick")
     os.makedirs(RES, exist_ok=True)

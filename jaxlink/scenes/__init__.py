@@ -44,7 +44,10 @@ def resolve(name_or_path: str) -> pathlib.Path:
         return scenes[name_or_path]
     if p.suffix == ".toml" or "/" in name_or_path:
         raise MechanismError(f"no such file: {name_or_path}")
+    import difflib
+
+    close = difflib.get_close_matches(name_or_path, list(scenes), n=1)
+    hint = f" — did you mean '{close[0]}'?" if close else ""
     raise MechanismError(
-        f"'{name_or_path}' is neither a file nor a built-in scene; built-in scenes: "
-        + ", ".join(scenes)
+        f"'{name_or_path}' is neither a file nor a built-in scene{hint}; built-in scenes: " + ", ".join(scenes)
     )
