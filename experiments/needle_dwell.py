@@ -286,9 +286,11 @@ def main():
 
     if not args.no_samplers:
         for method in ("uniform", "montecarlo"):
-            print(f"\n== {method} at the baseline's budget ({de['evaluations']} evaluations)")
             ev_s = Evaluator(pr)
             r, tr = search(ev_s, method, budget=de["evaluations"], seed=args.seed)
+            print(f"\n== {method} with the baseline's budget of {de['evaluations']} evaluations: used "
+                  f"{r['evaluations']}" + (" (a full grid: n points per variable, n^V within the budget)"
+                                          if method == "uniform" else ""))
             f = first_target(tr, measure)
             out[method] = {"result": r, "first_target": f}
             results.append(row(method, r, first=f))
@@ -296,8 +298,10 @@ def main():
     print("\n== summary (same run; wall s incl. compilation; warm = without; re-measured on the 0.05° grid)")
     print_rows(results)
     out["rows"] = results
-    print(f"gradient search reached the baseline's final objective {de['best']['search_objective']:.4f} after "
-          f"{out['gradient_to_de_quality']} (baseline: {de['evaluations']} evaluations, {de['wall_s']:.1f} s)")
+    reached = out["gradient_to_de_quality"]
+    print(f"gradient search reached the baseline's final objective {de['best']['search_objective']:.4f} "
+          + ("never" if reached is None else f"after {reached['evaluations']} evaluations, {reached['wall_s']:.1f} s")
+          + f" (baseline: {de['evaluations']} evaluations, {de['wall_s']:.1f} s)")
 
     if args.plot:
         curves = {}
