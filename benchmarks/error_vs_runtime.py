@@ -218,7 +218,7 @@ def dwell_cases(repeats, log, designs=64):
 
 def sinker_cases(repeats, log):
     from jaxlink import cam as sk
-    from jaxlink.cam.reference import reference_solution
+    reference_solution = sk.reference_solution
 
     C, f = 3.5e4, 0.1
     km = float(sk.damping_from_log_decrement(C, 1.5e-3))

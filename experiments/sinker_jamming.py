@@ -30,7 +30,6 @@ jax.config.update("jax_enable_x64", True)
 import numpy as np  # noqa: E402
 
 from jaxlink import cam as sk  # noqa: E402
-from jaxlink.cam.reference import reference_solution  # noqa: E402
 
 SPEED = sk.butt_speed(350.0, 0.096)
 
@@ -231,8 +230,8 @@ def stiffness_section(report, quick):
     rows = []
     for c in cs:
         km = float(sk.damping_from_log_decrement(c, 1.5e-3))
-        _, yref, info = reference_solution(radius=0.02, descent_deg=55, f=0.1, C=c,
-                                           k_over_m=km, ts=ts)
+        _, yref, info = sk.reference_solution(radius=0.02, descent_deg=55, f=0.1, C=c,
+                                              k_over_m=km, ts=ts)
         p = sk.make_params(C=c, f=0.1)
         omega = math.sqrt(c * float(sk.drive_fraction(math.radians(30), 0.1))
                           / (1.5e-3 * math.cos(math.radians(30))))

@@ -1,7 +1,7 @@
 """Knitting sinker on a stitch cam (issue 6): cam tracks, model, integrators, jamming.
 
 References: closed forms, the numbers published in `shared/spec/sinker-cam.md` (rebuilt from
-the seed), and an independent scipy `solve_ivp` solution (`jaxlink.cam.reference`).
+the seed), and an independent scipy `solve_ivp` solution (`jaxlink.cam.reference_solution`).
 """
 
 import math
@@ -12,7 +12,6 @@ import numpy as np
 import pytest
 
 from jaxlink import cam as sk
-from jaxlink.cam.reference import reference_solution
 
 SPEED = sk.butt_speed(350.0, 0.096)
 GEOMS = {g.name: g for g in sk.seed_geometries()}
@@ -139,9 +138,9 @@ def stiffness_refs():
     out = {}
     for c in (1e4, 3.5e4, 1e5, 1e6, 1e7):
         km = float(sk.damping_from_log_decrement(c, 1.5e-3))
-        out[c] = reference_solution(radius=0.02, descent_deg=55, f=0.1, C=c, k_over_m=km,
-                                    ts=np.linspace(0.0, 19.88e-3 / SPEED, N_OUT),
-                                    rtol=1e-11, max_step=5e-6)
+        out[c] = sk.reference_solution(radius=0.02, descent_deg=55, f=0.1, C=c, k_over_m=km,
+                                       ts=np.linspace(0.0, 19.88e-3 / SPEED, N_OUT),
+                                       rtol=1e-11, max_step=5e-6)
     return out
 
 
@@ -173,8 +172,8 @@ def test_short_bounce_not_skipped():
     cam = _cam("R10-45")
     ts = np.linspace(0.0, float(cam.t_end), N_OUT)
     dt = ts[1] - ts[0]
-    _, yref, info = reference_solution(radius=0.01, descent_deg=45, f=0.16, C=3.5e4,
-                                       k_over_m=float(p.k_over_m), ts=ts)
+    _, yref, info = sk.reference_solution(radius=0.01, descent_deg=45, f=0.16, C=3.5e4,
+                                          k_over_m=float(p.k_over_m), ts=ts)
     t_loss, t_regain = info["event_times"]
     assert 0.1e-3 < t_regain - t_loss < 0.4e-3
     lag_ref = np.asarray(sk.cam_profile(cam, ts)[0]) - yref[:, 0]
@@ -246,6 +245,23 @@ def test_dynamic_thresholds():
     cams = sk.make_cam(geoms, SPEED)
     assert not sk.jammed_at(sk.make_params(), cams, th.lo).any()
     assert sk.jammed_at(sk.make_params(), cams, th.hi).all()
+
+
+def test_thresholds_with_another_jam_predicate():
+    """`thresholds(jammed=...)` bisects any predicate: a step at f = 0.15 (0.17 for the 45 deg
+    cams) is bracketed to the tolerance from the static thresholds +- half_width."""
+    cams = sk.make_cam(sk.seed_geometries(), SPEED)
+    step = np.where(np.round(np.degrees(np.asarray(cams.descent_angle))) == 45, 0.17, 0.15)
+    calls = []
+
+    def jammed(params, cam, f):
+        calls.append(np.asarray(f))
+        return np.asarray(f) >= step
+
+    th = sk.thresholds(sk.make_params(), cams, tol=1e-5, jammed=jammed)
+    assert np.all(th.lo < step) and np.all(step <= th.hi) and np.all(th.hi - th.lo <= 1e-5)
+    assert np.max(np.abs(th.dynamic_f - step)) <= 0.5e-5
+    assert th.num_batches == len(calls)
 
 
 def test_jam_flag_and_runaway():

@@ -37,7 +37,6 @@ from jax import lax
 
 from ..results import RESULTS
 
-
 # ----------------------------------------------------------------------------------------
 # Dormand-Prince 5(4)
 _S6 = math.sqrt(6.0)
@@ -368,7 +367,12 @@ def integrate_hybrid(
             mb = g_at(mid) < 0
             return jnp.where(mb, lo, mid), jnp.where(mb, mid, hi)
 
-        _, theta_ev = lax.fori_loop(0, 60, bisect, (lo0, hi0))
+        # the bisection runs only in a step with a sample on the wrong side (events are rare);
+        # under `vmap` with `axis_name`, when any batch member has one (a batched predicate would
+        # turn the `cond` into a select that always runs it)
+        some_bad = any_bad if axis_name is None else lax.psum(any_bad.astype(jnp.int32), axis_name) > 0
+        theta_ev = lax.cond(some_bad, lambda: lax.fori_loop(0, 60, bisect, (lo0, hi0))[1],
+                            lambda: jnp.ones((), dtype))
         event = accept & any_bad
         theta_end = jnp.where(event, theta_ev, 1.0)
         t_new = jnp.where(event, t + theta_ev * h_try,

@@ -17,9 +17,9 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .track import CamTrack
-from .sinker import SinkerParams, static_threshold
 from .simulate import simulate_batch
+from .sinker import SinkerParams, static_threshold
+from .track import CamTrack
 
 
 class Thresholds(NamedTuple):
@@ -50,7 +50,7 @@ def jammed_at(params: SinkerParams, cam: CamTrack, f, **sim_kwargs) -> np.ndarra
 
 def thresholds(params: SinkerParams, cam: CamTrack, *, tol: float = 1e-4,
                half_width: float = 0.01, progress: Callable | None = None,
-               **sim_kwargs) -> Thresholds:
+               jammed: Callable | None = None, **sim_kwargs) -> Thresholds:
     """Static and dynamic jamming thresholds of stacked geometries.
 
     **Arguments:**
@@ -62,6 +62,8 @@ def thresholds(params: SinkerParams, cam: CamTrack, *, tol: float = 1e-4,
     - `half_width`: the first bracket is `static_f -/+ half_width`, widened until `lo` does
       not jam and `hi` does.
     - `progress`: optional `callable(n)` called after each batched simulation (a progress bar).
+    - `jammed`: optional predicate `jammed(params, cam, f) -> bool [n_g]` that replaces
+      `jammed_at` (another integrator or a reference solution; `sim_kwargs` are then unused).
     - `sim_kwargs`: passed to `simulate_batch` (`method`, `rtol`, `atol`, ...).
 
     **Returns:** `Thresholds`.
@@ -75,7 +77,8 @@ def thresholds(params: SinkerParams, cam: CamTrack, *, tol: float = 1e-4,
     def run(f):
         nonlocal n_batches
         n_batches += 1
-        out = jammed_at(params, cam, f, **sim_kwargs)
+        out = (np.asarray(jammed(params, cam, f)) if jammed is not None
+               else jammed_at(params, cam, f, **sim_kwargs))
         if progress is not None:
             progress(1)
         return out

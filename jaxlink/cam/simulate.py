@@ -19,9 +19,9 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .track import CamTrack, cam_eval, cam_segment
 from .integrate import DormandPrince5, RadauIIA5, Stats, dense_eval, integrate_hybrid
 from .sinker import SinkerParams, acceleration, lag, vector_field
+from .track import CamTrack, cam_eval, cam_segment
 
 SOLVERS = {"explicit": DormandPrince5(), "implicit": RadauIIA5()}
 
@@ -196,7 +196,8 @@ class Maxima(NamedTuple):
     """Peak values of one run, per phase (seed Tables 5.1-5.5).
 
     `rise_*` over the straight rise `[0, t_rise]`, `desc_*` over the straight descent
-    `[t_descent, T]` (as the seed's tables; the transition arc is in neither); accelerations in m/s^2, velocities in m/s, lags in m.
+    `[t_descent, T]` (as the seed's tables; the transition arc is in neither); accelerations
+    in m/s^2, velocities in m/s, lags in m.
     `bounce_depth` (m) = max of `-(y_z - y)` in the rise (0 without a bounce) and
     `bounce_time` (s) = how long the contact is lost in the rise.
     """
