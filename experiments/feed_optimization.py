@@ -6,7 +6,7 @@
    2b = 2.2676, centre (−10.6925, 55.27), Δx = 0.235 mm; and its Monte Carlo ("RAND": l2, l22 in
    [0, 4] mm, γ in [−30°, 30°], stop at the first design within the bounds; published 2.05 / 0.8 / 4°).
 2. Uniform (grid and the seed's coordinate stepping), Monte Carlo and gradient search on the same
-   ellipse objective (scene `sewing-feed-opt`, docs/optimize.md), one table.
+   ellipse objective (scene `sewing-feed-opt`, docs/methods/optimize.md), one table.
 3. Beyond the seed: objective `feed` (flat working part, low peak acceleration, stroke ≥ 5 mm,
    lift ≥ 2 mm) over l2, l22, γ and the other link lengths (±30 %).
 

@@ -45,7 +45,7 @@ figures. With Δφ = 2π/N:
 Lengths: `length_to_mm` converts the solved s (SI) to mm. For a dimensionless design (crank = 1,
 `needle-arachne-unit`) pass `stroke_mm = 20.0` instead: s is scaled so that h = 20 mm, i.e. the
 absolute 0.05 mm tolerance is 0.25 % of the stroke and the sag is in mm at a 20 mm stroke.
-amax_rel/vmax_rel are per crank length and never rescaled. docs/dwell.md.
+amax_rel/vmax_rel are per crank length and never rescaled. docs/methods/dwell.md.
 """
 
 from __future__ import annotations

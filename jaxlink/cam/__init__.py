@@ -4,7 +4,7 @@ The sinker of a small circular knitting machine slides in a groove of the needle
 its butt is lifted by a stationary stitch cam. This package rebuilds the seed's model
 (eq. 4.25: contact through a spring `C`, friction, damping from the log decrement), the six
 cam tracks, a hybrid explicit/implicit JAX integrator that locates every contact loss, and
-the static and dynamic jamming thresholds. See `docs/sinker.md`; the integrators measured
+the static and dynamic jamming thresholds. See `docs/methods/sinker.md`; the integrators measured
 against diffrax: `docs/methods/cam-integrators.md`.
 """
 

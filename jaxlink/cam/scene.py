@@ -1,5 +1,5 @@
 """Loading a cam-follower scene file (`kind = "cam-follower"`), e.g. the built-in
-`sinker-cam`. The format is documented in `docs/sinker.md` and in the scene's comments.
+`sinker-cam`. The format is documented in `docs/reference/file-format.md` (section 14) and in the scene's comments.
 
 Tables: `[mechanism]` (name, kind, description), `[dynamics]` (m, C, log_decrement or
 k_over_m, f, R1-R3, F_P, g, damping, normal_force), `[machine]` (n, D), `[cam]` (L, rise_deg,

@@ -25,7 +25,7 @@ from .track import CamTrack, cam_eval, cam_segment
 
 SOLVERS = {"explicit": DormandPrince5(), "implicit": RadauIIA5()}
 
-# Measured crossover (docs/sinker.md, experiments/sinker_jamming.py): above this stiffness
+# Measured crossover (docs/methods/sinker.md, experiments/sinker_jamming.py): above this stiffness
 # the implicit Radau IIA method needs fewer steps and less time than Dormand-Prince.
 AUTO_IMPLICIT_ABOVE = 3e6
 

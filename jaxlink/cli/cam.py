@@ -1,6 +1,6 @@
 """`jaxlink simulate` and `jaxlink jamming`: the cam-follower (knitting sinker) commands.
 
-See `docs/sinker.md` for the scene format and the model.
+The scene format: `docs/reference/file-format.md` (section 14); the model: `docs/methods/sinker.md`.
 """
 
 from __future__ import annotations

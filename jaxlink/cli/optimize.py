@@ -20,7 +20,7 @@ def register(sub) -> None:
             "(per circuit); a value-and-gradient counts 2. With --out, the state is checkpointed "
             "after every chunk (OUT.state.npz, OUT.log.jsonl, OUT rewritten with the best so far); "
             "--resume continues an interrupted search and ends with the same result. Same seed, "
-            "same result. See docs/optimize.md."
+            "same result. See docs/methods/optimize.md."
         ),
         formatter_class=argparse.ArgumentDefaultsHelpFormatter,
     )

@@ -1,5 +1,5 @@
 """Design search (`jaxlink optimize`): objectives, the batched evaluator, uniform / Monte Carlo /
-gradient searches (`searches/`), checkpoints. See docs/optimize.md.
+gradient searches (`searches/`), checkpoints. See docs/methods/optimize.md.
 
 `run(problem_or_evaluator, method, budget=..., seed=...)` searches and returns a `SearchResult`
 (`.to_json()`: the document `jaxlink optimize --out` writes)."""

@@ -5,7 +5,7 @@ Every batched evaluation puts its leading (design) axis on a one-axis mesh named
 Designs are independent, so the result does not depend on the number of devices (tested on CPU
 with `XLA_FLAGS=--xla_force_host_platform_device_count=4`). Several GPUs of one host need
 nothing more; several hosts call `jax.distributed.initialize()` first, after which
-`jax.devices()` lists the devices of every process (docs/optimize.md).
+`jax.devices()` lists the devices of every process (docs/methods/optimize.md).
 """
 
 from __future__ import annotations

@@ -13,7 +13,7 @@ candidate design needs its own one, on the file's assembly branch (circuit). Two
   the result must close the loops to the solver's tolerance. It stays on the branch connected to
   the file's configuration; it can fail (wrongly infeasible) when the straight homotopy path
   crosses a region where the mechanism cannot be assembled at φ₀ although both ends can — the
-  rate is measured in `tests/test_optimize_start.py` and docs/optimize.md.
+  rate is measured in `tests/test_optimize.py` and docs/methods/optimize.md.
 """
 
 from __future__ import annotations

@@ -4,7 +4,7 @@ the design objective `dwell` and its defaults.
 The objective maximizes the dwell of the needle at its top dead centre at a required stroke,
 under the constraints on the linkage's transmission, rod and toggle angles, its peak
 acceleration, its Grashof margin and the number of acceleration sign changes; the metrics and
-the roles of the mechanism's unknowns are those of `jaxlink/analysis/dwell.py` (docs/dwell.md).
+the roles of the mechanism's unknowns are those of `jaxlink/analysis/dwell.py` (docs/methods/dwell.md).
 Registered by `register_objectives`, which the objective registry
 (`jaxlink/optimize/objectives/__init__.py`) calls.
 """

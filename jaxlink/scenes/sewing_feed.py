@@ -45,7 +45,7 @@ def feed_objective(problem) -> Objective:
             + penalty · [((stroke − 2a)₊ / stroke)² + ((lift − 2b)₊ / lift)²]
 
     (defaults `FEED_OPTIONS`): stroke and lift are lower bounds, enforced by quadratic penalties.
-    Metrics: `shape_metrics` at `rpm`. docs/optimize.md.
+    Metrics: `shape_metrics` at `rpm`. docs/methods/optimize.md.
     """
     opt = FEED_OPTIONS
     stroke = number(problem, "stroke", opt["stroke"], positive=True)

@@ -172,7 +172,7 @@ def ellipse_objective(problem) -> Objective:
     `tilt_weight` default 0 (an axis-aligned ellipse fit already penalizes tilt).
 
     Metrics: `shape_metrics` (with the peak accelerations when the file sets the input speed
-    `rpm`) and the centroid (`centroid_x`, `centroid_y`). docs/optimize.md.
+    `rpm`) and the centroid (`centroid_x`, `centroid_y`). docs/methods/optimize.md.
     """
     axes = problem.option("axes")
     if (not isinstance(axes, (list, tuple)) or len(axes) != 2
