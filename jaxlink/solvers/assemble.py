@@ -628,7 +628,13 @@ def _batch(mech, phis, p, q0, options: NewtonOptions, points: bool) -> Solution:
     phi_ref = jnp.full((B,), mech.input_start, dtype) if from_start else None
     structure = mech.structure if isinstance(mech, Mechanism) else mech
     q, rn, code, k, pts = _solve_batch(structure, options, points, P, phis, Q0, phi_ref)
-    pts = _mask_points(pts, code) if points else None
+    if points:
+        # finiteness is part of convergence: a position whose points are not finite (an
+        # expression like asin(2) in [points]) is `nonfinite`, never converged with NaN points
+        bad = ~jnp.all(jnp.isfinite(pts), axis=(-2, -1))
+        code = jnp.where(bad & ((code == RESULTS.converged) | (code == RESULTS.singular)),
+                         jnp.int8(RESULTS.nonfinite), code)
+        pts = _mask_points(pts, code)
     sol = Solution(q=q, points=pts, result=code, stats=SolveStats(residual=rn, steps=k))
     return sol if batch else jax.tree_util.tree_map(lambda x: x[0], sol)
 
