@@ -210,9 +210,18 @@ def drawing(mech, q, phis, p, shown, tol: float | None = None) -> LinkageDrawing
     the dtype of `q` times the length scale: positions solved in float32 are close to 1e-4)."""
     shown = np.asarray(shown, dtype=bool)
     p = jnp.asarray(p)
-    loop_vec, point_vec, joint_vec = _vectors(mech, q, phis, p)
     n_rows = len(shown)
-    rows = np.flatnonzero(shown) if shown.any() else np.arange(n_rows)
+    kinds = [[term_kind(mech, t) for t in terms] for _, terms in mech.loops]
+    labels = [[_length_text(t) for t in terms] for _, terms in mech.loops]
+    if not shown.any():  # nothing assembled: nothing to draw
+        nan = np.full((n_rows, 1, 2), np.nan)
+        return LinkageDrawing([np.full((n_rows, len(t), 2), np.nan) for _, t in mech.loops], kinds, labels,
+                              ["not placed: no position assembled"] * len(mech.loops), np.zeros((n_rows, 0, 2)),
+                              [], np.zeros(0, bool), [], [nan for _ in mech.points],
+                              np.full((n_rows, len(mech.points), 2), np.nan), tuple(mech.point_names), shown,
+                              float(mech.length_scale(p)))
+    loop_vec, point_vec, joint_vec = _vectors(mech, q, phis, p)
+    rows = np.flatnonzero(shown)
     sample = rows[np.unique(np.linspace(0, len(rows) - 1, min(len(rows), 16)).round().astype(int))]
     scale = float(mech.length_scale(p))
     if tol is None:  # what "the same position" means: rounding of the dtype the positions came in
@@ -235,7 +244,6 @@ def drawing(mech, q, phis, p, shown, tol: float | None = None) -> LinkageDrawing
     # relative vertices of each loop: vertex j = start of term j
     rel = [_partial_sums(vec)[:, :-1] for vec, _ in loop_vec]
     inputs = [_input_vertex(mech, terms) for _, terms in mech.loops]
-    kinds = [[term_kind(mech, t) for t in terms] for _, terms in mech.loops]
     is_joint = [np.array([_ends_link(kd, j) for j in range(len(kd))]) for kd in kinds]
     order, placed, shifts, how, own = [], {}, {}, {}, {}
     pending = list(range(len(mech.loops)))
@@ -266,7 +274,6 @@ def drawing(mech, q, phis, p, shown, tol: float | None = None) -> LinkageDrawing
         v = shifts[c][:, None, :] + rel[c]
         v[hide] = np.nan
         loops.append(v)
-    labels = [[_length_text(t) for t in terms] for _, terms in mech.loops]
 
     # joints: loop vertices at the end of a link, merged across loops
     joints = []

@@ -179,6 +179,14 @@ def closed_curve(x, y, periodic: bool, step=None):
     return np.append(x, x[-1] + h), np.concatenate([y, y[:1]])
 
 
+def _below(ax):
+    """Axes coordinates shifted down past the tick labels and the x label (for a legend under the
+    drawing, outside the point paths)."""
+    from matplotlib.transforms import offset_copy
+
+    return offset_copy(ax.transAxes, fig=ax.figure, y=-34, units="points")
+
+
 def _loop(v, periodic: bool):
     """A path over one full revolution, closed: the first position again at the end."""
     return np.concatenate([v, v[:1]]) if periodic and len(v) > 1 else v
@@ -268,8 +276,8 @@ def plot_kinematics(path: str, mech, table) -> None:
             x_in, _grid.runs(~table.assembled, table.periodic), table.input_kind, limit=3))
     handles, _ = ax_path.get_legend_handles_labels()
     if handles:
-        ax_path.legend(loc="upper center", bbox_to_anchor=(0.5, -0.08), fontsize=8, ncol=min(3, len(handles)),
-                       frameon=False)
+        ax_path.legend(loc="upper center", bbox_to_anchor=(0.5, 0.0), bbox_transform=_below(ax_path), fontsize=8,
+                       ncol=min(3, len(handles)), frameon=False)
 
     for r, (what, arr) in enumerate(panels):
         ax = fig.add_subplot(gs[r, 1])
@@ -331,8 +339,8 @@ def animate(path: str, mech, table, fps: int = 15, progress: bool = True, dpi: i
     ax.set_ylim(y0, y1)
     title = ax.set_title(f"{mech.name}   input 360°")  # room for the frames' titles
     if mech.point_names:
-        ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.1), fontsize=8, frameon=False,
-                  ncol=min(3, len(mech.point_names)))
+        ax.legend(loc="upper center", bbox_to_anchor=(0.5, 0.0), bbox_transform=_below(ax), fontsize=8,
+                  frameon=False, ncol=min(3, len(mech.point_names)))
     fig.tight_layout()
     moving = sorted(art.artists() + [title], key=lambda a: a.get_zorder())
     for a in moving:
