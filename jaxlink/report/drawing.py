@@ -276,7 +276,7 @@ def drawing(mech, q, phis, p, shown, tol: float | None = None) -> LinkageDrawing
         loops.append(v)
 
     # joints: loop vertices at the end of a link, merged across loops
-    joints = []
+    joints: list = []
     for c, v in enumerate(loops):
         for j in range(v.shape[1]):
             if is_joint[c][j] and not any(_close(other, v[:, j], sample, tol) for other in joints):
@@ -286,7 +286,7 @@ def drawing(mech, q, phis, p, shown, tol: float | None = None) -> LinkageDrawing
     names = _joint_names(J, ground, file_joints, chains, mech.point_names, sample, tol)
 
     # sliders
-    sliders = []
+    sliders: list = []
     for c, (vec, axis) in enumerate(loop_vec):
         for j, kind in enumerate(kinds[c]):
             if kind != "slider":

@@ -122,15 +122,18 @@ def kinematics_table(mech: Mechanism, phis, *, omega: float = 1.0, outputs=OUTPU
         cols.append(f"{n}_{unit}")
         data.append(q_shown[:, j])
         if "rates" in outputs:
+            assert mu is not None and nu is not None
             cols += [f"{n}_{unit}_s", f"{n}_{unit}_s2"]
             data += [mu[:, j], nu[:, j]]
     for i, pn in enumerate(mech.point_names):
         cols += [f"{pn}_x_m", f"{pn}_y_m"]
         data += [pts[:, i, 0], pts[:, i, 1]]
         if "velocity" in outputs:
+            assert v is not None
             cols += [f"{pn}_vx_m_s", f"{pn}_vy_m_s"]
             data += [v[:, i, 0], v[:, i, 1]]
         if "acceleration" in outputs:
+            assert a is not None
             cols += [f"{pn}_ax_m_s2", f"{pn}_ay_m_s2"]
             data += [a[:, i, 0], a[:, i, 1]]
     cols += list(STATUS_COLUMNS)

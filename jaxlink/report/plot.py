@@ -281,7 +281,7 @@ def plot_kinematics(path: str, mech, table) -> None:
 
     for r, (what, arr) in enumerate(panels):
         ax = fig.add_subplot(gs[r, 1])
-        series = []
+        series: list = []
         for i, pn in enumerate(mech.point_names):
             col = f"C{i}"
             if what == "position":
@@ -289,6 +289,7 @@ def plot_kinematics(path: str, mech, table) -> None:
                     xx, yy = closed_curve(x_in, table.points[:, i, comp] * s, table.periodic)
                     ax.plot(xx, yy, style, color=col, lw=1.5, label=f"{pn} {'xy'[comp]}")
             else:
+                assert arr is not None
                 letter = what[0]
                 mag = np.hypot(arr[:, i, 0], arr[:, i, 1])
                 xx, yy = closed_curve(x_in, mag, table.periodic)
