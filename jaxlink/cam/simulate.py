@@ -182,8 +182,7 @@ def product_cases(params: SinkerParams, cam: CamTrack, *, f=None, C=None, k_over
     if cam.t0.ndim == 1:
         cam = jax.tree.map(lambda x: x[None], cam)
     shape = (n_f, n_g, n_c)
-    fi, gi, ci = np.meshgrid(np.arange(n_f), np.arange(n_g), np.arange(n_c), indexing="ij")
-    fi, gi, ci = fi.ravel(), gi.ravel(), ci.ravel()
+    fi, gi, ci = (np.ravel(a) for a in np.meshgrid(np.arange(n_f), np.arange(n_g), np.arange(n_c), indexing="ij"))
     n = fi.size
     pb = params._replace(f=f[fi], C=cc[ci], k_over_m=km[ci])
     pb = jax.tree.map(lambda x: jnp.broadcast_to(jnp.asarray(x), (n,) + jnp.shape(x)[1:])

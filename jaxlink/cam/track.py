@@ -143,14 +143,14 @@ def make_cam(geoms: CamGeometry | list[CamGeometry], speed: float, *, pad_to: in
     - `pad_to`: number of table rows (default: the largest piece count).
     """
     single = isinstance(geoms, CamGeometry)
-    glist = [geoms] if single else list(geoms)
+    glist: list[CamGeometry] = [geoms] if isinstance(geoms, CamGeometry) else list(geoms)
     built = [_pieces(g) for g in glist]
     n_rows = max(len(p) for p, _, _ in built)
     if pad_to is not None:
         if pad_to < n_rows:
             raise ValueError(f"pad_to={pad_to} is smaller than the {n_rows} pieces needed")
         n_rows = pad_to
-    cols = {k: [] for k in CamTrack._fields}
+    cols: dict[str, list] = {k: [] for k in CamTrack._fields}
     for g, (pieces, x_rise, x_desc) in zip(glist, built):
         tab = np.full((n_rows, 4), np.nan)
         tab[: len(pieces)] = np.asarray(pieces)
