@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import argparse
 import sys
 
 from ..errors import MechanismError
@@ -22,7 +21,6 @@ def register(sub) -> None:
             "--resume continues an interrupted search and ends with the same result. Same seed, "
             "same result. See docs/optimize.md."
         ),
-        formatter_class=argparse.ArgumentDefaultsHelpFormatter,
     )
     add_mechanism_arguments(p, positions=False)
     p.add_argument("--method", required=True, choices=("uniform", "montecarlo", "gradient"),
