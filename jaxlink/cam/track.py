@@ -1,9 +1,9 @@
-"""Stitch-cam tracks of the knitting sinker (seed eqs. 4.29-4.44).
+"""Stitch-cam tracks of the knitting sinker (the cam profile equations of docs/methods/sinker.md).
 
 A cam is a straight rise at `a1`, a transition of radius `R` from `a1` to `a2`, and a straight
 descent at `a2`, over a horizontal length `L`. The butt moves along the cam at the constant
 speed `v = omega D / 2`, so the horizontal position is `x = v t`. The transition is either the
-exact circular arc or the seed's polygon of chords of length about `q` (0.1 mm).
+exact circular arc or the thesis's polygon of chords of length about `q` (0.1 mm).
 
 Both are stored in one padded table of *pieces*: piece `k` starts at time `t0[k]`, position
 `(x0[k], y0[k])`, and is a straight line of slope angle `alpha0[k]` (`is_arc[k] = 0`) or a
@@ -89,7 +89,7 @@ def butt_speed(n_rpm: float, diameter: float) -> float:
 
 
 def seed_geometries(*, arc: str = "exact") -> list[CamGeometry]:
-    """The seed's six stitch cams: R10/R20 times descent 45/50/55 deg (rise 30 deg)."""
+    """The six stitch cams of the thesis: R10/R20 times descent 45/50/55 deg (rise 30 deg)."""
     out = []
     for a2 in (45, 50, 55):
         for r in (10, 20):
