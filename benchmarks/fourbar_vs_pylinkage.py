@@ -223,6 +223,23 @@ def main(argv=None) -> dict:
         results[f"jaxlink_{name}_compile_s"] = compile_s - tbest
         results[f"jaxlink_{name}_converged_fraction"] = float(np.mean(np.asarray(conv)))
 
+    # one design over one revolution, called repeatedly from Python (the README's call, points
+    # included), as pylinkage's step_fast above: per-call latency, not batch throughput
+    ph1 = jnp.asarray(phis, dtype=np.float64)
+    p1 = jnp.asarray(P[0], dtype=np.float64)
+    q01 = jnp.asarray(mech.guess, dtype=np.float64)
+    one = jl.solve(mech, ph1, p1, q01)
+    err1 = float(np.max(np.abs(np.asarray(one.points[:, 0], dtype=float) - ref_xy[0, 1:])))
+    n_calls = 200
+    t1, _ = best_of(lambda: [jl.solve(mech, ph1, p1, q01) for _ in range(n_calls)][-1], repeats)
+    log("jaxlink solve, 1 design per call (repeated)", "float64", n_calls * STEPS / t1, err1)
+    results["jaxlink_single_design_positions_per_s"] = n_calls * STEPS / t1
+    results["jaxlink_single_design_call_ms"] = 1e3 * t1 / n_calls
+    results["jaxlink_single_design_max_abs_error_m"] = err1
+    if "pylinkage_step_fast_positions_per_s" in results:
+        results["ratio_single_design_vs_step_fast"] = (results["jaxlink_single_design_positions_per_s"]
+                                                       / results["pylinkage_step_fast_positions_per_s"])
+
     if args.cores is None:  # jaxlink pinned to one core, like pylinkage's numba loop
         extra = ["--jaxlink-only", "--designs", str(B)] + (["--quick"] if args.quick else [])
         one = run_pinned(os.path.abspath(__file__), extra, 1)
@@ -249,6 +266,10 @@ def main(argv=None) -> dict:
               f"over designs "
               f"({results['ratio_float64_vs_pylinkage_step_fast']:.2f}x its step_fast); float32 "
               f"{results['ratio_float32_vs_pylinkage_core']:.2f}x")
+    if "ratio_single_design_vs_step_fast" in results:
+        print(f"one design x {STEPS} positions per call, repeated: jaxlink "
+              f"{results['jaxlink_single_design_call_ms']:.3f} ms per call = "
+              f"{results['ratio_single_design_vs_step_fast']:.2f}x pylinkage's step_fast")
     if "ratio_float64_1core_vs_pylinkage_core" in results:
         print(f"pinned to 1 core (as pylinkage): jaxlink float64 = "
               f"{results['ratio_float64_1core_vs_pylinkage_core']:.2f}x pylinkage's numba core")

@@ -5,7 +5,6 @@ import subprocess
 import sys
 
 import numpy as np
-
 from closed_forms import slider_crank_offset
 
 
@@ -37,8 +36,9 @@ def test_kinematics_csv_columns_and_values(tmp_path):
     rows = list(csv.reader(open(out)))
     assert rows[0] == ["input_deg", "psi13_rad", "p14_m", "A_x_m", "A_y_m", "A_vx_m_s", "A_vy_m_s",
                        "A_ax_m_s2", "A_ay_m_s2", "B_x_m", "B_y_m", "B_vx_m_s", "B_vy_m_s", "B_ax_m_s2",
-                       "B_ay_m_s2", "converged", "residual_m"]
-    data = np.array(rows[1:], dtype=float)
+                       "B_ay_m_s2", "converged", "residual_m", "result"]
+    assert all(r[-1] == "converged" for r in rows[1:])
+    data = np.array([r[:-1] for r in rows[1:]], dtype=float)
     assert data.shape == (36, 17)
     phis = np.deg2rad(data[:, 0])
     _, p14 = slider_crank_offset(0.012, np.pi / 2, 0.030, 0.080, 0.0, phis)  # h2 = 30 mm via --set
@@ -57,7 +57,7 @@ def test_kinematics_positions_only_and_plot(tmp_path):
             "--count", "4", "--csv", str(out), "--plot", str(png))
     assert r.returncode == 0, r.stderr
     rows = list(csv.reader(open(out)))
-    assert rows[0] == ["input_deg", "phi3_rad", "phi4_rad", "P_x_m", "P_y_m", "converged", "residual_m"]
+    assert rows[0] == ["input_deg", "phi3_rad", "phi4_rad", "P_x_m", "P_y_m", "converged", "residual_m", "result"]
     assert [float(x[0]) for x in rows[1:]] == [10.0, 40.0, 70.0, 100.0]
     assert png.stat().st_size > 10_000
 
@@ -66,6 +66,9 @@ def test_kinematics_reports_unreachable_positions(tmp_path):
     out = tmp_path / "nb.csv"
     r = run("kinematics", "four-bar", "--set", "b=40", "--set", "c=30", "--csv", str(out))
     assert r.returncode == 1
-    assert "did not converge" in r.stderr and "cannot_assemble" in r.stderr
-    data = np.array(list(csv.reader(open(out)))[1:], dtype=float)
-    assert 0 < data[:, -2].sum() < len(data)
+    assert "did not converge" in r.stderr and "cannot_assemble at 135°–225°" in r.stderr
+    rows = list(csv.reader(open(out)))
+    conv = np.array([float(x[rows[0].index("converged")]) for x in rows[1:]])
+    assert 0 < conv.sum() < len(conv)
+    # a row that did not converge is not data (tests/test_report.py checks every column)
+    assert all(x[rows[0].index("P_x_m")] == "nan" for x, c in zip(rows[1:], conv) if c == 0)

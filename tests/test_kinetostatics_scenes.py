@@ -23,8 +23,9 @@ def test_needle_reactions_match_the_reference(tmp_path):
     assert r.returncode == 0, r.stderr
     rows = list(csv.reader(open(out)))
     assert rows[0] == ["input_deg"] + [f"{j}_{c}_N" for j in ("A0", "A", "C", "C0", "D", "B", "guide")
-                                       for c in ("Fx", "Fy")] + ["drive_torque_N_m"]
-    ours = {name: np.array([float(row[i]) for row in rows[1:]]) for i, name in enumerate(rows[0])}
+                                       for c in ("Fx", "Fy")] + ["drive_torque_N_m", "result"]
+    assert all(row[-1] == "converged" for row in rows[1:])
+    ours = {name: np.array([float(row[i]) for row in rows[1:]]) for i, name in enumerate(rows[0][:-1])}
     ref = np.genfromtxt(REFERENCE, delimiter=",", names=True, skip_header=1)
     np.testing.assert_array_equal(ours["input_deg"], ref["phi_deg"])  # the same input angles, from A0->C0
     mag = lambda j: np.hypot(ours[f"{j}_Fx_N"], ours[f"{j}_Fy_N"])  # noqa: E731

@@ -65,3 +65,16 @@ def test_points_nan_where_not_assembled():
     bad = ~np.isin(np.asarray(sol.result), [jl.RESULTS.converged, jl.RESULTS.singular])
     assert bad.any() and (~bad).any()
     assert np.all(np.isnan(np.asarray(sol.points)[bad])) and np.all(np.isfinite(np.asarray(sol.points)[~bad]))
+
+
+def test_non_finite_points_are_not_converged():
+    """A point whose expression has no real value (asin(2)) makes its positions `nonfinite`."""
+    old = 'P = ["a @ phi2", "cx @ phi3", "cy @ phi3 + 90"]'
+    assert old in FOURBAR
+    m = jl.loads(FOURBAR.replace(old, 'P = ["a @ phi2", "cx @ asin(2 * a / a)"]'))
+    sol = jl.solve(m, np.deg2rad(np.arange(0.0, 360.0, 30.0)))
+    assert np.all(np.asarray(sol.result) == jl.RESULTS.nonfinite)
+    assert not np.any(np.asarray(sol.converged))
+    # the loops themselves closed: q is the closed form's
+    ref = jl.solve(jl.load("four-bar"), np.deg2rad(np.arange(0.0, 360.0, 30.0)))
+    np.testing.assert_allclose(np.asarray(sol.q), np.asarray(ref.q), rtol=0, atol=1e-14)

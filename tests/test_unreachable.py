@@ -1,9 +1,9 @@
 """Unreachable positions are flagged with a result code; the rest of the batch is unaffected."""
 
 import numpy as np
+from closed_forms import fourbar_freudenstein
 
 import jaxlink as jl
-from closed_forms import fourbar_freudenstein
 
 
 def _wrap(x):

@@ -1,11 +1,12 @@
-"""Stiff cam-follower dynamics of the knitting sinker (project issue 6).
+"""Stiff cam-follower dynamics; the knitting sinker is its scene.
 
 The sinker of a small circular knitting machine slides in a groove of the needle cylinder;
-its butt is lifted by a stationary stitch cam. This package rebuilds the seed's model
-(eq. 4.25: contact through a spring `C`, friction, damping from the log decrement), the six
-cam tracks, a hybrid explicit/implicit JAX integrator that locates every contact loss, and
-the static and dynamic jamming thresholds. See `docs/methods/sinker.md`; the integrators measured
-against diffrax: `docs/methods/cam-integrators.md`.
+its butt is lifted by a stationary stitch cam. This package rebuilds the model of a
+knitting-machine thesis (contact through a spring `C`, friction, damping from the logarithmic
+decrement; equations in docs/methods/sinker.md), the six cam tracks, a hybrid explicit/implicit
+JAX integrator that locates every contact loss, and the static and dynamic jamming thresholds.
+Measured results: docs/studies/sinker.md; the integrators measured against diffrax:
+docs/methods/cam-integrators.md.
 """
 
 from .integrate import RESULTS as RESULTS

@@ -34,7 +34,7 @@ from .track import CamGeometry, butt_speed
 
 KIND = "cam-follower"
 
-_SCHEMA = {
+_SCHEMA: dict[str, dict[str, type]] = {
     "mechanism": {"name": str, "kind": str, "description": str},
     "dynamics": {"m": float, "C": float, "log_decrement": float, "k_over_m": float,
                  "f": list, "R1": float, "R2": float, "R3": float, "F_P": float, "g": float,

@@ -182,8 +182,7 @@ def product_cases(params: SinkerParams, cam: CamTrack, *, f=None, C=None, k_over
     if cam.t0.ndim == 1:
         cam = jax.tree.map(lambda x: x[None], cam)
     shape = (n_f, n_g, n_c)
-    fi, gi, ci = np.meshgrid(np.arange(n_f), np.arange(n_g), np.arange(n_c), indexing="ij")
-    fi, gi, ci = fi.ravel(), gi.ravel(), ci.ravel()
+    fi, gi, ci = (np.ravel(a) for a in np.meshgrid(np.arange(n_f), np.arange(n_g), np.arange(n_c), indexing="ij"))
     n = fi.size
     pb = params._replace(f=f[fi], C=cc[ci], k_over_m=km[ci])
     pb = jax.tree.map(lambda x: jnp.broadcast_to(jnp.asarray(x), (n,) + jnp.shape(x)[1:])
@@ -193,10 +192,10 @@ def product_cases(params: SinkerParams, cam: CamTrack, *, f=None, C=None, k_over
 
 
 class Maxima(NamedTuple):
-    """Peak values of one run, per phase (seed Tables 5.1-5.5).
+    """Peak values of one run, per phase (as Tables 5.1-5.5 of the thesis; docs/studies/sinker.md).
 
     `rise_*` over the straight rise `[0, t_rise]`, `desc_*` over the straight descent
-    `[t_descent, T]` (as the seed's tables; the transition arc is in neither); accelerations
+    `[t_descent, T]` (as the thesis's tables; the transition arc is in neither); accelerations
     in m/s^2, velocities in m/s, lags in m.
     `bounce_depth` (m) = max of `-(y_z - y)` in the rise (0 without a bounce) and
     `bounce_time` (s) = how long the contact is lost in the rise.

@@ -1,6 +1,6 @@
-"""The sinker's equation of motion (seed eq. 4.25) and its static jamming threshold.
+"""The sinker's equation of motion (docs/methods/sinker.md) and its static jamming threshold.
 
-One degree of freedom, the sinker lift `y` (m, positive "up" in the seed's inverted drawing,
+One degree of freedom, the sinker lift `y` (m, positive "up" in the thesis's inverted drawing,
 gravity along +y). The cam track gives `y_z(t)`, its slope `alpha(t)` and `y_z'(t)`. With the
 lag `l = y_z - y`:
 
@@ -18,8 +18,8 @@ along the groove (static self-locking, "vzpriceni"). `D = 0` is a quadratic in `
 closed form by `static_threshold`.
 
 The damping `k/m` follows the log decrement `delta` of the contact oscillation,
-`k/m = delta sqrt(C/m) / pi` (seed 4.28, `delta = ln 2` gives 1065.8 1/s at C = 3.5e4 N/m),
-unless it is given directly. As in the seed's Simulink diagram it acts also out of contact
+`k/m = delta sqrt(C/m) / pi` (`delta = ln 2` gives 1065.8 1/s at C = 3.5e4 N/m),
+unless it is given directly. As in the thesis's Simulink diagram it acts also out of contact
 (`damping_always = 1`); `damping_always = 0` switches it off with the contact.
 """
 
@@ -46,8 +46,8 @@ class SinkerParams(NamedTuple):
     - `R_sum`: `R1 + R2 + R3`, the preload reactions in the groove (N).
     - `F_P`: needle/yarn force (N).
     - `g`: gravity along +y (m/s^2).
-    - `damping_always`: 1.0 = damping also out of contact (seed), 0.0 = only in contact.
-    - `cos_in_N`: 1.0 = `N = C l / cos a` (seed), 0.0 = `N = C l` (a variant in the spec).
+    - `damping_always`: 1.0 = damping also out of contact (the thesis), 0.0 = only in contact.
+    - `cos_in_N`: 1.0 = `N = C l / cos a` (the thesis), 0.0 = `N = C l` (a variant).
     """
 
     m: jnp.ndarray
@@ -62,14 +62,14 @@ class SinkerParams(NamedTuple):
 
 
 def damping_from_log_decrement(C, m, delta=math.log(2.0)):
-    """`k/m = delta sqrt(C/m) / pi` (1/s), seed eq. 4.28."""
+    """`k/m = delta sqrt(C/m) / pi` (1/s), the logarithmic-decrement damping of docs/methods/sinker.md."""
     return delta * jnp.sqrt(C / m) / jnp.pi
 
 
 def make_params(*, m=1.5e-3, C=3.5e4, k_over_m=None, log_decrement=math.log(2.0), f=0.1,
                 R_sum=3.2014 + 3.1216 + 6.323, F_P=0.0, g=9.81, damping_always=True,
                 cos_in_N=True) -> SinkerParams:
-    """`SinkerParams` with the seed's defaults; `k_over_m=None` derives it from
+    """`SinkerParams` with the thesis's values; `k_over_m=None` derives it from
     `log_decrement` and `C`. Array arguments broadcast against each other."""
     m, C, f = (jnp.asarray(x, dtype=float) for x in (m, C, f))
     if k_over_m is None:
@@ -141,6 +141,6 @@ def lag(cam: CamTrack, t, u, k=None):
 
 
 def nonsmooth_acceleration(p: SinkerParams, cam: CamTrack, t, u, k=None):
-    """`y''` and `N` with the seed's switch `N = C max(l, 0) / cos a` (no modes)."""
+    """`y''` and `N` with the thesis's switch `N = C max(l, 0) / cos a` (no modes)."""
     contact = (lag(cam, t, u, k) > 0).astype(u.dtype)
     return acceleration(p, cam, t, u, contact, k)

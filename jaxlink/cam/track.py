@@ -1,9 +1,9 @@
-"""Stitch-cam tracks of the knitting sinker (seed eqs. 4.29-4.44).
+"""Stitch-cam tracks of the knitting sinker (the cam profile equations of docs/methods/sinker.md).
 
 A cam is a straight rise at `a1`, a transition of radius `R` from `a1` to `a2`, and a straight
 descent at `a2`, over a horizontal length `L`. The butt moves along the cam at the constant
 speed `v = omega D / 2`, so the horizontal position is `x = v t`. The transition is either the
-exact circular arc or the seed's polygon of chords of length about `q` (0.1 mm).
+exact circular arc or the thesis's polygon of chords of length about `q` (0.1 mm).
 
 Both are stored in one padded table of *pieces*: piece `k` starts at time `t0[k]`, position
 `(x0[k], y0[k])`, and is a straight line of slope angle `alpha0[k]` (`is_arc[k] = 0`) or a
@@ -89,7 +89,7 @@ def butt_speed(n_rpm: float, diameter: float) -> float:
 
 
 def seed_geometries(*, arc: str = "exact") -> list[CamGeometry]:
-    """The seed's six stitch cams: R10/R20 times descent 45/50/55 deg (rise 30 deg)."""
+    """The six stitch cams of the thesis: R10/R20 times descent 45/50/55 deg (rise 30 deg)."""
     out = []
     for a2 in (45, 50, 55):
         for r in (10, 20):
@@ -143,14 +143,14 @@ def make_cam(geoms: CamGeometry | list[CamGeometry], speed: float, *, pad_to: in
     - `pad_to`: number of table rows (default: the largest piece count).
     """
     single = isinstance(geoms, CamGeometry)
-    glist = [geoms] if single else list(geoms)
+    glist: list[CamGeometry] = [geoms] if isinstance(geoms, CamGeometry) else list(geoms)
     built = [_pieces(g) for g in glist]
     n_rows = max(len(p) for p, _, _ in built)
     if pad_to is not None:
         if pad_to < n_rows:
             raise ValueError(f"pad_to={pad_to} is smaller than the {n_rows} pieces needed")
         n_rows = pad_to
-    cols = {k: [] for k in CamTrack._fields}
+    cols: dict[str, list] = {k: [] for k in CamTrack._fields}
     for g, (pieces, x_rise, x_desc) in zip(glist, built):
         tab = np.full((n_rows, 4), np.nan)
         tab[: len(pieces)] = np.asarray(pieces)

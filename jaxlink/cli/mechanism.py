@@ -1,7 +1,7 @@
 """Command group for linkages: `jaxlink scenes`, `jaxlink check`, `jaxlink kinematics`.
 
 Also the shared option helpers other linkage commands (reactions, optimize) reuse:
-`add_mechanism_arguments`, `load_from_args`, `inputs_from_args`, `omega_from_args`.
+`add_mechanism_arguments`, `load_from_args`, `inputs_from_args`, `input_grid`, `omega_from_args`.
 """
 
 from __future__ import annotations
@@ -14,7 +14,7 @@ import numpy as np
 
 from ..errors import MechanismError
 
-OUTPUTS = ("position", "velocity", "acceleration")
+OUTPUTS = ("position", "velocity", "acceleration", "rates")
 
 
 # ----------------------------------------------------------------------------- shared helpers
@@ -66,6 +66,15 @@ def load_from_args(args):
 def inputs_from_args(mech, args) -> np.ndarray:
     """Input values (SI) from --start/--step/--count (degrees for an angle input, file length unit
     for a length input)."""
+    return input_grid(mech, args)[0]
+
+
+def input_grid(mech, args) -> tuple:
+    """`(phis, values)`: the inputs from --start/--step/--count in SI, and as a table prints them
+    (degrees for an angle input, metres for a length input), computed in decimal from the numbers
+    given so that they print as asked (15.0, not 14.999999999999998)."""
+    from ..report.grid import exact_grid
+
     if args.step == 0 or not math.isfinite(args.step):
         raise MechanismError("--step must be a non-zero finite number")
     count = args.count
@@ -73,10 +82,13 @@ def inputs_from_args(mech, args) -> np.ndarray:
         count = max(1, int(round(360.0 / abs(args.step)))) if mech.input_kind == "angle" else 73
     if count < 1:
         raise MechanismError("--count must be at least 1")
-    vals = args.start + args.step * np.arange(count)
+    vals = exact_grid(args.start, args.step, count)
     if mech.input_kind == "angle":
-        return np.deg2rad(vals)
-    return vals * mech.units.length
+        return np.deg2rad(vals), vals
+    unit = mech.units.length
+    inv = 1.0 / unit
+    si = vals / inv if float(round(inv)) == inv else vals * unit  # 1.5 mm / 1000 prints as 0.0015
+    return si, si
 
 
 def omega_from_args(args) -> float:
@@ -113,15 +125,24 @@ def register(sub) -> None:
         description=(
             "Solve the loop equations over the input positions (closed-form dyads where every block "
             "of the structure is a dyad, else Newton with continuation; see `jaxlink check`) and "
-            "write one row per position. CSV columns: input_deg; each unknown as NAME_rad or "
-            "NAME_m; for each point P: P_x_m, P_y_m [, P_vx_m_s, P_vy_m_s] [, P_ax_m_s2, P_ay_m_s2]; "
-            "converged (1/0); residual_m. Velocities and accelerations are exact (forward-mode AD, "
-            "Jacobian solves) at constant input speed."
+            "write one row per position. CSV columns: input_deg (input_m for a length input), as asked "
+            "for; each unknown as NAME_rad or NAME_m [with --outputs rates: NAME_rad_s, NAME_rad_s2 or "
+            "NAME_m_s, NAME_m_s2]; for each point P: P_x_m, P_y_m [, P_vx_m_s, P_vy_m_s] "
+            "[, P_ax_m_s2, P_ay_m_s2]; converged (1/0); residual_m; result (converged, singular, "
+            "cannot_assemble, ...). Velocities and accelerations are exact (forward-mode AD, Jacobian "
+            "solves) at constant input speed. A position that did not assemble is nan in every solved "
+            "column (and is left out of the summary and the plots); at a singular one (dead centre, "
+            "toggle) the positions are given and the rates are nan. Exit status 1 when some position "
+            "did not converge (the warning lists the input ranges)."
         ),
     )
     add_mechanism_arguments(p)
     p.add_argument("--outputs", default="position,velocity,acceleration",
-                   help="comma-separated subset of position,velocity,acceleration (default: all three)")
+                   help="comma-separated subset of position,velocity,acceleration,rates (default: the first "
+                        "three): the points' velocities and accelerations, and 'rates' of the joint variables "
+                        "(each unknown's NAME_rad_s, NAME_rad_s2 for an angle, NAME_m_s, NAME_m_s2 for a length: "
+                        "a link's angular velocity and acceleration, a slider's speed and acceleration along "
+                        "its guide)")
     p.add_argument("--csv", metavar="OUT", help="write the table to this CSV file (default: print a summary)")
     p.add_argument("--plot", metavar="OUT.png", help="plot the point paths and the curves over the input")
     p.add_argument("--animate", metavar="OUT.gif", help="animated GIF of the moving linkage")
@@ -206,24 +227,29 @@ def cmd_kinematics(args) -> int:
     for o in outputs:
         if o not in OUTPUTS:
             raise MechanismError(f"--outputs: unknown output '{o}'; choose from {', '.join(OUTPUTS)}")
-    order = 2 if "acceleration" in outputs else (1 if "velocity" in outputs else 0)
     mech = load_from_args(args)
-    phis = inputs_from_args(mech, args)
+    phis, values = input_grid(mech, args)
     omega = omega_from_args(args)
     from ..report import kinematics as _report
 
-    table = _report.kinematics_table(mech, phis, omega=omega, order=order, dtype=dtype)
+    table = _report.kinematics_table(mech, phis, omega=omega, outputs=outputs, dtype=dtype, input_values=values,
+                                     rpm=getattr(args, "rpm", None))
     bad = int((~table.converged).sum())
-    _report.print_summary(table, sys.stdout, every_row_hint=not args.csv)
+    info = sys.stderr if args.csv == "-" else sys.stdout  # `--csv -`: the table alone on standard output
+    _report.print_summary(table, info, every_row_hint=not args.csv)
     if args.csv:
         _report.write_csv(args.csv, table)
-        print(f"wrote {args.csv}: {len(phis)} rows, {len(table.columns)} columns")
-    if args.plot:
-        _report.plot_kinematics(args.plot, mech, table)
-        print(f"wrote {args.plot}")
-    if args.animate:
-        _report.animate(args.animate, mech, table)
-        print(f"wrote {args.animate}")
+        if args.csv != "-":
+            print(f"wrote {args.csv}: {len(phis)} rows, {len(table.columns)} columns", file=info)
+    if args.plot or args.animate:
+        from ..report import plot as _plot
+
+        if args.plot:
+            _plot.plot_kinematics(args.plot, mech, table)
+            print(f"wrote {args.plot}", file=info)
+        if args.animate:
+            _plot.animate(args.animate, mech, table)
+            print(f"wrote {args.animate}", file=info)
     if bad:
         print(f"warning: {bad} of {len(phis)} positions did not converge (converged = 0 in the table): "
               + _report.failure_summary(table), file=sys.stderr)

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import argparse
 import sys
 
 from ..errors import MechanismError
@@ -22,7 +21,6 @@ def register(sub) -> None:
             "--resume continues an interrupted search and ends with the same result. Same seed, "
             "same result. See docs/methods/optimize.md."
         ),
-        formatter_class=argparse.ArgumentDefaultsHelpFormatter,
     )
     add_mechanism_arguments(p, positions=False)
     p.add_argument("--method", required=True, choices=("uniform", "montecarlo", "gradient"),
@@ -33,7 +31,7 @@ def register(sub) -> None:
     p.add_argument("--out", metavar="OUT.json", help="write the result JSON here (and checkpoint beside it)")
     p.add_argument("--resume", action="store_true", help="continue the interrupted search of --out")
     p.add_argument("--uniform", choices=("grid", "coordinate"), default=None,
-                   help="uniform search: full grid, or the seed's parameter-by-parameter stepping "
+                   help="uniform search: full grid, or parameter-by-parameter stepping (as the feed study did) "
                         "(default: [optimize] uniform, else grid)")
     p.add_argument("--starts", type=int, default=None, help="gradient: parallel starts (default 16)")
     p.add_argument("--chunk", type=int, default=None, help="designs per batch (default 256)")

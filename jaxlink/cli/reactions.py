@@ -2,17 +2,15 @@
 
 The table, CSV and plot are made by `jaxlink/report/reactions.py` (its docstring lists the CSV
 columns). Rows where the kinematics did not converge or the kinetostatic system is singular hold
-`nan` (and the exit status is 1).
+`nan` and name their result (and the exit status is 1; the warning lists the input ranges).
 """
 
 from __future__ import annotations
 
 import sys
 
-import numpy as np
-
-from ..report.reactions import plot, print_summary, reactions_table, write_csv
-from .mechanism import add_mechanism_arguments, enable_dtype, inputs_from_args, load_from_args, omega_from_args
+from ..report.reactions import failure_summary, plot, print_summary, reactions_table, write_csv
+from .mechanism import add_mechanism_arguments, enable_dtype, input_grid, load_from_args, omega_from_args
 
 
 def register(sub) -> None:
@@ -23,8 +21,10 @@ def register(sub) -> None:
             "force and moment balances of all moving bodies (from the file's [bodies], [joints], [loads], "
             "[environment]) for the joint reactions and the drive torque, at constant input speed. CSV "
             "columns: input_deg; for each joint J: J_Fx_N, J_Fy_N (force on the second listed body from the "
-            "first); drive_torque_N_m (on the input body, counter-clockwise +). Rows that cannot be solved "
-            "hold nan and make the exit status 1. Give the speed with --rpm or --omega (default 1 rad/s)."
+            "first); drive_torque_N_m (on the input body, counter-clockwise +); result (converged, or why "
+            "not: the position solve's code such as cannot_assemble, or singular). Rows that cannot be "
+            "solved hold nan and make the exit status 1. Give the speed with --rpm or --omega (default "
+            "1 rad/s)."
         ),
     )
     add_mechanism_arguments(p)
@@ -36,30 +36,26 @@ def register(sub) -> None:
 def cmd_reactions(args) -> int:
     dtype = enable_dtype(args.dtype)
     from ..model import bodies as _bodies
-    from ..results import RESULTS
 
     mech = load_from_args(args)
     _bodies.model(mech)  # a file without bodies is refused before the solve
-    phis = inputs_from_args(mech, args)
+    phis, values = input_grid(mech, args)  # the input column exactly as asked (no rad round trip)
     omega = omega_from_args(args)
-    degrees = args.start + args.step * np.arange(len(phis))  # exactly as asked (no rad round trip)
-    table = reactions_table(mech, phis, omega=omega, dtype=dtype, degrees=degrees)
+    table = reactions_table(mech, phis, omega=omega, dtype=dtype, input_values=values,
+                            rpm=getattr(args, "rpm", None))
+    info = sys.stderr if args.csv == "-" else sys.stdout  # `--csv -`: the table alone on standard output
     if args.csv:
         write_csv(args.csv, table)
-        print(f"wrote {args.csv}: {len(phis)} rows, {len(table.columns)} columns")
+        if args.csv != "-":
+            print(f"wrote {args.csv}: {len(phis)} rows, {len(table.columns)} columns", file=info)
     else:
         print_summary(table, sys.stdout)
     if args.plot:
         plot(args.plot, mech, table)
-        print(f"wrote {args.plot}")
+        print(f"wrote {args.plot}", file=info)
     bad = ~table.ok
     if bad.any():
-        parts = []
-        for code in np.unique(table.result[bad]):
-            where = table.data[table.result == code, 0]
-            parts.append(f"{int((table.result == code).sum())} × {RESULTS.names[int(code)]} (first at "
-                         f"input_deg = {where[0]:g}): {RESULTS.messages[int(code)]}")
         print(f"warning: {int(bad.sum())} of {len(phis)} positions have no reactions (nan in the table): "
-              + "; ".join(parts), file=sys.stderr)
+              + failure_summary(table), file=sys.stderr)
         return 1
     return 0

@@ -1,17 +1,23 @@
 """Tables, CSV and plots of the joint reactions and the driving torque (`jaxlink reactions`).
 
-CSV columns: `input_deg`; for each joint J (file order) `J_Fx_N`, `J_Fy_N`, the force on the
-joint's second listed body from its first; `drive_torque_N_m`, the torque the drive applies to the
-input body (counter-clockwise positive). Rows where the kinematics did not converge or the
-kinetostatic system is singular hold `nan`.
+CSV columns: `input_deg` (as asked for; `input_m` for a length input); for each joint J (file order)
+`J_Fx_N`, `J_Fy_N`, the force on the joint's second listed body from its first; `drive_torque_N_m`,
+the torque the drive applies to the input body (counter-clockwise positive); `result`, the name of
+the code of the row (`converged`; the position solve's code, e.g. `cannot_assemble`, where the
+kinematics did not converge; `singular` where the kinetostatic system is singular). Rows that are
+not `converged` hold `nan`: they are left out of the summary and are gaps in the plot.
 """
 
 from __future__ import annotations
 
 import csv
 import dataclasses
+import sys
 
 import numpy as np
+
+from ..results import RESULTS
+from . import grid as _grid
 
 
 @dataclasses.dataclass
@@ -19,28 +25,37 @@ class ReactionsTable:
     """One row per input position; `columns` name the columns of `data` (units in the names)."""
 
     columns: list
-    data: np.ndarray  # (N, 2 J + 2)
+    data: np.ndarray  # (N, 2 J + 3); the last column is the result code
     ok: np.ndarray  # (N,) bool
     result: np.ndarray  # (N,) RESULTS codes
     joint_names: tuple
     omega: float
+    input_kind: str = "angle"
+    periodic: bool = False
+    rpm: float | None = None
 
     def column(self, name: str) -> np.ndarray:
         return self.data[:, self.columns.index(name)]
 
     def magnitudes(self) -> np.ndarray:
         """(N, J) |F| of each joint, N."""
-        f = self.data[:, 1:-1].reshape(len(self.data), -1, 2)
+        f = self.data[:, 1:1 + 2 * len(self.joint_names)].reshape(len(self.data), -1, 2)
         return np.hypot(f[..., 0], f[..., 1])
 
+    def speed_text(self) -> str:
+        if self.rpm is not None:
+            return f"{self.rpm:g} rpm (ω = {self.omega:.4g} rad/s)"
+        return f"ω = {self.omega:g} rad/s"
 
-def reactions_table(mech, phis, *, omega: float, p=None, dtype=np.float64, degrees=None) -> ReactionsTable:
-    """Solve positions at `phis` (rad) and the reactions at input speed `omega` (rad/s). `degrees`:
-    the input angles as given (the `input_deg` column; default `phis` converted)."""
+
+def reactions_table(mech, phis, *, omega: float, p=None, dtype=np.float64, input_values=None,
+                    rpm: float | None = None) -> ReactionsTable:
+    """Solve positions at `phis` (SI) and the reactions at input speed `omega` (rad/s). `input_values`:
+    the input column as asked for (degrees for an angle input, metres for a length input; default
+    `phis` converted); `rpm`: the speed as given, for the labels."""
     from ..analysis.kinetostatics import rigidity_errors, solve_reactions
     from ..errors import MechanismError
     from ..model import bodies as _bodies
-    from ..results import RESULTS
 
     mdl = _bodies.model(mech)
     p = np.asarray(mech.parameters if p is None else p, dtype=dtype)
@@ -51,67 +66,100 @@ def reactions_table(mech, phis, *, omega: float, p=None, dtype=np.float64, degre
         if errors:
             raise MechanismError("the bodies do not move rigidly with the kinematics: " + "; ".join(errors),
                                  file=mech.file, key="bodies")
-    res = np.asarray(r.result)
+    # the position solve's code where it did not converge (more telling than `not_assembled`)
+    res = np.where(conv, np.asarray(r.result), np.asarray(sol.result)).astype(np.int8)
     ok = res == RESULTS.converged
     force = np.where(ok[:, None, None], np.asarray(r.force, dtype=float), np.nan)
     torque = np.where(ok, np.asarray(r.torque, dtype=float), np.nan)
-    cols = ["input_deg"]
-    data = [np.rad2deg(np.asarray(phis, dtype=float)) if degrees is None else np.asarray(degrees, dtype=float)]
+    angle = mech.input_kind == "angle"
+    if input_values is None:
+        input_values = np.rad2deg(np.asarray(phis, dtype=float)) if angle else np.asarray(phis, dtype=float)
+    cols = ["input_deg" if angle else "input_m"]
+    data = [np.asarray(input_values, dtype=float)]
     for k, name in enumerate(mdl.joint_names):
         cols += [f"{name}_Fx_N", f"{name}_Fy_N"]
         data += [force[:, k, 0], force[:, k, 1]]
-    cols.append("drive_torque_N_m")
-    data.append(torque)
-    return ReactionsTable(cols, np.stack(data, axis=1), ok, res, mdl.joint_names, float(omega))
+    cols += ["drive_torque_N_m", "result"]
+    data += [torque, res.astype(float)]
+    return ReactionsTable(cols, np.stack(data, axis=1), ok, res, mdl.joint_names, float(omega), mech.input_kind,
+                          _grid.full_turn(phis, mech.input_kind), rpm)
 
 
-def write_csv(path: str, table: ReactionsTable) -> None:
-    with open(path, "w", newline="") as fh:
-        w = csv.writer(fh)
-        w.writerow(table.columns)
-        for row in table.data:
-            w.writerow(["nan" if np.isnan(x) else repr(float(x)) for x in row])
+def write_csv(out, table: ReactionsTable) -> None:
+    """The table as CSV to `out`: a path, `-` (standard output) or an open text file."""
+    if isinstance(out, str) and out != "-":
+        with open(out, "w", newline="") as fh:
+            _write_rows(fh, table)
+    else:
+        _write_rows(sys.stdout if out == "-" else out, table)
+
+
+def _write_rows(fh, table: ReactionsTable) -> None:
+    w = csv.writer(fh, lineterminator="\n")
+    w.writerow(table.columns)
+    for row in table.data:
+        out = ["nan" if np.isnan(x) else repr(float(x)) for x in row[:-1]]
+        w.writerow(out + [RESULTS.name(int(row[-1]))])
+
+
+def failure_summary(table: ReactionsTable) -> str:
+    """`19 × cannot_assemble at 135°–225°: <what to do>` for every code other than converged."""
+    return _grid.failure_text(table.result, table.data[:, 0], table.input_kind, table.periodic)
 
 
 def print_summary(table: ReactionsTable, out) -> None:
+    """The largest |F| of every joint and the largest |τ|, with the input where they occur (an
+    angle reduced to [0, 360)), over the solved rows."""
     n = len(table.data)
-    out.write(f"{n} positions, {int(table.ok.sum())} solved, ω = {table.omega:g} rad/s\n")
+    out.write(f"{n} positions, {int(table.ok.sum())} solved, {table.speed_text()}\n")
     if not table.ok.any():
         return
     mags = table.magnitudes()
     ang = table.data[:, 0]
+    angle = table.input_kind == "angle"
+    at = _grid.reduce_deg(ang) if angle else ang
+    head = "at input (deg)" if angle else "at input (m)"
     width = max(len(j) for j in table.joint_names + ("drive torque",))
-    out.write(f"{'joint':<{width}}  {'max |F| (N)':>14} {'at input (deg)':>15}\n")
+    out.write(f"{'joint':<{width}}  {'max |F| (N)':>14} {head:>15}\n")
     for k, name in enumerate(table.joint_names):
         i = int(np.nanargmax(mags[:, k]))
-        out.write(f"{name:<{width}}  {mags[i, k]:14.6g} {ang[i]:15.6g}\n")
+        out.write(f"{name:<{width}}  {mags[i, k]:14.6g} {at[i]:15.6g}\n")
     t = table.column("drive_torque_N_m")
     i = int(np.nanargmax(np.abs(t)))
-    out.write(f"{'drive torque':<{width}}  {t[i]:14.6g} {ang[i]:15.6g}   (N·m, largest |τ|)\n")
+    out.write(f"{'drive torque':<{width}}  {t[i]:14.6g} {at[i]:15.6g}   (N·m, largest |τ|)\n")
     out.write("(use --csv OUT to write every row)\n")
 
 
 def plot(path: str, mech, table: ReactionsTable) -> None:
-    """Reaction magnitudes over the input angle (as in the feed-mechanism thesis, Fig. 15.1) and the drive torque."""
-    import matplotlib
+    """Reaction magnitudes over the input (as in the feed-mechanism thesis, Fig. 15.1) and the drive
+    torque: gaps and shaded ranges where not solved, closed over a full revolution, axes limited to
+    the bulk of the values when a spike (a toggle) would flatten them (`jaxlink/report/plot.py`)."""
+    from .plot import closed_curve, limit_axis, pyplot
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
+    plt = pyplot()
     ang = table.data[:, 0]
     mags = table.magnitudes()
-    fig, (ax, ax2) = plt.subplots(2, 1, figsize=(9, 7), sharex=True, gridspec_kw={"height_ratios": [2, 1]})
+    fig, (ax, ax2) = plt.subplots(2, 1, figsize=(10, 7), sharex=True, gridspec_kw={"height_ratios": [2, 1]},
+                                  layout="constrained")
     styles = ("-", "--", "-.", ":")  # two-force members give equal curves: keep them visible
     for k, name in enumerate(table.joint_names):
-        ax.plot(ang, mags[:, k], styles[k % 4], label=name, lw=1.6)
+        ax.plot(*closed_curve(ang, mags[:, k], table.periodic), styles[k % 4], color=f"C{k % 10}", label=name, lw=1.6)
     ax.set_ylabel("reaction |F| (N)")
-    ax.set_title(f"{mech.name}: joint reactions, ω = {table.omega:g} rad/s")
-    ax.grid(alpha=0.3)
-    ax.legend(fontsize=8, ncol=2)
-    ax2.plot(ang, table.column("drive_torque_N_m"), color="k")
+    ax.set_title(f"{mech.name}: joint reactions at {table.speed_text()}")
+    torque = table.column("drive_torque_N_m")
+    ax2.plot(*closed_curve(ang, torque, table.periodic), color="k", label="drive torque")
     ax2.set_ylabel("drive torque (N·m)")
-    ax2.set_xlabel("input angle (deg)")
-    ax2.grid(alpha=0.3)
-    fig.tight_layout()
+    ax2.set_xlabel("input angle (deg)" if table.input_kind == "angle" else "input (m)")
+    for a, arrays, unit in ((ax, [mags], "N"), (ax2, [torque], "N·m")):
+        bad = ~table.ok
+        h = (ang[1] - ang[0]) if len(ang) > 1 else 1.0
+        for i, (lo, hi) in enumerate(_grid.runs(bad)):
+            a.axvspan(ang[lo] - h / 2, ang[hi] + h / 2, color="red", alpha=0.08, lw=0,
+                      label="not solved" if i == 0 else None)
+        limit_axis(a, arrays, unit)
+        a.grid(alpha=0.3)
+        a.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.01, 1.0), frameon=False)
+    if table.periodic:
+        ax.set_xlim(ang[0], ang[0] + 360.0 * np.sign(ang[1] - ang[0]))
     fig.savefig(path, dpi=110)
     plt.close(fig)

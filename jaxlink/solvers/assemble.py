@@ -328,17 +328,24 @@ def _closed_form_path(mech, p, phis, q0, tol, trig_in, trig_p, thr, phi_ref, poi
 
     def one(phi, t_in):
         q, ok, rn, sine, trig = _dyads.solve_with_trig(mech, dyads, sigma, q_ref, phi, p, {**t_in, **trig_p})
-        # (cos, sin) of the solved angles, for the points (no new trigonometry there)
-        angles = [n for n, k in zip(mech.unknown_names, mech.unknown_kinds) if k == "angle"]
-        trig_q = {n: trig[n] for n in angles} if points else None
         conv = (rn <= tol) & ref_ok
         code = jnp.where(conv, jnp.where(sine < thr, RESULTS.singular, RESULTS.converged),
                          jnp.where(~ref_ok | ~jnp.isfinite(rn), RESULTS.nonfinite,
                                    jnp.where(ok, RESULTS.max_steps, RESULTS.cannot_assemble)))
         q = jnp.where(jnp.all(jnp.isfinite(q)), q, q_ref)
-        return q, rn, code.astype(jnp.int8), jnp.zeros((), jnp.int32), trig_q
+        # every output of a position packed into one array: one fused kernel writes them all (XLA on
+        # CPU would otherwise compute the solve once per output); the points from the sines and
+        # cosines the solve already has (no new trigonometry)
+        parts = [q, rn[None], code.astype(q.dtype)[None]]
+        if points:
+            parts.append(jnp.ravel(mech.point_positions(q, phi, p, trig)))
+        return jnp.concatenate(parts)
 
-    return jax.vmap(one)(phis, trig_in)
+    packed = jax.vmap(one)(phis, trig_in)
+    n = len(mech.unknown_names)
+    pts = packed[:, n + 2:].reshape(packed.shape[0], -1, 2) if points else None
+    zeros = jnp.zeros(packed.shape[:1], jnp.int32)
+    return packed[:, :n], packed[:, n], packed[:, n + 1].astype(jnp.int8), zeros, pts
 
 
 def _extrapolate(hist_q, hist_phi, n_good, phi, order: int):
@@ -505,18 +512,9 @@ def _solve_batch_impl(mech: Mechanism, opts: NewtonOptions, points: bool, P, phi
         # (B) is computed once, not inside every fused kernel.
         ref = phi0 if phi_ref is None else phi_ref
         trig_in, trig_p = materialize((_dyads.input_trig(mech, phis), _dyads.parameter_trig(mech, P)))
-        q, rn, code, k, trig_q = jax.vmap(
+        return jax.vmap(
             lambda p, ph, q0, t, ti, tp, r: _closed_form_path(mech, p, ph, q0, t, ti, tp, thr, r, points),
             in_axes=(0, ax, 0, 0, ax, 0, 0))(P, phis, Q0, tol, trig_in, trig_p, ref)
-        if not points:
-            return q, rn, code, k, None
-        # the points from the stored q and its sines and cosines: a separate kernel that reads them
-        # (fused with the solve, XLA on CPU would compute the solve once per output)
-        q, trig_q = materialize((q, trig_q))
-        pts = jax.vmap(jax.vmap(lambda qq, phi, p, ti, tp, tq: mech.point_positions(qq, phi, p, {**ti, **tp, **tq}),
-                                in_axes=(0, 0, None, 0 if ax is None else 0, None, 0)),
-                       in_axes=(0, ax, 0, ax, 0, 0))(q, phis, P, trig_in, trig_p, trig_q)
-        return q, rn, code, k, pts
     # Newton: a design whose tolerance is not finite (a NaN or infinite length, even one that only
     # a point uses) or whose guess is not finite (it selects no branch) is `nonfinite` at every
     # position, without iterating (a NaN tolerance makes `newton` stop at once)
@@ -630,7 +628,13 @@ def _batch(mech, phis, p, q0, options: NewtonOptions, points: bool) -> Solution:
     phi_ref = jnp.full((B,), mech.input_start, dtype) if from_start else None
     structure = mech.structure if isinstance(mech, Mechanism) else mech
     q, rn, code, k, pts = _solve_batch(structure, options, points, P, phis, Q0, phi_ref)
-    pts = _mask_points(pts, code) if points else None
+    if points:
+        # finiteness is part of convergence: a position whose points are not finite (an
+        # expression like asin(2) in [points]) is `nonfinite`, never converged with NaN points
+        bad = ~jnp.all(jnp.isfinite(pts), axis=(-2, -1))
+        code = jnp.where(bad & ((code == RESULTS.converged) | (code == RESULTS.singular)),
+                         jnp.int8(RESULTS.nonfinite), code)
+        pts = _mask_points(pts, code)
     sol = Solution(q=q, points=pts, result=code, stats=SolveStats(residual=rn, steps=k))
     return sol if batch else jax.tree_util.tree_map(lambda x: x[0], sol)
 

@@ -1,0 +1,372 @@
+"""Plots and animations of a kinematics table (`jaxlink kinematics --plot / --animate`).
+
+The linkage is drawn where `jaxlink/report/drawing.py` places it: links as bars labelled with
+their length, frame vectors dashed, joints as circles with their names, ground pivots with a
+ground symbol, sliders as a block on their guide line (the loop's own slider vector dotted), each
+point's arm from its last joint, and the traced point paths. Lengths are shown in the file's
+length unit.
+
+Curves over the input: positions, and |v|, |a| (thick, one colour per point) with their x and y
+components (thin: solid x, dashed y). Positions that did not assemble are gaps in every line and
+shaded ranges; over one full revolution each curve is closed (the last position joined to the
+first). An axis whose extremes lie far outside the bulk of its values (the spike of a toggle) is
+limited to the bulk (the 5–95 % range widened by half its span) and says so with the true extremes.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..results import RESULTS
+from . import grid as _grid
+from .drawing import LinkageDrawing, drawing
+
+UNITS = {1.0: "m", 1e-2: "cm", 1e-3: "mm"}
+
+
+def pyplot():
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+def length_unit(mech) -> tuple:
+    """(factor from metres to the file's length unit, its name)."""
+    u = float(mech.units.length)
+    name = UNITS.get(u)
+    return (1.0 / u, name) if name else (1e3, "mm")
+
+
+def linkage_drawing(mech, table) -> LinkageDrawing:
+    """The placed linkage of a kinematics table (positions where it assembled)."""
+    return drawing(mech, table.q, table.inputs, table.parameters, table.assembled)
+
+
+class LinkageArtist:
+    """The matplotlib artists of a linkage drawing on `ax`, scaled by `scale` (metres → shown
+    unit); `update(k)` shows position k (nothing where it did not assemble). The joint circles are
+    one line (`joint_marks`, gid "joints"), the ground symbols sit at `ground_xy` (shown unit)."""
+
+    def __init__(self, ax, d: LinkageDrawing, scale: float, color: str = "0.25", labels: bool = True):
+        from matplotlib.patches import Polygon
+
+        self.d, self.s, self.ax = d, scale, ax
+        size = d.extent * scale
+        self.size = size
+        self.segments = []
+        for kinds in d.kinds:
+            row = []
+            for kind in kinds:
+                if kind == "link":
+                    ln, = ax.plot([], [], "-", color=color, lw=2.4, solid_capstyle="round", zorder=3)
+                elif kind == "frame":
+                    ln, = ax.plot([], [], "--", color="0.6", lw=1.0, zorder=2)
+                elif kind == "slider":  # the loop's vector of a slider: a construction line
+                    ln, = ax.plot([], [], ":", color="0.6", lw=0.9, zorder=2)
+                else:
+                    ln, = ax.plot([], [], "-", color="0.5", lw=1.0, zorder=2)
+                row.append(ln)
+            self.segments.append(row)
+        self.arms = [ax.plot([], [], "-", color=color, lw=1.2, alpha=0.8, zorder=3)[0] for _ in d.arms]
+        self.guides = [ax.plot([], [], "-", color="0.55", lw=4.0, alpha=0.45, solid_capstyle="butt", zorder=1)[0]
+                       for _ in d.sliders]
+        self.blocks = [ax.add_patch(Polygon(np.zeros((4, 2)), closed=True, facecolor="0.85", edgecolor=color,
+                                            lw=1.4, zorder=4)) for _ in d.sliders]
+        # ground pivots do not move: their symbols are drawn once, at the first shown position
+        rows = np.flatnonzero(d.shown)
+        k0 = int(rows[0]) if rows.size else 0
+        self.ground_xy = d.joints[k0, d.ground] * scale if d.joints.size else np.zeros((0, 2))
+        g = 0.035 * size
+        for x, y in self.ground_xy:
+            ax.add_patch(Polygon([[x, y], [x - g, y - 1.5 * g], [x + g, y - 1.5 * g]], closed=True,
+                                 facecolor="0.8", edgecolor="0.3", lw=1.0, zorder=2))
+            ax.plot([x - 1.5 * g, x + 1.5 * g], [y - 1.5 * g] * 2, "-", color="0.3", lw=1.4, zorder=2)
+            for t in np.linspace(-1.2, 1.2, 5):
+                ax.plot([x + t * g, x + (t - 0.4) * g], [y - 1.5 * g, y - 2.0 * g], "-", color="0.3", lw=0.8,
+                        zorder=2)
+        self.joint_marks, = ax.plot([], [], "o", ms=5.5, mfc="white", mec=color, mew=1.4, zorder=5, gid="joints")
+        self.point_marks = [ax.plot([], [], "s", color=f"C{i}", ms=6, zorder=6)[0] for i in range(len(d.point_names))]
+        self.labels = []
+        self.link_labels = []
+        if labels:
+            seen = set()  # a link in two loops is labelled once
+            for kinds, texts in zip(d.kinds, d.labels):
+                row = []
+                for kind, t in zip(kinds, texts):
+                    row.append(ax.annotate(t, (0, 0), xytext=(0, 0), textcoords="offset points", fontsize=7,
+                                           color="0.45", style="italic", ha="center", va="center", zorder=7)
+                               if kind == "link" and t not in seen else None)
+                    seen.add(t)
+                self.link_labels.append(row)
+            self.labels = [ax.annotate(n, (0, 0), xytext=(5, 5), textcoords="offset points", fontsize=8,
+                                       color="0.15", zorder=7) for n in d.joint_names]
+            taken = set(d.joint_names)
+            self.point_labels = [None if n in taken else
+                                 ax.annotate(n, (0, 0), xytext=(5, -11), textcoords="offset points", fontsize=8,
+                                             color=f"C{i}", fontweight="bold", zorder=7)
+                                 for i, n in enumerate(d.point_names)]
+        else:
+            self.point_labels = [None] * len(d.point_names)
+
+    def bounds(self) -> tuple:
+        """(xmin, xmax, ymin, ymax) of everything drawn over all shown positions, padded."""
+        d, shown = self.d, self.d.shown
+        pieces = [v[shown].reshape(-1, 2) for v in d.loops] + [d.points[shown].reshape(-1, 2)]
+        pieces += [a[shown].reshape(-1, 2) for a in d.arms] + [sl.guide[shown].reshape(-1, 2) for sl in d.sliders]
+        xy = np.concatenate(pieces) * self.s if shown.any() else np.zeros((1, 2))
+        xy = xy[np.isfinite(xy).all(axis=1)]
+        if not xy.size:
+            xy = np.zeros((1, 2))
+        pad = 0.06 * max(float(np.ptp(xy, axis=0).max()), 1e-12)
+        ground = 0.035 * self.size * 2.2 if self.ground_xy.size else 0.0
+        return (xy[:, 0].min() - pad, xy[:, 0].max() + pad, xy[:, 1].min() - max(pad, ground),
+                xy[:, 1].max() + pad)
+
+    def artists(self) -> list:
+        out = [ln for row in self.segments for ln in row] + self.arms + self.guides + self.blocks
+        out += [self.joint_marks] + self.point_marks + self.labels + [t for t in self.point_labels if t is not None]
+        out += [t for row in self.link_labels for t in row if t is not None]
+        return out
+
+    def update(self, k: int) -> list:
+        d, s = self.d, self.s
+        show = bool(d.shown[k])
+        for c, row in enumerate(self.segments):
+            v = d.loops[c][k] * s
+            n = len(row)
+            for j, ln in enumerate(row):
+                seg = np.stack([v[j], v[(j + 1) % n]])
+                ln.set_data(seg[:, 0], seg[:, 1])
+                label = self.link_labels[c][j] if self.link_labels else None
+                if label is not None:  # beside the middle of the bar, on its left
+                    t = seg[1] - seg[0]
+                    t = t / max(float(np.hypot(*t)), 1e-300)
+                    label.xy = tuple(seg.mean(axis=0))
+                    label.set_position((-7 * t[1], 7 * t[0]))
+                    label.set_visible(show)
+        for arm, ln in zip(d.arms, self.arms):
+            ln.set_data(arm[k, :, 0] * s, arm[k, :, 1] * s)
+        h, w = 0.05 * self.size, 0.032 * self.size
+        for sl, ln, patch in zip(d.sliders, self.guides, self.blocks):
+            ln.set_data(sl.guide[k, :, 0] * s, sl.guide[k, :, 1] * s)
+            u = sl.axis[k]
+            n_ = np.array([-u[1], u[0]])
+            b = sl.block[k] * s
+            patch.set_xy(np.array([b - h * u - w * n_, b + h * u - w * n_, b + h * u + w * n_, b - h * u + w * n_]))
+            patch.set_visible(show)
+        xy = d.joints[k] * s
+        self.joint_marks.set_data(xy[:, 0], xy[:, 1])
+        for i, m in enumerate(self.point_marks):
+            m.set_data([d.points[k, i, 0] * s], [d.points[k, i, 1] * s])
+        for t, p in zip(self.labels, xy):
+            t.xy = tuple(p)
+            t.set_visible(show)
+        for t, p in zip(self.point_labels, d.points[k] * s):
+            if t is not None:
+                t.xy = tuple(p)
+                t.set_visible(show)
+        return self.artists()
+
+
+def closed_curve(x, y, periodic: bool, step=None):
+    """Append the first value at the end of one full revolution (x + one step)."""
+    if not periodic or len(x) < 2:
+        return x, y
+    h = (x[1] - x[0]) if step is None else step
+    return np.append(x, x[-1] + h), np.concatenate([y, y[:1]])
+
+
+def _below(ax):
+    """Axes coordinates shifted down past the tick labels and the x label (for a legend under the
+    drawing, outside the point paths)."""
+    from matplotlib.transforms import offset_copy
+
+    return offset_copy(ax.transAxes, fig=ax.figure, y=-34, units="points")
+
+
+def _loop(v, periodic: bool):
+    """A path over one full revolution, closed: the first position again at the end."""
+    return np.concatenate([v, v[:1]]) if periodic and len(v) > 1 else v
+
+
+def robust_limits(values) -> tuple | None:
+    """Limits for values whose extremes lie far outside their bulk: `(lo, hi, note)` or None.
+    The bulk is the 5–95 % range; an extreme more than one bulk span beyond it is a spike (a
+    toggle, a dead centre): the limits are then the bulk widened by half its span."""
+    v = np.asarray(values, dtype=float)
+    v = v[np.isfinite(v)]
+    if v.size < 10:
+        return None
+    lo, hi = np.percentile(v, [5, 95])
+    span = hi - lo
+    if span <= 0:
+        return None
+    vmin, vmax = v.min(), v.max()
+    if vmax <= hi + span and vmin >= lo - span:
+        return None
+    return (max(vmin, lo - 0.5 * span), min(vmax, hi + 0.5 * span),
+            f"clipped: the extremes are {vmin:.3g} … {vmax:.3g}")
+
+
+def _shade_failures(ax, x, table, label=True):
+    """Light red spans over the input ranges that did not assemble."""
+    bad = ~table.assembled
+    if not bad.any():
+        return
+    h = (x[1] - x[0]) if len(x) > 1 else 1.0
+    first = True
+    for a, b in _grid.runs(bad):
+        ax.axvspan(x[a] - h / 2, x[b] + h / 2, color="red", alpha=0.08, lw=0,
+                   label="not assembled" if (label and first) else None)
+        first = False
+
+
+def limit_axis(ax, arrays, unit_text):
+    lim = robust_limits(np.concatenate([np.ravel(a) for a in arrays])) if arrays else None
+    if lim is None:
+        return
+    lo, hi, note = lim
+    pad = 0.05 * (hi - lo)
+    ax.set_ylim(lo - pad, hi + pad)
+    ax.text(0.01, 0.97, f"{note} {unit_text}", transform=ax.transAxes, fontsize=7, va="top", color="0.3",
+            bbox=dict(boxstyle="round,pad=0.2", fc="white", ec="0.8", alpha=0.85))
+
+
+def plot_kinematics(path: str, mech, table) -> None:
+    """The linkage and the point paths (left); positions, |v|, |a| over the input (right)."""
+    plt = pyplot()
+    s, lu = length_unit(mech)
+    x_in = table.input_values
+    angle = table.input_kind == "angle"
+    xlabel = "input angle (deg)" if angle else "input (m)"
+    npts = len(mech.point_names)
+    panels = [("position", None)]
+    if table.velocities is not None:
+        panels.append(("velocity", table.velocities))
+    if table.accelerations is not None:
+        panels.append(("acceleration", table.accelerations))
+    rows = len(panels)
+    fig = plt.figure(figsize=(13, 3.4 * max(rows, 2)), layout="constrained")
+    gs = fig.add_gridspec(rows, 2, width_ratios=[1.0, 1.15])
+    ax_path = fig.add_subplot(gs[:, 0])
+    d = linkage_drawing(mech, table)
+    ok = np.flatnonzero(table.converged)
+    shown = np.flatnonzero(table.assembled)
+    k0 = int(ok[0]) if ok.size else (int(shown[0]) if shown.size else 0)
+    art = LinkageArtist(ax_path, d, s)
+    art.update(k0)
+    for i, pn in enumerate(mech.point_names):
+        xy = table.points[:, i] * s
+        ax_path.plot(_loop(xy[:, 0], table.periodic), _loop(xy[:, 1], table.periodic), "-", lw=1.4,
+                     color=f"C{i}", label=f"path of {pn}", zorder=1)
+    x0, x1, y0, y1 = art.bounds()
+    ax_path.set_xlim(x0, x1)
+    ax_path.set_ylim(y0, y1)
+    ax_path.set_aspect("equal", adjustable="box")
+    ax_path.set_xlabel(f"x ({lu})")
+    ax_path.set_ylabel(f"y ({lu})")
+    at = _grid.format_value(x_in[k0], table.input_kind) if len(x_in) else ""
+    ax_path.set_title(f"{mech.name}: linkage at {at}" + (" and point paths" if npts else ""))
+    ax_path.grid(alpha=0.3)
+    if (~table.assembled).any():
+        ax_path.plot([], [], " ", label="not assembled at " + _grid.format_runs(
+            x_in, _grid.runs(~table.assembled, table.periodic), table.input_kind, limit=3))
+    handles, _ = ax_path.get_legend_handles_labels()
+    if handles:
+        ax_path.legend(loc="upper center", bbox_to_anchor=(0.5, 0.0), bbox_transform=_below(ax_path), fontsize=8,
+                       ncol=min(3, len(handles)), frameon=False)
+
+    for r, (what, arr) in enumerate(panels):
+        ax = fig.add_subplot(gs[r, 1])
+        series: list = []
+        for i, pn in enumerate(mech.point_names):
+            col = f"C{i}"
+            if what == "position":
+                for comp, style in ((0, "-"), (1, "--")):
+                    xx, yy = closed_curve(x_in, table.points[:, i, comp] * s, table.periodic)
+                    ax.plot(xx, yy, style, color=col, lw=1.5, label=f"{pn} {'xy'[comp]}")
+            else:
+                assert arr is not None
+                letter = what[0]
+                mag = np.hypot(arr[:, i, 0], arr[:, i, 1])
+                xx, yy = closed_curve(x_in, mag, table.periodic)
+                ax.plot(xx, yy, "-", color=col, lw=2.4, label=f"|{letter}| {pn}")
+                for comp, style in ((0, "-"), (1, "--")):
+                    xx, yy = closed_curve(x_in, arr[:, i, comp], table.periodic)
+                    ax.plot(xx, yy, style, color=col, lw=0.9, alpha=0.7, label=f"{pn} {letter}{'xy'[comp]}")
+                series += [mag, arr[:, i, 0], arr[:, i, 1]]
+        unit = {"position": lu, "velocity": "m/s", "acceleration": "m/s²"}[what]
+        ax.set_ylabel(f"{what} ({unit})")
+        _shade_failures(ax, x_in, table)
+        if what != "position":
+            limit_axis(ax, series, unit)
+        ax.grid(alpha=0.3)
+        if angle and table.periodic:
+            ax.set_xlim(x_in[0], x_in[0] + 360.0 * np.sign(x_in[1] - x_in[0]))
+        if ax.get_legend_handles_labels()[0]:
+            ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8, frameon=False)
+        if r == rows - 1:
+            speed = f", at {table.speed_text()}" if rows > 1 else ""
+            ax.set_xlabel(xlabel + speed)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def animate(path: str, mech, table, fps: int = 15, progress: bool = True, dpi: int = 90) -> None:
+    """GIF of the moving linkage over the table's positions, with the traced point paths; a
+    progress bar on standard error while the frames are drawn. The still parts (axes, grid, paths,
+    ground symbols) are drawn once and every frame draws only the moving artists over them."""
+    plt = pyplot()
+    from PIL import Image
+    from tqdm import tqdm
+
+    s, lu = length_unit(mech)
+    d = linkage_drawing(mech, table)
+    fig, ax = plt.subplots(figsize=(6, 6), dpi=dpi)
+    ax.set_aspect("equal")
+    ax.grid(alpha=0.3)
+    ax.set_xlabel(f"x ({lu})")
+    ax.set_ylabel(f"y ({lu})")
+    for i, pn in enumerate(mech.point_names):
+        xy = table.points[:, i] * s
+        ax.plot(_loop(xy[:, 0], table.periodic), _loop(xy[:, 1], table.periodic), ":", lw=1.2,
+                color=f"C{i}", label=f"path of {pn}")
+    art = LinkageArtist(ax, d, s)
+    x0, x1, y0, y1 = art.bounds()
+    ax.set_xlim(x0, x1)
+    ax.set_ylim(y0, y1)
+    title = ax.set_title(f"{mech.name}   input 360°")  # room for the frames' titles
+    if mech.point_names:
+        ax.legend(loc="upper center", bbox_to_anchor=(0.5, 0.0), bbox_transform=_below(ax), fontsize=8,
+                  frameon=False, ncol=min(3, len(mech.point_names)))
+    fig.tight_layout()
+    moving = sorted(art.artists() + [title], key=lambda a: a.get_zorder())
+    for a in moving:
+        a.set_animated(True)
+    canvas = fig.canvas
+    canvas.draw()
+    background = canvas.copy_from_bbox(fig.bbox)
+    x_in = table.input_values
+    frames = []
+    n = len(table.data)
+    with tqdm(total=n, desc=f"drawing {path}", unit="frame", disable=not progress, leave=False,
+              mininterval=0.5) as bar:
+        for k in range(n):
+            canvas.restore_region(background)
+            art.update(k)
+            text = f"{mech.name}   input {_grid.format_value(x_in[k], table.input_kind)}"
+            if not table.assembled[k]:
+                text += f"   ({RESULTS.name(table.result[k])}: not drawn)"
+            title.set_text(text)
+            title.set_color("black" if table.assembled[k] else "red")
+            for a in moving:
+                if a.get_visible():
+                    ax.draw_artist(a)
+            rgba = np.asarray(canvas.buffer_rgba())
+            frames.append(Image.fromarray(rgba[..., :3].copy()).quantize(colors=64, method=Image.Quantize.MEDIANCUT))
+            bar.update(1)
+    plt.close(fig)
+    frames[0].save(path, save_all=True, append_images=frames[1:], duration=int(round(1000 / fps)), loop=0)
