@@ -60,7 +60,7 @@ from jaxlink import cam as sk  # noqa: E402
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, HERE)
-from throughput import feed_point_np, numpy_newton  # noqa: E402
+from throughput import feed_batch, feed_point_np  # noqa: E402
 
 RESULTS_DIR = os.path.join(HERE, "results")
 SPEED = sk.butt_speed(350.0, 0.096)
@@ -469,15 +469,8 @@ def jamming_wall_rows(tol, log):
 
 
 def newton_rows(B, quick, repeats, log):
-    mech = jl.load("sewing-feed")
-    rng = np.random.default_rng(0)
-    P = np.repeat(mech.parameters[None], B, axis=0)
-    for name in ("l2", "l22", "gamma"):
-        P[:, mech.parameter_index(name)] *= 1 + 0.01 * rng.uniform(-1, 1, B)
-    N = 72
-    phis = mech.input_start + 2 * np.pi * np.arange(N) / N
-    q_ref = numpy_newton(P, phis, mech.guess, tol=1e-15, max_steps=40)
-    ref = feed_point_np(q_ref.reshape(-1, 4), np.tile(phis, B), np.repeat(P, N, axis=0))
+    mech, P, phis, ref = feed_batch(B)
+    N = len(phis)
     pos = B * N
     Pd, ph, q0 = (jnp.asarray(x) for x in (P, phis, mech.guess))
     problem = f"sewing-feed {B}x{N}, continuation"

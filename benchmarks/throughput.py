@@ -137,6 +137,20 @@ def handwritten_closed_form(P, phis, sigma1, sigma2):
     return jax.vmap(lambda p: jax.vmap(lambda f: one(p, f))(phis))(P)
 
 
+def feed_batch(B, N=72, seed=0):
+    """The benchmarks' feed problem: the original design with l2, l22, gamma varied by ±1 % (B
+    designs), N crank angles from the file's start, and the feed point Z of a numpy Newton
+    reference iterated to 1e-15 m: `(mech, P (B, 11), phis (N,), Z (B·N, 2))`."""
+    mech = jl.load("sewing-feed")
+    rng = np.random.default_rng(seed)
+    P = np.repeat(mech.parameters[None], B, axis=0)
+    for name in ("l2", "l22", "gamma"):
+        P[:, mech.parameter_index(name)] *= 1 + 0.01 * rng.uniform(-1, 1, B)
+    phis = mech.input_start + 2 * np.pi * np.arange(N) / N
+    q_ref = numpy_newton(P, phis, mech.guess, tol=1e-15, max_steps=40)
+    return mech, P, phis, feed_point_np(q_ref.reshape(-1, 4), np.tile(phis, B), np.repeat(P, N, axis=0))
+
+
 def handwritten_branches(p, phi, q):
     """The branch signs (sigma1, sigma2) of `handwritten_closed_form` at a solved position q =
     (phi3, phi4, phi5, phi6): the side of each dyad's base vector on which its first link lies."""

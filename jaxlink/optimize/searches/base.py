@@ -13,6 +13,7 @@ about one more solve). Under `vmap` every start is charged for every trial it is
 
 from __future__ import annotations
 
+import abc
 from concurrent.futures import Future, ThreadPoolExecutor
 from typing import NamedTuple, Protocol
 
@@ -146,7 +147,7 @@ def start_indices(pool: Pool) -> np.ndarray | None:
     return np.where(ok, np.arange(S), np.flatnonzero(ok)[np.arange(S) % ok.sum()])
 
 
-class PresampledStarts:
+class PresampledStarts(abc.ABC):
     """Skeleton of the gradient searches. Phase 0 draws a seeded Monte Carlo presample (numpy
     PCG64 seeded by (seed, 1000003, chunk)) in chunks and pools the `S` best designs; then
     `started` begins phase 1, whose chunks `searched` runs. The state has the fields `progress`,
@@ -165,16 +166,18 @@ class PresampledStarts:
     def step(self, st):
         return self._presample_chunk(st) if int(st.phase) == 0 else self.searched(st)
 
+    @abc.abstractmethod
     def presampled(self, st, U):
         """Evaluate (and count) presampled designs: (state, designs to pool, their ranking values,
         their circuits)."""
-        raise NotImplementedError
 
+    @abc.abstractmethod
     def started(self, st):
-        raise NotImplementedError
+        """The state that begins phase 1 from the pooled presample."""
 
+    @abc.abstractmethod
     def searched(self, st):
-        raise NotImplementedError
+        """One chunk of phase 1 (the method's own iterations)."""
 
     def _presample_chunk(self, st):
         ev = self.ev
