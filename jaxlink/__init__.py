@@ -27,6 +27,7 @@ from .analysis.kinetostatics import solve_reactions as solve_reactions
 from .analysis.transfer import Transfer as Transfer
 from .analysis.transfer import time_derivatives as time_derivatives
 from .analysis.transfer import transfer as transfer
+from .cache import enable_compilation_cache as enable_compilation_cache
 from .errors import MechanismError as MechanismError
 from .files.reader import load as load
 from .files.reader import loads as loads

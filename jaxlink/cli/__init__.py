@@ -73,6 +73,9 @@ def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     name = f"jaxlink {args.command}"
+    from ..cache import enable_compilation_cache
+
+    enable_compilation_cache()  # JAXLINK_CACHE_DIR: a repeated command loads its compiled code
     try:
         return int(args.func(args) or 0)
     except MechanismError as exc:
