@@ -34,7 +34,9 @@ def register(sub) -> None:
                    help="uniform search: full grid, or parameter-by-parameter stepping (as the feed study did) "
                         "(default: [optimize] uniform, else grid)")
     p.add_argument("--starts", type=int, default=None, help="gradient: parallel starts (default 16)")
-    p.add_argument("--chunk", type=int, default=None, help="designs per batch (default 256)")
+    p.add_argument("--chunk", type=int, default=None,
+                   help="designs per batch (default: [optimize] chunk, else from the device and the problem's "
+                        "size: 4096 designs of 36 samples on a CPU)")
     p.add_argument("--progress", choices=("auto", "on", "off"), default="auto",
                    help="progress bar (auto: when stderr is a terminal)")
     p.set_defaults(func=cmd_optimize)
@@ -57,8 +59,8 @@ def cmd_optimize(args) -> int:
         raise MechanismError("--budget must be at least 1")
     if args.starts is not None and args.starts < 1:
         raise MechanismError("--starts must be at least 1")
-    chunk = args.chunk or problem.option("chunk", 256)
-    if not isinstance(chunk, int) or chunk < 1:
+    chunk = args.chunk if args.chunk is not None else problem.option("chunk", None)
+    if chunk is not None and (not isinstance(chunk, int) or chunk < 1):
         raise MechanismError(f"--chunk must be a positive integer, got {chunk!r}")
     progress = sys.stderr.isatty() if args.progress == "auto" else args.progress == "on"
     knobs = {}

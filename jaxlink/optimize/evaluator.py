@@ -30,7 +30,7 @@ from ..solvers import dyads as _dyads
 from ..solvers.assemble import NewtonOptions, default_rtol, solve_path
 from .objectives import OBJECTIVES, PathData, to_python
 from .problem import Problem
-from .sharding import design_sharding, pad_rows, put
+from .sharding import default_chunk, design_sharding, pad_rows, put
 from .start import circuit_signs, closed_form_start, continuation_start, file_configuration
 
 
@@ -40,11 +40,13 @@ class Evaluator:
     **Arguments:**
 
     - `problem`: the parsed `[optimize]` problem.
-    - `chunk`: designs per compiled batch (keyword-only; batches are padded to it).
+    - `chunk`: designs per compiled batch (keyword-only; default: from the device and the
+      problem's size, `sharding.default_chunk`: 4096 designs of 36 samples on a CPU).
     - `devices`: the devices to shard over (default: all).
     """
 
-    def __init__(self, problem: Problem, *, chunk: int = 256, devices=None, options: NewtonOptions = NewtonOptions()):
+    def __init__(self, problem: Problem, *, chunk: int | None = None, devices=None,
+                 options: NewtonOptions = NewtonOptions()):
         self.problem = problem
         mech = problem.mech
         self.mech = mech
@@ -52,7 +54,6 @@ class Evaluator:
         self.options = options
         self.sharding = design_sharding(devices)
         self.n_devices = len(self.sharding.mesh.devices.flat)
-        self.chunk = -(-chunk // self.n_devices) * self.n_devices
         phi0 = float(problem.phis[0])
         self.phi0 = phi0
         self.q_file = file_configuration(mech, phi0)
@@ -71,11 +72,25 @@ class Evaluator:
         else:
             self.sigmas = np.zeros((1, 0))
         self.n_circuits = len(self.sigmas)
+        if chunk is None:
+            per = len(problem.phis) * (self.n_circuits if problem.circuits == "all" else 1)
+            chunk = default_chunk(per, len(mech.guess) + 2 * len(mech.point_names),
+                                  list(self.sharding.mesh.devices.flat))
+        self.chunk = -(-int(chunk) // self.n_devices) * self.n_devices
         default_report = 7200 if problem.objective == "points" else len(problem.phis)
         self.report_samples = int(problem.option("report_samples", default_report))
         self.evaluations = 0  # mechanism evaluations made through this object
         self.infeasible = 0
         self._compiled: dict = {}
+
+    def padded_size(self, n: int) -> int:
+        """Rows a batch of `n` designs is padded to: the next power of two (at least 8 per
+        device), at most `chunk`. Few shapes (one compilation each), and a small batch (the
+        gradient search's starts) is not padded to a large chunk."""
+        m = 8 * self.n_devices
+        while m < n and m < self.chunk:
+            m *= 2
+        return min(m, self.chunk)
 
     def compiled(self, key, build):
         """`build()` made once per evaluator under `key` (a hashable tuple): every jitted batch
@@ -178,13 +193,13 @@ class Evaluator:
         vals, oks, cs, rs = [], [], [], []
         for s in range(0, B, self.chunk):
             part = U[s:s + self.chunk]
-            padded, n = pad_rows(part, self.chunk)
+            padded, n = pad_rows(part, self.padded_size(len(part)))
             if circuits is None and self.n_circuits > 1:
                 v, ok, c, *r = self._values(True, rank)(put(jnp.asarray(padded), self.sharding))
                 self.evaluations += n * self.n_circuits
             else:
                 cc = np.zeros(len(part), int) if circuits is None else np.asarray(circuits[s:s + self.chunk])
-                cc, _ = pad_rows(cc, self.chunk)
+                cc, _ = pad_rows(cc, len(padded))
                 v, ok, *r = self._values(False, rank)(*put((jnp.asarray(padded), jnp.asarray(cc)), self.sharding))
                 c = cc
                 self.evaluations += n
@@ -256,8 +271,8 @@ class Evaluator:
         U = np.asarray(U, dtype=float)
         xs, oks = [], []
         for s in range(0, len(U), self.chunk):
-            part, n = pad_rows(U[s:s + self.chunk], self.chunk)
-            cc, _ = pad_rows(np.asarray(circuits[s:s + self.chunk]), self.chunk)
+            part, n = pad_rows(U[s:s + self.chunk], self.padded_size(len(U[s:s + self.chunk])))
+            cc, _ = pad_rows(np.asarray(circuits[s:s + self.chunk]), len(part))
             xy, ok = self._paths_batch()(*put((jnp.asarray(part), jnp.asarray(cc)), self.sharding))
             xs.append(np.asarray(xy)[:n])
             oks.append(np.asarray(ok)[:n])

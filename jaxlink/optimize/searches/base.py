@@ -102,6 +102,23 @@ def next_chunk(p: Progress) -> Progress:
     return p._replace(chunk=p.chunk + 1)
 
 
+BLOCK = 256  # rows per seeded block of random designs
+
+
+def drawn(key: tuple[int, ...], start: int, n: int, n_variables: int) -> np.ndarray:
+    """Rows `start … start + n − 1` of a seeded stream of uniform designs in [0, 1]^V: block k
+    (rows 256 k … 256 k + 255) comes from numpy's PCG64 seeded by `key + (k,)`. The designs do not
+    depend on how the stream is cut into chunks, so a search draws the same designs with any
+    `chunk` (a 256-row chunk k is block k, as before the blocks existed)."""
+    if n <= 0:
+        return np.zeros((0, n_variables))
+    first, last = start // BLOCK, (start + n - 1) // BLOCK
+    rows = np.concatenate([np.random.default_rng([*key, k]).random((BLOCK, n_variables))
+                           for k in range(first, last + 1)])
+    off = start - first * BLOCK
+    return rows[off:off + n]
+
+
 def compile_ahead(fn, *args) -> Future:
     """Compile the jitted `fn` for `args` in a thread (XLA compiles without holding the GIL, so
     the caller goes on evaluating meanwhile). The future's `result()` is the compiled executable,
@@ -148,8 +165,8 @@ def start_indices(pool: Pool) -> np.ndarray | None:
 
 
 class PresampledStarts(abc.ABC):
-    """Skeleton of the gradient searches. Phase 0 draws a seeded Monte Carlo presample (numpy
-    PCG64 seeded by (seed, 1000003, chunk)) in chunks and pools the `S` best designs; then
+    """Skeleton of the gradient searches. Phase 0 draws a seeded Monte Carlo presample (`drawn`
+    with the key (seed, 1000003)) in chunks and pools the `S` best designs; then
     `started` begins phase 1, whose chunks `searched` runs. The state has the fields `progress`,
     `phase` (0 presample, 1 search) and `pool`; subclasses set `ev`, `budget`, `seed`, `S`,
     `presample` and define `presampled`, `started` and `searched`."""
@@ -184,8 +201,7 @@ class PresampledStarts(abc.ABC):
         p = st.progress
         n = min(ev.chunk, self.presample - int(st.pool.n), max(0, (self.budget - int(p.evaluations)) // ev.n_circuits))
         if n > 0:
-            rng = np.random.default_rng([self.seed, 1_000_003, int(p.chunk)])
-            U = rng.random((ev.chunk, ev.problem.n_variables))[:n]
+            U = drawn((self.seed, 1_000_003), int(st.pool.n), n, ev.problem.n_variables)
             st, U, values, circuits = self.presampled(st, U)
             st = st._replace(pool=pooled(st.pool, U, values, circuits)._replace(n=st.pool.n + np.int64(n)))
         st = st._replace(progress=next_chunk(st.progress))

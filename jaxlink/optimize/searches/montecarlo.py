@@ -1,15 +1,14 @@
 """Monte Carlo search: designs uniform at random in the bounds, in chunks of the evaluator's
-batch; chunk k's designs come from numpy's PCG64 seeded by (seed, k), so a resumed search draws
-exactly the designs of an uninterrupted one."""
+batch, from one seeded stream (`base.drawn`: 256-row blocks, block k from numpy's PCG64 seeded by
+(seed, k)), so a resumed search draws exactly the designs of an uninterrupted one, and any `chunk`
+draws the same designs (the same result)."""
 
 from __future__ import annotations
 
 from typing import NamedTuple
 
-import numpy as np
-
 from ..evaluator import Evaluator
-from .base import Progress, evaluate, next_chunk, progress_start, recorded
+from .base import Progress, drawn, evaluate, next_chunk, progress_start, recorded
 
 
 class MonteCarloState(NamedTuple):
@@ -33,6 +32,5 @@ class MonteCarlo:
     def step(self, st: MonteCarloState) -> MonteCarloState:
         ev, p = self.ev, st.progress
         n = min(ev.chunk, (self.budget - int(p.evaluations)) // ev.n_circuits)
-        rng = np.random.default_rng([self.seed, int(p.chunk)])
-        U = rng.random((ev.chunk, ev.problem.n_variables))[:n]
+        U = drawn((self.seed,), int(p.designs), n, ev.problem.n_variables)
         return MonteCarloState(next_chunk(recorded(p, U, evaluate(ev, U))))

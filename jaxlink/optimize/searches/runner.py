@@ -18,7 +18,8 @@ from .result import SearchResult, summarized
 
 def run(problem_or_evaluator: Problem | Evaluator, method: str, *, budget: int, seed: int = 0,
         out: str | os.PathLike | None = None, resume: bool = False, progress: bool = False,
-        chunk: int | None = None, stop_after_chunks: int | None = None, **knobs) -> SearchResult:
+        chunk: int | None = None, stop_after_chunks: int | None = None, checkpoint_s: float = 2.0,
+        **knobs) -> SearchResult:
     """Search the design space of a problem for the lowest objective.
 
     **Arguments:**
@@ -32,14 +33,17 @@ def run(problem_or_evaluator: Problem | Evaluator, method: str, *, budget: int, 
       with `SearchResult.to_json()`. `resume`: continue the interrupted search of `out`; it ends
       with exactly the result of an uninterrupted one.
     - `progress`: a tqdm bar on stderr. `chunk`: designs per batch when a `Problem` is given
-      (default `[optimize] chunk`, else 256).
+      (default `[optimize] chunk`, else from the device and the problem: `Evaluator`).
+    - `checkpoint_s`: seconds between checkpoints (the first chunk, then at most every
+      `checkpoint_s`, and at the end; a kill loses at most that much work, and the resumed search
+      still ends exactly as an uninterrupted one). 0: after every chunk.
     - `stop_after_chunks` (testing): stop after that many chunks of this call, as if killed.
     - `knobs`: the method's options (`uniform`, `starts`, `presample`, `iterations`, …).
     """
     if isinstance(problem_or_evaluator, Evaluator):
         ev = problem_or_evaluator
     else:
-        ev = Evaluator(problem_or_evaluator, chunk=chunk or problem_or_evaluator.option("chunk", 256))
+        ev = Evaluator(problem_or_evaluator, chunk=chunk or problem_or_evaluator.option("chunk", None))
     search = searcher(ev, method, budget=budget, seed=seed, **knobs)
     extra = {"uniform": knobs.get("uniform", "grid")} if method == "uniform" else {}
     fp = _checkpoint.fingerprint(ev.problem, method, seed, budget, repr(sorted(knobs.items())))
@@ -65,6 +69,18 @@ def run(problem_or_evaluator: Problem | Evaluator, method: str, *, budget: int, 
 
         bar = tqdm(total=budget, initial=int(st.progress.evaluations), unit="eval", desc=method, dynamic_ncols=True)
     chunks = 0
+    pending: list[dict] = []  # log records of the chunks since the last checkpoint
+    saved_at = -float("inf")
+
+    def checkpoint():
+        nonlocal saved_at
+        _checkpoint.save_state(files[1], st, fp)
+        for record in pending:
+            _checkpoint.append_log(files[2], record)
+        pending.clear()
+        _checkpoint.write_json_atomic(files[0], result(False).to_json())
+        saved_at = time.perf_counter()
+
     try:
         while not search.done(st):
             if stop_after_chunks is not None and chunks >= stop_after_chunks:
@@ -80,15 +96,17 @@ def run(problem_or_evaluator: Problem | Evaluator, method: str, *, budget: int, 
                 if p.found:
                     bar.set_postfix(best=f"{float(p.best_value):.6g}")
             if files:
-                _checkpoint.save_state(files[1], st, fp)
-                _checkpoint.append_log(files[2], {
+                pending.append({
                     "chunk": int(p.chunk), "evaluations": int(p.evaluations), "designs": int(p.designs),
                     "infeasible": int(p.infeasible), "best_value": float(p.best_value) if p.found else None,
                     "best_parameters": (dict(zip(ev.problem.names, map(float, ev.problem.to_file_units(p.best_u))))
                                         if p.found else None),
                     "wall_s": float(p.wall_s),
                 })
-                _checkpoint.write_json_atomic(files[0], result(False).to_json())
+                if time.perf_counter() - saved_at >= checkpoint_s:
+                    checkpoint()
+        if files and pending:
+            checkpoint()  # the last chunks (also of a search stopped by stop_after_chunks)
     finally:
         if bar is not None:
             bar.close()
