@@ -38,7 +38,7 @@ def enable_compilation_cache(path: str | None = None) -> str | None:
     """
     import jax
 
-    current = jax.config.jax_compilation_cache_dir
+    current = getattr(jax.config, "jax_compilation_cache_dir", None)
     if current:
         return current
     path = cache_dir() if path is None else path
