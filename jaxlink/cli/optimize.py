@@ -39,12 +39,43 @@ def register(sub) -> None:
                         "size: 4096 designs of 36 samples on a CPU)")
     p.add_argument("--progress", choices=("auto", "on", "off"), default="auto",
                    help="progress bar (auto: when stderr is a terminal)")
+    d = p.add_argument_group(
+        "several processes", "spread the search over N processes (hosts, or several on one host) with "
+                             "jax.distributed: start the same command N times, with --process-id 0 … N-1 and the "
+                             "same --coordinator; same result as one process; process 0 writes --out "
+                             "(docs/methods/optimize.md)")
+    d.add_argument("--coordinator", metavar="HOST:PORT", default=None,
+                   help="address of process 0, which coordinates (a free port on its host)")
+    d.add_argument("--num-processes", type=int, default=None, metavar="N", help="number of processes")
+    d.add_argument("--process-id", type=int, default=None, metavar="I", help="this process's index, 0 … N-1")
     p.set_defaults(func=cmd_optimize)
+
+
+def _distributed(args) -> bool:
+    """Join the group of processes the options name (before any JAX work); whether this process
+    prints (process 0, or a single process)."""
+    given = [args.coordinator is not None, args.num_processes is not None, args.process_id is not None]
+    if not any(given):
+        return True
+    if not all(given):
+        raise MechanismError("--coordinator, --num-processes and --process-id go together (all three or none)")
+    if args.num_processes < 1:
+        raise MechanismError(f"--num-processes must be at least 1, got {args.num_processes}")
+    if not 0 <= args.process_id < args.num_processes:
+        raise MechanismError(f"--process-id must be in 0 … {args.num_processes - 1}, got {args.process_id}")
+    host, _, port = args.coordinator.rpartition(":")
+    if not host or not port.isdigit() or not 0 < int(port) < 65536:
+        raise MechanismError(f"--coordinator must be HOST:PORT, got {args.coordinator!r}")
+    from ..optimize import initialize_distributed
+
+    index, _ = initialize_distributed(args.coordinator, args.num_processes, args.process_id)
+    return index == 0
 
 
 def cmd_optimize(args) -> int:
     from .mechanism import enable_dtype, load_from_args
 
+    printer = _distributed(args)
     enable_dtype(args.dtype)
     from ..optimize import Evaluator, problem_from, run
 
@@ -73,7 +104,9 @@ def cmd_optimize(args) -> int:
         knobs["starts"] = args.starts
     ev = Evaluator(problem, chunk=chunk)
     result = run(ev, args.method, budget=budget, seed=seed, out=args.out, resume=args.resume,
-                 progress=progress, **knobs)
+                 progress=progress and printer, **knobs)
+    if not printer:
+        return 0 if result.parameters else 1
     print(f"method      {result.method}" + (f" ({knobs['uniform']})" if "uniform" in knobs else ""))
     if result.parameters:
         print("best        " + ", ".join(f"{k} = {v:.6g}" for k, v in result.parameters.items()))

@@ -4,6 +4,7 @@ gradient searches (`searches/`), checkpoints. See docs/methods/optimize.md.
 `run(problem_or_evaluator, method, budget=..., seed=...)` searches and returns a `SearchResult`
 (`.to_json()`: the document `jaxlink optimize --out` writes)."""
 
+from .distributed import initialize_distributed as initialize_distributed
 from .evaluator import Evaluator as Evaluator
 from .objectives import OBJECTIVES as OBJECTIVES
 from .objectives import Objective as Objective

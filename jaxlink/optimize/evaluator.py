@@ -190,19 +190,31 @@ class Evaluator:
         """
         U = np.asarray(U, dtype=float)
         B = len(U)
+        if jax.process_count() > 1:  # several processes: each evaluates its share (distributed.py)
+            from .distributed import gathered, process_share
+
+            a, b, _ = process_share(B)
+            out = gathered(self._evaluated(U[a:b], None if circuits is None else np.asarray(circuits)[a:b], rank), B)
+        else:
+            out = self._evaluated(U, circuits, rank)
+        self.evaluations += B * (self.n_circuits if circuits is None and self.n_circuits > 1 else 1)
+        self.infeasible += int(np.count_nonzero(~np.asarray(out["feasible"], dtype=bool)))
+        return out
+
+    def _evaluated(self, U, circuits, rank: bool) -> dict:
+        """`evaluate` on this process's devices, uncounted."""
+        B = len(U)
         vals, oks, cs, rs = [], [], [], []
         for s in range(0, B, self.chunk):
             part = U[s:s + self.chunk]
             padded, n = pad_rows(part, self.padded_size(len(part)))
             if circuits is None and self.n_circuits > 1:
                 v, ok, c, *r = self._values(True, rank)(put(jnp.asarray(padded), self.sharding))
-                self.evaluations += n * self.n_circuits
             else:
                 cc = np.zeros(len(part), int) if circuits is None else np.asarray(circuits[s:s + self.chunk])
                 cc, _ = pad_rows(cc, len(padded))
                 v, ok, *r = self._values(False, rank)(*put((jnp.asarray(padded), jnp.asarray(cc)), self.sharding))
                 c = cc
-                self.evaluations += n
             vals.append(np.asarray(v)[:n])
             oks.append(np.asarray(ok)[:n])
             cs.append(np.asarray(c)[:n])
@@ -215,7 +227,6 @@ class Evaluator:
         }
         if rank:
             out["rank"] = np.concatenate(rs) if rs else np.zeros(0)
-        self.infeasible += int(np.count_nonzero(~np.asarray(out["feasible"], dtype=bool)))
         return out
 
     # ------------------------------------------------------------------ reports

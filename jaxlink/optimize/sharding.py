@@ -4,8 +4,8 @@ Every batched evaluation puts its leading (design) axis on a one-axis mesh named
 `jit` then partitions the computation so that each device solves its share of the designs.
 Designs are independent, so the result does not depend on the number of devices (tested on CPU
 with `XLA_FLAGS=--xla_force_host_platform_device_count=4`). Several GPUs of one host need
-nothing more; several hosts call `jax.distributed.initialize()` first, after which
-`jax.devices()` lists the devices of every process (docs/methods/optimize.md).
+nothing more; several processes or hosts split each batch between them first
+(`distributed.py`), each sharding its share over its own devices.
 """
 
 from __future__ import annotations
@@ -16,7 +16,9 @@ from jax.sharding import Mesh, NamedSharding, PartitionSpec
 
 
 def design_sharding(devices=None) -> NamedSharding:
-    devices = list(jax.devices() if devices is None else devices)
+    """The design axis over `devices` (default: this process's devices; several processes split
+    a batch between them first, `distributed.py`)."""
+    devices = list(jax.local_devices() if devices is None else devices)
     mesh = Mesh(np.asarray(devices), ("designs",))
     return NamedSharding(mesh, PartitionSpec("designs"))
 
@@ -50,7 +52,7 @@ def default_chunk(positions_per_design: int, values_per_position: int, devices=N
     about `CPU_POSITIONS` positions on a CPU and `ACCELERATOR_POSITIONS` on a GPU/TPU, fewer
     where a quarter of the device's memory would not hold them (≈ 16 float64 values per solved
     value: `values_per_position` = unknowns + 2 × points)."""
-    devices = list(jax.devices() if devices is None else devices)
+    devices = list(jax.local_devices() if devices is None else devices)
     target = CPU_POSITIONS if devices[0].platform == "cpu" else ACCELERATOR_POSITIONS
     try:
         limit = int(devices[0].memory_stats()["bytes_limit"])

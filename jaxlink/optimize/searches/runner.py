@@ -6,6 +6,7 @@ from __future__ import annotations
 import os
 import time
 
+import jax
 import numpy as np
 
 from ...errors import MechanismError
@@ -48,6 +49,7 @@ def run(problem_or_evaluator: Problem | Evaluator, method: str, *, budget: int, 
     extra = {"uniform": knobs.get("uniform", "grid")} if method == "uniform" else {}
     fp = _checkpoint.fingerprint(ev.problem, method, seed, budget, repr(sorted(knobs.items())))
     files = _checkpoint.paths(out) if out else None
+    writer = jax.process_index() == 0  # several processes (distributed.py): process 0 writes
     st = search.init()
     saved = None
     if resume:
@@ -56,7 +58,7 @@ def run(problem_or_evaluator: Problem | Evaluator, method: str, *, budget: int, 
         saved = _checkpoint.load_state(files[1], st, fp)
     if saved is not None:
         st = saved
-    elif files:
+    elif files and writer:
         files[2].unlink(missing_ok=True)
         files[1].unlink(missing_ok=True)
 
@@ -74,6 +76,9 @@ def run(problem_or_evaluator: Problem | Evaluator, method: str, *, budget: int, 
 
     def checkpoint():
         nonlocal saved_at
+        if not writer:
+            pending.clear()
+            return
         _checkpoint.save_state(files[1], st, fp)
         for record in pending:
             _checkpoint.append_log(files[2], record)
@@ -111,6 +116,6 @@ def run(problem_or_evaluator: Problem | Evaluator, method: str, *, budget: int, 
         if bar is not None:
             bar.close()
     res = result(search.done(st))
-    if files:
+    if files and writer:
         _checkpoint.write_json_atomic(files[0], res.to_json())
     return res
