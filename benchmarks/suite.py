@@ -13,6 +13,11 @@ for timing and memory):
 - `error_vs_runtime.py` — error against run time for every accuracy knob (+ PNG);
 - `scaling.py` — batch size 1e2…1e6, 1 vs 2 host devices, peak memory.
 
+Not in the suite (run on their own): `accelerator.py` (batch scaling to 1e8 positions, memory,
+gradient/forward, Monte Carlo designs/s on whatever device JAX finds: meant for a GPU) and
+`system.py` (command latency cold/warm with the compilation cache; a 3e6-design Monte Carlo
+search's peak memory and rate against the raw solve rate).
+
     python benchmarks/suite.py [--quick] [--only NAME,...]
 
 `--quick` (smaller batches, fewer repeats and settings) finishes in under 5 minutes on 2 cores and

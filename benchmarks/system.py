@@ -1,0 +1,100 @@
+"""The system around the kernel, measured as a user meets it: command latency with and without the
+compilation cache, and a large Monte Carlo search's memory and rate against the raw solve rate,
+all in one run.
+
+1. **Latency.** `jaxlink kinematics sewing-feed --rpm 2500 --csv f.csv` twice with
+   `JAXLINK_CACHE_DIR` set to a fresh directory (cold: compiles and fills the cache; warm: loads
+   the compiled code), and once with the cache off (`JAXLINK_CACHE_DIR=""`).
+2. **Search rate.** `jaxlink optimize sewing-feed-opt --method montecarlo --budget B --progress off
+   --out R.json` (B = 3e6; `--quick` 3e5): peak resident memory of the process, and the search's
+   positions/s (evaluations × samples / `search_wall_s`, or `wall_s` where the JSON has no
+   `search_wall_s`) against `throughput.py --quick --jaxlink-only` positions/s in the same run.
+
+    python benchmarks/system.py [--quick] [--json OUT]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import subprocess
+import sys
+import tempfile
+import time
+
+from _cores import default_output
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+ROOT = os.path.dirname(HERE)
+
+
+# the command line, reporting its own peak resident memory on exit
+CLI = ("import atexit, resource, runpy, sys; "
+       "atexit.register(lambda: print('PEAK_RSS_KB', resource.getrusage(resource.RUSAGE_SELF).ru_maxrss, "
+       "file=sys.stderr)); sys.argv = ['jaxlink'] + sys.argv[1:]; runpy.run_module('jaxlink.cli', run_name='__main__')")
+
+
+def timed(args, env, cwd):
+    """(wall seconds, peak RSS of the command in MB, completed process)."""
+    t = time.perf_counter()
+    r = subprocess.run(args, env=env, cwd=cwd, capture_output=True, text=True, timeout=3600)
+    wall = time.perf_counter() - t
+    peak = [int(x.split()[1]) for x in r.stderr.splitlines() if x.startswith("PEAK_RSS_KB")]
+    return wall, (peak[-1] / 1024 if peak else float("nan")), r
+
+
+def main(argv=None) -> dict:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
+                                 formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--quick", action="store_true", help="a 3e5-design search instead of 3e6")
+    ap.add_argument("--json", metavar="OUT", help="write the results as JSON (default: benchmarks/results/latest/)")
+    args = ap.parse_args(argv)
+    out: dict = {}
+    cli = [sys.executable, "-c", CLI]
+    with tempfile.TemporaryDirectory(prefix="jaxlink_system_") as tmp:
+        # 1. latency
+        kin = cli + ["kinematics", "sewing-feed", "--rpm", "2500", "--csv", os.path.join(tmp, "f.csv")]
+        cache = os.path.join(tmp, "xla")
+        env = dict(os.environ, JAXLINK_CACHE_DIR=cache)
+        cold, _, r1 = timed(kin, env, tmp)
+        warm, _, r2 = timed(kin, env, tmp)
+        off, _, r3 = timed(kin, dict(os.environ, JAXLINK_CACHE_DIR=""), tmp)
+        ok = all(r.returncode == 0 for r in (r1, r2, r3))
+        out["latency"] = {"command": "jaxlink kinematics sewing-feed --rpm 2500 --csv f.csv", "cold_s": cold,
+                          "warm_s": warm, "uncached_s": off, "warm_over_cold": warm / cold, "ok": ok}
+        print(f"latency: cold {cold:.2f} s, warm {warm:.2f} s ({100 * warm / cold:.0f} % of cold), "
+              f"cache off {off:.2f} s{'' if ok else '  (a run failed)'}", flush=True)
+
+        # 2. the raw rate, then the search
+        tp_json = os.path.join(tmp, "tp.json")
+        subprocess.run([sys.executable, os.path.join(HERE, "throughput.py"), "--quick", "--jaxlink-only",
+                        "--cores", str(len(os.sched_getaffinity(0))), "--json", tp_json],
+                       cwd=ROOT, capture_output=True, text=True, timeout=1800)
+        raw = json.load(open(tp_json))["positions_per_s"] if os.path.exists(tp_json) else None
+        budget = 300_000 if args.quick else 3_000_000
+        res = os.path.join(tmp, "R.json")
+        wall, rss, r = timed(cli + ["optimize", "sewing-feed-opt", "--method", "montecarlo", "--budget", str(budget),
+                                    "--progress", "off", "--out", res], dict(os.environ, JAXLINK_CACHE_DIR=""), tmp)
+        doc = json.load(open(res)) if r.returncode == 0 else {}
+        search_s = doc.get("search_wall_s", doc.get("wall_s"))
+        rate = doc["evaluations"] * doc["samples"] / search_s if doc else None
+        out["search"] = {"budget": budget, "process_wall_s": wall, "peak_rss_mb": rss, "search_wall_s": search_s,
+                         "evaluations": doc.get("evaluations"), "samples": doc.get("samples"),
+                         "positions_per_s": rate, "raw_positions_per_s": raw,
+                         "ratio_vs_raw": (rate / raw) if rate and raw else None,
+                         "best_objective": (doc.get("best") or {}).get("objective"),
+                         "error": None if r.returncode == 0 else r.stderr.strip().splitlines()[-3:]}
+        s = out["search"]
+        print(f"Monte Carlo {budget} designs: process {wall:.1f} s, search {search_s} s, peak RSS {rss:.0f} MB, "
+              f"{rate or 0:.3g} positions/s = {100 * (s['ratio_vs_raw'] or 0):.0f} % of the raw solve rate "
+              f"({raw or 0:.3g} positions/s, throughput.py --quick --jaxlink-only, same run)", flush=True)
+    path = args.json or default_output("system.json")
+    with open(path, "w") as f:
+        json.dump(out, f, indent=1)
+    print(f"wrote {path}")
+    return out
+
+
+if __name__ == "__main__":
+    main()
