@@ -18,17 +18,12 @@ from __future__ import annotations
 import dataclasses
 import math
 import pathlib
-import re
-
-try:
-    import tomllib
-except ModuleNotFoundError:  # Python < 3.11
-    import tomli as tomllib  # type: ignore[no-redef]
 
 from ..errors import MechanismError
 from ..files.expr import suggest
 from ..files.locator import Locator
 from ..files.overrides import parse_set
+from ..files.source import parse_toml
 from .sinker import SinkerParams, make_params
 from .track import CamGeometry, butt_speed
 
@@ -122,10 +117,10 @@ def load_scene(path_or_name: str, overrides: list[str] | None = None) -> SinkerS
 
     Raises `MechanismError` naming the file, line and key of anything wrong.
     """
-    from ..scenes import resolve
+    from ..files.source import read_source
 
-    p = resolve(path_or_name)
-    return loads_scene(p.read_text(encoding="utf-8"), file=str(p), overrides=overrides)
+    p, text = read_source(path_or_name)
+    return loads_scene(text, file=str(p), overrides=overrides)
 
 
 def loads_scene(text: str, *, file: str = "<string>", overrides: list[str] | None = None) -> SinkerScene:
@@ -133,11 +128,7 @@ def loads_scene(text: str, *, file: str = "<string>", overrides: list[str] | Non
     those of `text`."""
     path = file
     loc = Locator(text)
-    try:
-        data = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        m = re.search(r"line (\d+)", str(exc))
-        raise MechanismError(f"not valid TOML: {exc}", file=path, line=int(m.group(1)) if m else None) from None
+    data = parse_toml(text, path)
 
     overridden = set()
 
