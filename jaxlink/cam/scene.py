@@ -151,6 +151,18 @@ def loads_scene(text: str, *, file: str = "<string>", overrides: list[str] | Non
         raise err(f"kind must be {KIND!r} for a cam-follower scene, got {mech.get('kind')!r}",
                   "mechanism", "kind")
     overridden.update(_apply_set(data, parse_set(overrides), path))
+    for table, content in data.items():  # every number finite and within ±1e15, nested ones too
+        for key, value in (content.items() if isinstance(content, dict) else ()):
+            stack = [value]
+            while stack:
+                v = stack.pop()
+                if isinstance(v, dict):
+                    stack += list(v.values())
+                elif isinstance(v, list):
+                    stack += v
+                elif isinstance(v, (int, float)) and not isinstance(v, bool) and not abs(v) <= 1e15:
+                    shown = repr(v) if abs(v) < 10**30 else "an integer of more than 30 digits"
+                    raise err(f"must be finite and within ±1e15, got {shown}", table, key)
     for table, content in data.items():
         if table not in _SCHEMA:
             raise MechanismError(f"unknown table [{table}]{suggest(table, _SCHEMA)}; known: "
@@ -163,6 +175,10 @@ def loads_scene(text: str, *, file: str = "<string>", overrides: list[str] | Non
             if want is None:
                 raise err(f"unknown key{suggest(key, _SCHEMA[table])}; known keys of [{table}]: "
                           + ", ".join(_SCHEMA[table]), table, key)
+            if want is float and isinstance(value, (int, float)) and not isinstance(value, bool) \
+                    and not abs(value) <= 1e15:  # nan, inf, a 400-digit integer
+                shown = repr(value) if abs(value) < 10**30 else "an integer of more than 30 digits"
+                raise err(f"must be a finite number within ±1e15, got {shown}", table, key)
             if want is float and isinstance(value, int) and not isinstance(value, bool):
                 content[key] = float(value)
             elif want is list and not isinstance(value, list) and key in ("f", "geometry") \

@@ -132,7 +132,7 @@ def problem_from(mech: Mechanism, overrides: Mapping[str, Any] | None = None) ->
     if not mech.point_names:
         raise err("the mechanism has no [points]; the objective needs one", "point")
     point = table.get("point", mech.point_names[0])
-    if point not in mech.point_names:
+    if not isinstance(point, str) or point not in mech.point_names:
         raise err(f"unknown point '{point}'; points: {', '.join(mech.point_names)}", "point")
 
     # variables
@@ -146,7 +146,7 @@ def problem_from(mech: Mechanism, overrides: Mapping[str, Any] | None = None) ->
             raise err(f"'{name}' is not a parameter; parameters: {', '.join(mech.parameter_names)}",
                       f"variables.{name}")
         if (not isinstance(bounds, (list, tuple)) or len(bounds) != 2
-                or not all(isinstance(b, (int, float)) and not isinstance(b, bool) for b in bounds)):
+                or not all(_finite(b) is not None for b in bounds)):
             raise err(f"bounds of '{name}' must be [lower, upper] numbers, got {bounds!r}", f"variables.{name}")
         a, b = float(bounds[0]), float(bounds[1])
         if not (math.isfinite(a) and math.isfinite(b)) or not a < b:
@@ -170,7 +170,7 @@ def problem_from(mech: Mechanism, overrides: Mapping[str, Any] | None = None) ->
     if start is None:
         phi0 = mech.input_start
     else:
-        if isinstance(start, bool) or not isinstance(start, (int, float)) or not math.isfinite(start):
+        if _finite(start) is None:
             raise err(f"'start' must be a number (file units of the input), got {start!r}", "start")
         phi0 = mech.to_si(mech.input_name, start)
         if abs(phi0) > 1e4:
@@ -188,7 +188,7 @@ def problem_from(mech: Mechanism, overrides: Mapping[str, Any] | None = None) ->
                   "start_method")
 
     objective = table.get("objective", "points")
-    if objective not in OBJECTIVES:
+    if not isinstance(objective, str) or objective not in OBJECTIVES:
         raise err(f"unknown objective '{objective}'; known: {', '.join(OBJECTIVES)}", "objective")
 
     return Problem(
@@ -259,3 +259,14 @@ def check_size(problem: Problem, chunk: int, chunk_from: str = "chunk") -> None:
             f"samples = {len(problem.phis)} positions × {chunk_from} = {chunk} designs per batch needs about "
             f"{need / 2**30:.3g} GiB, more than {MEMORY_SHARE:.0%} of the {avail / 2**30:.3g} GiB available; "
             f"lower 'samples' or the chunk (at most {fit} designs per batch at these samples)", "samples")
+
+
+def _finite(v) -> float | None:
+    """`v` as a finite float, or None if it is not a number or not finite (a 400-digit integer)."""
+    if isinstance(v, bool) or not isinstance(v, (int, float)):
+        return None
+    try:
+        x = float(v)
+    except OverflowError:
+        return None
+    return x if math.isfinite(x) else None
