@@ -18,17 +18,12 @@ from __future__ import annotations
 import dataclasses
 import math
 import pathlib
-import re
-
-try:
-    import tomllib
-except ModuleNotFoundError:  # Python < 3.11
-    import tomli as tomllib  # type: ignore[no-redef]
 
 from ..errors import MechanismError
 from ..files.expr import suggest
 from ..files.locator import Locator
 from ..files.overrides import parse_set
+from ..files.source import parse_toml
 from .sinker import SinkerParams, make_params
 from .track import CamGeometry, butt_speed
 
@@ -122,10 +117,10 @@ def load_scene(path_or_name: str, overrides: list[str] | None = None) -> SinkerS
 
     Raises `MechanismError` naming the file, line and key of anything wrong.
     """
-    from ..scenes import resolve
+    from ..files.source import read_source
 
-    p = resolve(path_or_name)
-    return loads_scene(p.read_text(encoding="utf-8"), file=str(p), overrides=overrides)
+    p, text = read_source(path_or_name)
+    return loads_scene(text, file=str(p), overrides=overrides)
 
 
 def loads_scene(text: str, *, file: str = "<string>", overrides: list[str] | None = None) -> SinkerScene:
@@ -133,11 +128,7 @@ def loads_scene(text: str, *, file: str = "<string>", overrides: list[str] | Non
     those of `text`."""
     path = file
     loc = Locator(text)
-    try:
-        data = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        m = re.search(r"line (\d+)", str(exc))
-        raise MechanismError(f"not valid TOML: {exc}", file=path, line=int(m.group(1)) if m else None) from None
+    data = parse_toml(text, path)
 
     overridden = set()
 
@@ -160,6 +151,18 @@ def loads_scene(text: str, *, file: str = "<string>", overrides: list[str] | Non
         raise err(f"kind must be {KIND!r} for a cam-follower scene, got {mech.get('kind')!r}",
                   "mechanism", "kind")
     overridden.update(_apply_set(data, parse_set(overrides), path))
+    for table, content in data.items():  # every number finite and within ±1e15, nested ones too
+        for key, value in (content.items() if isinstance(content, dict) else ()):
+            stack = [value]
+            while stack:
+                v = stack.pop()
+                if isinstance(v, dict):
+                    stack += list(v.values())
+                elif isinstance(v, list):
+                    stack += v
+                elif isinstance(v, (int, float)) and not isinstance(v, bool) and not abs(v) <= 1e15:
+                    shown = repr(v) if abs(v) < 10**30 else "an integer of more than 30 digits"
+                    raise err(f"must be finite and within ±1e15, got {shown}", table, key)
     for table, content in data.items():
         if table not in _SCHEMA:
             raise MechanismError(f"unknown table [{table}]{suggest(table, _SCHEMA)}; known: "
@@ -172,6 +175,10 @@ def loads_scene(text: str, *, file: str = "<string>", overrides: list[str] | Non
             if want is None:
                 raise err(f"unknown key{suggest(key, _SCHEMA[table])}; known keys of [{table}]: "
                           + ", ".join(_SCHEMA[table]), table, key)
+            if want is float and isinstance(value, (int, float)) and not isinstance(value, bool) \
+                    and not abs(value) <= 1e15:  # nan, inf, a 400-digit integer
+                shown = repr(value) if abs(value) < 10**30 else "an integer of more than 30 digits"
+                raise err(f"must be a finite number within ±1e15, got {shown}", table, key)
             if want is float and isinstance(value, int) and not isinstance(value, bool):
                 content[key] = float(value)
             elif want is list and not isinstance(value, list) and key in ("f", "geometry") \

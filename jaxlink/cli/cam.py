@@ -11,6 +11,7 @@ import math
 import sys
 
 from ..errors import MechanismError
+from .mechanism import writing
 
 _FILE_HELP = ("cam-follower scene: a TOML file with kind = \"cam-follower\", or the built-in "
               "scene name 'sinker-cam'")
@@ -81,7 +82,10 @@ def _simulate_cmd(args) -> int:
 
     from ..cam import RESULTS, make_cam, maxima, product_cases, simulate_batch
     from ..cam.scene import load_scene
+    from .mechanism import PLOT_FORMATS, check_output
 
+    check_output("--csv", args.csv)
+    check_output("--plot", args.plot, PLOT_FORMATS)
     scene = load_scene(args.file, args.overrides)
     geoms = [scene.geometry(n) for n in scene.sim_geometries]
     cam = make_cam(geoms, scene.speed)
@@ -113,7 +117,7 @@ def _simulate_cmd(args) -> int:
                   f"{'yes' if s.jammed else 'no':>6} {int(s.stats.num_steps):6d}"
                   + ("" if ok else f"  FAILED: {RESULTS.messages[int(s.result)]}"))
     if args.csv:
-        with open(args.csv, "w", newline="") as fh:
+        with writing("--csv", args.csv), open(args.csv, "w", newline="") as fh:
             w = csv.writer(fh)
             w.writerow(["geometry", "f", "t_s", "yz_m", "y_m", "v_m_s", "a_m_s2", "lag_m",
                         "N_N", "contact"])
@@ -124,7 +128,8 @@ def _simulate_cmd(args) -> int:
                         w.writerow([g.name, repr(f)] + [f"{x:.15g}" for x in row])
         print(f"wrote {args.csv}")
     if args.plot:
-        _plot(args.plot, scene, geoms, cam, case, n_f)
+        with writing("--plot", args.plot):
+            _plot(args.plot, scene, geoms, cam, case, n_f)
         print(f"wrote {args.plot}")
     return 1 if failed else 0
 
@@ -181,7 +186,9 @@ def _jamming_cmd(args) -> int:
     from ..cam import make_cam, thresholds
     from ..cam.jamming import bisection_steps
     from ..cam.scene import load_scene
+    from .mechanism import check_output
 
+    check_output("--out", args.out)
     scene = load_scene(args.file, args.overrides)
     tol = scene.jam_tol if args.tol is None else args.tol
     if not (math.isfinite(tol) and 0 < tol < 0.1):
@@ -210,7 +217,7 @@ def _jamming_cmd(args) -> int:
     for g, s, d, lo, hi in zip(scene.geometries, th.static_f, th.dynamic_f, th.lo, th.hi):
         print(f"{g.name:>10} {s:9.5f} {d:9.5f}  ({lo:.5f}, {hi:.5f}]")
     if args.out:
-        with open(args.out, "w") as fh:
+        with writing("--out", args.out), open(args.out, "w") as fh:
             json.dump(out, fh, indent=2)
             fh.write("\n")
         print(f"wrote {args.out}")

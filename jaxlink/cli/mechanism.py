@@ -7,7 +7,10 @@ Also the shared option helpers other linkage commands (reactions, optimize) reus
 from __future__ import annotations
 
 import argparse
+import contextlib
 import math
+import os
+import stat
 import sys
 
 import numpy as np
@@ -15,6 +18,12 @@ import numpy as np
 from ..errors import MechanismError
 
 OUTPUTS = ("position", "velocity", "acceleration", "rates")
+#: most input positions one command solves (--count, or a revolution of --step)
+MAX_POSITIONS = 1_000_000
+#: largest input speed |ω| (rad/s; 1e6 rad/s is about 9.5 million rpm)
+MAX_OMEGA = 1e6
+#: picture formats of --plot (matplotlib's, by the file's extension)
+PLOT_FORMATS = ("png", "pdf", "svg", "svgz", "eps", "ps", "jpg", "jpeg", "tif", "tiff", "webp", "pgf")
 
 
 # ----------------------------------------------------------------------------- shared helpers
@@ -32,6 +41,68 @@ def enable_dtype(name: str = "float64"):
     raise MechanismError(f"--dtype must be float64 or float32, not {name!r}")
 
 
+def finite(text: str) -> float:
+    """argparse type: a finite float (`nan`, `inf`, `1e999` are refused, naming the option)."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
+    if not math.isfinite(value):
+        raise argparse.ArgumentTypeError(f"{text!r} is not a finite number")
+    return value
+
+
+def check_output(option: str, path: str | None, formats: tuple | None = None) -> None:
+    """Refuse, before any work, an output that cannot be written: a folder, a path through a file
+    or a missing folder, a place not writable, or (`formats`) an unknown extension. `-` (standard
+    output) and special files (a named pipe, a device) are written to as they are."""
+    if path is None or path == "-":
+        return
+    if formats is not None:
+        ext = os.path.splitext(path)[1].lower().lstrip(".")
+        if ext not in formats:
+            raise MechanismError(f"{option} {path}: unknown format {('.' + ext) if ext else '(no extension)'}; "
+                                 f"the file name must end in one of {', '.join('.' + f for f in formats)}")
+    try:
+        st = os.stat(path)
+    except FileNotFoundError:
+        st = None
+    except NotADirectoryError:
+        st = None
+    except OSError as exc:
+        raise MechanismError(f"{option} {path}: {exc.strerror}") from None
+    if st is not None:
+        if stat.S_ISDIR(st.st_mode):
+            raise MechanismError(f"{option} {path}: is a folder; give a file name")
+        if not os.access(path, os.W_OK):
+            raise MechanismError(f"{option} {path}: not writable")
+        return
+    parent = os.path.dirname(path) or "."
+    if not os.path.exists(parent):
+        up = parent
+        while up and not os.path.exists(up):  # the part of the path that is there
+            up = os.path.dirname(up)
+        if up and os.path.exists(up) and not os.path.isdir(up):
+            raise MechanismError(f"{option} {path}: '{up}' is a file, not a folder")
+        raise MechanismError(f"{option} {path}: the folder '{parent}' does not exist")
+    if not os.path.isdir(parent):
+        raise MechanismError(f"{option} {path}: '{parent}' is a file, not a folder")
+    if not os.access(parent, os.W_OK):
+        raise MechanismError(f"{option} {path}: the folder '{parent}' is not writable")
+
+
+@contextlib.contextmanager
+def writing(option: str, path: str):
+    """Turn an error while writing an output (a full disk, a closed pipe's reader gone is not one)
+    into a `MechanismError` naming the option and the file."""
+    try:
+        yield
+    except BrokenPipeError:
+        raise
+    except OSError as exc:
+        raise MechanismError(f"{option} {path}: cannot write: {exc.strerror or exc}") from None
+
+
 def add_mechanism_arguments(parser: argparse.ArgumentParser, *, positions: bool = True) -> None:
     """FILE, --set, --dtype and (if `positions`) --rpm/--omega, --start/--step/--count."""
     parser.add_argument("file", metavar="FILE", help="mechanism TOML file, or a built-in scene name")
@@ -43,13 +114,13 @@ def add_mechanism_arguments(parser: argparse.ArgumentParser, *, positions: bool 
                         help="floating-point precision of the solve (default float64)")
     if positions:
         speed = parser.add_mutually_exclusive_group()
-        speed.add_argument("--rpm", type=float, help="input speed in revolutions per minute")
-        speed.add_argument("--omega", type=float,
+        speed.add_argument("--rpm", type=finite, help="input speed in revolutions per minute")
+        speed.add_argument("--omega", type=finite,
                            help="input speed in rad/s (default 1 rad/s: velocities and accelerations "
                                 "are then the transfer functions d/dφ, d²/dφ²)")
-        parser.add_argument("--start", type=float, default=0.0,
+        parser.add_argument("--start", type=finite, default=0.0,
                             help="first input angle, degrees (default 0)")
-        parser.add_argument("--step", type=float, default=5.0,
+        parser.add_argument("--step", type=finite, default=5.0,
                             help="input step, degrees (default 5)")
         parser.add_argument("--count", type=int, default=None,
                             help="number of positions (default: a full revolution, 360/step)")
@@ -77,11 +148,30 @@ def input_grid(mech, args) -> tuple:
 
     if args.step == 0 or not math.isfinite(args.step):
         raise MechanismError("--step must be a non-zero finite number")
+    if not math.isfinite(args.start):
+        raise MechanismError(f"--start {args.start}: must be a finite number")
     count = args.count
     if count is None:
-        count = max(1, int(round(360.0 / abs(args.step)))) if mech.input_kind == "angle" else 73
+        turn = 360.0 / abs(args.step)
+        if mech.input_kind == "angle" and turn > MAX_POSITIONS:
+            raise MechanismError(f"--step {args.step:g}: a revolution would be {turn:.3g} positions, more than "
+                                 f"{MAX_POSITIONS}; use a larger step or give --count")
+        count = max(1, int(round(turn))) if mech.input_kind == "angle" else 73
     if count < 1:
-        raise MechanismError("--count must be at least 1")
+        raise MechanismError(f"--count {count}: must be at least 1")
+    if count > MAX_POSITIONS:
+        raise MechanismError(f"--count {count}: at most {MAX_POSITIONS} positions in one command")
+    from ..files.reader import DOMAINS
+
+    # the inputs in SI within the domain of their kind (the file format's limits)
+    limit = DOMAINS[mech.input_kind][1] / (math.pi / 180.0 if mech.input_kind == "angle" else mech.units.length)
+    unit = "°" if mech.input_kind == "angle" else " (file length unit)"
+    last = args.start + (count - 1) * args.step
+    for option, value in (("--start", args.start), ("--step", last)):
+        if not abs(value) <= limit:
+            what = "the first input" if option == "--start" else f"the last input ({last:g})"
+            raise MechanismError(f"{option} {getattr(args, option[2:]):g}: {what} is out of range: inputs are "
+                                 f"within ±{limit:g}{unit}")
     vals = exact_grid(args.start, args.step, count)
     if mech.input_kind == "angle":
         return np.deg2rad(vals), vals
@@ -92,10 +182,15 @@ def input_grid(mech, args) -> tuple:
 
 
 def omega_from_args(args) -> float:
-    if getattr(args, "rpm", None) is not None:
-        return args.rpm * 2.0 * math.pi / 60.0
-    if getattr(args, "omega", None) is not None:
-        return float(args.omega)
+    """The input speed ω (rad/s) of --rpm or --omega (1 by default), finite and within ±`MAX_OMEGA`."""
+    for option, value, scale in (("--rpm", getattr(args, "rpm", None), 2.0 * math.pi / 60.0),
+                                 ("--omega", getattr(args, "omega", None), 1.0)):
+        if value is not None:
+            if not (math.isfinite(value) and abs(value * scale) <= MAX_OMEGA):
+                limit = MAX_OMEGA / scale
+                raise MechanismError(f"{option} {value:g}: the input speed must be finite and within ±{limit:.6g}"
+                                     + (" rpm" if option == "--rpm" else " rad/s"))
+            return float(value) * scale
     return 1.0
 
 
@@ -169,6 +264,10 @@ def cmd_check(args) -> int:
     from ..solvers.linalg import solve_small
 
     mech = load_from_args(args)
+    if mech.bodies is not None:  # what `reactions` checks before it solves
+        from ..model import bodies as _bodies
+
+        _bodies.model(mech)
     print(f"mechanism   {mech.name}  ({mech.file})")
     if mech.description:
         print(f"            {mech.description}")
@@ -227,6 +326,9 @@ def cmd_kinematics(args) -> int:
     for o in outputs:
         if o not in OUTPUTS:
             raise MechanismError(f"--outputs: unknown output '{o}'; choose from {', '.join(OUTPUTS)}")
+    check_output("--csv", args.csv)
+    check_output("--plot", args.plot, PLOT_FORMATS)
+    check_output("--animate", args.animate, ("gif",))
     mech = load_from_args(args)
     phis, values = input_grid(mech, args)
     omega = omega_from_args(args)
@@ -238,17 +340,20 @@ def cmd_kinematics(args) -> int:
     info = sys.stderr if args.csv == "-" else sys.stdout  # `--csv -`: the table alone on standard output
     _report.print_summary(table, info, every_row_hint=not args.csv)
     if args.csv:
-        _report.write_csv(args.csv, table)
+        with writing("--csv", args.csv):
+            _report.write_csv(args.csv, table)
         if args.csv != "-":
             print(f"wrote {args.csv}: {len(phis)} rows, {len(table.columns)} columns", file=info)
     if args.plot or args.animate:
         from ..report import plot as _plot
 
         if args.plot:
-            _plot.plot_kinematics(args.plot, mech, table)
+            with writing("--plot", args.plot):
+                _plot.plot_kinematics(args.plot, mech, table)
             print(f"wrote {args.plot}", file=info)
         if args.animate:
-            _plot.animate(args.animate, mech, table)
+            with writing("--animate", args.animate):
+                _plot.animate(args.animate, mech, table)
             print(f"wrote {args.animate}", file=info)
     if bad:
         print(f"warning: {bad} of {len(phis)} positions did not converge (converged = 0 in the table): "

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import contextlib
+import os
 import sys
 
 from ..errors import MechanismError
@@ -78,21 +80,30 @@ def cmd_optimize(args) -> int:
     printer = _distributed(args)
     enable_dtype(args.dtype)
     from ..optimize import Evaluator, problem_from, run
+    from ..optimize.problem import INTEGER_DOMAINS, check_size
+    from .mechanism import check_output, writing
 
+    # the options (the [optimize] keys they stand for are checked, naming the file, by problem_from)
+    for option in ("budget", "seed", "starts", "chunk"):
+        value = getattr(args, option)
+        lo, hi = INTEGER_DOMAINS[option]
+        if value is not None and not lo <= value <= hi:
+            raise MechanismError(f"--{option} {value}: must be an integer from {lo} to {hi}")
+    if args.out is not None:
+        from ..optimize.checkpoint import paths
+
+        for path in paths(args.out):  # the result and the checkpoint files beside it
+            check_output("--out", str(path))
+        folder = os.path.realpath(os.path.dirname(os.path.abspath(args.out)))
+        if folder.split(os.sep)[1:2] in (["dev"], ["proc"], ["sys"]):
+            raise MechanismError(f"--out {args.out}: the checkpoint files (OUT.state.npz, OUT.log.jsonl) are "
+                                 f"written beside OUT, and {folder} is no place for them; give a file (or a named "
+                                 "pipe) in an ordinary folder")
     mech = load_from_args(args)
     problem = problem_from(mech)
     budget = args.budget if args.budget is not None else problem.option("budget", 10000)
     seed = args.seed if args.seed is not None else problem.option("seed", 0)
-    for name, v in (("--budget", budget), ("--seed", seed)):
-        if isinstance(v, bool) or not isinstance(v, int):
-            raise MechanismError(f"{name} must be an integer, got {v!r}")
-    if budget < 1:
-        raise MechanismError("--budget must be at least 1")
-    if args.starts is not None and args.starts < 1:
-        raise MechanismError("--starts must be at least 1")
     chunk = args.chunk if args.chunk is not None else problem.option("chunk", None)
-    if chunk is not None and (not isinstance(chunk, int) or chunk < 1):
-        raise MechanismError(f"--chunk must be a positive integer, got {chunk!r}")
     progress = sys.stderr.isatty() if args.progress == "auto" else args.progress == "on"
     knobs = {}
     if args.method == "uniform":
@@ -102,9 +113,11 @@ def cmd_optimize(args) -> int:
                                  file=mech.file, key="optimize.uniform")
     if args.method == "gradient" and args.starts:
         knobs["starts"] = args.starts
-    ev = Evaluator(problem, chunk=chunk)
-    result = run(ev, args.method, budget=budget, seed=seed, out=args.out, resume=args.resume,
-                 progress=progress and printer, **knobs)
+    ev = Evaluator(problem, chunk=chunk)  # chunk None: from the device and the problem's size
+    check_size(problem, ev.chunk, "--chunk" if args.chunk is not None else "chunk")
+    with writing("--out", args.out) if args.out and printer else contextlib.nullcontext():
+        result = run(ev, args.method, budget=budget, seed=seed, out=args.out, resume=args.resume,
+                     progress=progress and printer, **knobs)
     if not printer:
         return 0 if result.parameters else 1
     print(f"method      {result.method}" + (f" ({knobs['uniform']})" if "uniform" in knobs else ""))

@@ -10,7 +10,16 @@ from __future__ import annotations
 import sys
 
 from ..report.reactions import failure_summary, plot, print_summary, reactions_table, write_csv
-from .mechanism import add_mechanism_arguments, enable_dtype, input_grid, load_from_args, omega_from_args
+from .mechanism import (
+    PLOT_FORMATS,
+    add_mechanism_arguments,
+    check_output,
+    enable_dtype,
+    input_grid,
+    load_from_args,
+    omega_from_args,
+    writing,
+)
 
 
 def register(sub) -> None:
@@ -35,6 +44,8 @@ def register(sub) -> None:
 
 def cmd_reactions(args) -> int:
     dtype = enable_dtype(args.dtype)
+    check_output("--csv", args.csv)
+    check_output("--plot", args.plot, PLOT_FORMATS)
     from ..model import bodies as _bodies
 
     mech = load_from_args(args)
@@ -45,13 +56,15 @@ def cmd_reactions(args) -> int:
                             rpm=getattr(args, "rpm", None))
     info = sys.stderr if args.csv == "-" else sys.stdout  # `--csv -`: the table alone on standard output
     if args.csv:
-        write_csv(args.csv, table)
+        with writing("--csv", args.csv):
+            write_csv(args.csv, table)
         if args.csv != "-":
             print(f"wrote {args.csv}: {len(phis)} rows, {len(table.columns)} columns", file=info)
     else:
         print_summary(table, sys.stdout)
     if args.plot:
-        plot(args.plot, mech, table)
+        with writing("--plot", args.plot):
+            plot(args.plot, mech, table)
         print(f"wrote {args.plot}", file=info)
     bad = ~table.ok
     if bad.any():

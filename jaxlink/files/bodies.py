@@ -46,7 +46,6 @@ input must be an angle and `[input] body` must name the body its torque drives.
 
 from __future__ import annotations
 
-import math
 from typing import Callable, Mapping
 
 from ..errors import MechanismError
@@ -97,7 +96,7 @@ def read_bodies(
     unknown_keys(env_raw, ENV_KEYS, "environment", err)
     g = env_raw.get("gravity", [0.0, 0.0])
     if (not isinstance(g, list) or len(g) != 2
-            or not all(isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x) for x in g)):
+            or not all(_finite(x) for x in g)):
         raise err("'gravity' must be [gx, gy] in m/s², e.g. [0, -9.81]", "environment", "gravity")
 
     bodies_raw = data.get("bodies", {})
@@ -161,6 +160,8 @@ def read_bodies(
 
     def angle_expr(value, table, key):
         if isinstance(value, (int, float)) and not isinstance(value, bool):
+            if not _finite(value):
+                raise err(f"'{key}' must be a finite angle within ±{NUMBER_LIMIT:g}", table, key)
             value = repr(float(value))
         if not isinstance(value, str):
             raise err(f"'{key}' must be an angle expression like \"phi3\" or \"90\"", table, key)
@@ -180,9 +181,10 @@ def read_bodies(
         v = d[key]
         if isinstance(v, bool) or not isinstance(v, (int, float)):
             raise err(f"'{key}' must be a number, got {v!r}", table, key)
+        if not _finite(v):
+            shown = repr(v) if abs(v) < 10**30 else "an integer of more than 30 digits"
+            raise err(f"'{key}' = {shown} is not a finite number within ±{NUMBER_LIMIT:g}", table, key)
         v = float(v)
-        if not math.isfinite(v):
-            raise err(f"'{key}' = {v} is not finite", table, key)
         if nonneg and v < 0:
             raise err(f"'{key}' = {v:g} is negative; it must be ≥ 0", table, key)
         return v
@@ -262,8 +264,7 @@ def read_bodies(
                     raise err(f"a force needs '{k}'", table)
             f = ld["force"]
             if (not isinstance(f, list) or len(f) != 2
-                    or not all(isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x)
-                               for x in f)):
+                    or not all(_finite(x) for x in f)):
                 raise err("'force' must be [Fx, Fy] in N (two finite numbers)", table, "force")
             forces.append(Force(str(lname), body_index(ld["body"], table, "body"),
                                 vector_sum(ld["at"], table, "at"), (float(f[0]), float(f[1]))))
@@ -334,3 +335,12 @@ def unknown_keys(d: Mapping, allowed, table: str, err) -> None:
         if k not in allowed:
             raise err(f"unknown key '{k}'{_expr.suggest(k, allowed)}; allowed: {', '.join(sorted(allowed))}",
                       table, k)
+
+
+#: largest magnitude of a number of [bodies], [joints], [loads], [environment] (SI)
+NUMBER_LIMIT = 1e15
+
+
+def _finite(x) -> bool:
+    """A number (not a bool), finite and within ±`NUMBER_LIMIT` (a 400-digit integer is not)."""
+    return isinstance(x, (int, float)) and not isinstance(x, bool) and abs(x) <= NUMBER_LIMIT

@@ -1,6 +1,9 @@
 """Arithmetic expressions and vector terms of mechanism files.
 
-Grammar (parsed by recursive descent, never `eval`ed)::
+Grammar (parsed by recursive descent, never `eval`ed; bounded: at most `MAX_TOKENS` tokens and
+`MAX_NESTING` levels of parentheses, function calls and signs, so that a hostile expression is
+refused with its limit instead of exhausting the stack; a long sum or product, such as a sum of
+thousands of names, is built as a balanced tree)::
 
     term    := expr '@' expr            # LENGTH @ ANGLE: LENGTH * (cos ANGLE, sin ANGLE)
              | ['+'|'-'] '(' expr ',' expr ')'   # a constant vector (X, Y)
@@ -30,6 +33,21 @@ from fractions import Fraction
 from typing import Callable, Mapping, Union
 
 import jax.numpy as jnp
+import numpy as np
+
+# ----------------------------------------------------------------------------- limits
+
+#: most tokens (numbers, names, operators) in one expression or term
+MAX_TOKENS = 20000
+#: most levels of parentheses, function calls and leading signs inside one another
+MAX_NESTING = 100
+#: most levels of the expression tree (a balanced sum of n terms counts log2 n)
+MAX_DEPTH = 250
+#: largest magnitude of a number written in an expression
+MAX_LITERAL = 1e15
+# a sum or product of more terms than this is built as a balanced tree (shorter ones are folded
+# left to right, as written, so that their rounding is that of the text)
+_BALANCE_ABOVE = 32
 
 # ----------------------------------------------------------------------------- tokens
 
@@ -63,9 +81,11 @@ def tokenize(text: str) -> list[Token]:
                         j += 1
             lit = text[i:j]
             try:
-                float(lit)
+                value = float(lit)
             except ValueError:
                 raise _SyntaxError(f"malformed number '{lit}'", i) from None
+            if not abs(value) <= MAX_LITERAL:
+                raise _SyntaxError(f"number '{_short(lit)}' is out of range (|x| ≤ {MAX_LITERAL:g})", i)
             tokens.append(Token("num", lit, i))
             i = j
             continue
@@ -81,8 +101,14 @@ def tokenize(text: str) -> list[Token]:
             i += 1
             continue
         raise _SyntaxError(f"unexpected character '{c}'", i)
+        if len(tokens) > MAX_TOKENS:
+            raise _SyntaxError(f"the expression is too long: more than {MAX_TOKENS} tokens", i)
     tokens.append(Token("end", "", n))
     return tokens
+
+
+def _short(text: str, n: int = 24) -> str:
+    return text if len(text) <= n else f"{text[:n // 2]}…{text[-n // 2:]} ({len(text)} characters)"
 
 
 class _SyntaxError(Exception):
@@ -161,6 +187,13 @@ class _Parser:
         self.text = text
         self.tokens = tokenize(text)
         self.pos = 0
+        self.depth = 0
+
+    def enter(self, tok: Token) -> None:
+        self.depth += 1
+        if self.depth > MAX_NESTING:
+            raise _SyntaxError(f"nested too deeply: more than {MAX_NESTING} levels of parentheses, "
+                               "functions or signs", tok.col)
 
     def peek(self) -> Token:
         return self.tokens[self.pos]
@@ -178,24 +211,29 @@ class _Parser:
         return tok
 
     def expr(self) -> Node:
-        node = self.mul()
+        items: list = [("+", self.mul())]
         while self.peek().text in ("+", "-") and self.peek().kind == "op":
             op = self.take().text
-            node = Bin(op, node, self.mul())
-        return node
+            items.append((op, self.mul()))
+        return _chain(items, "+", "-")
 
     def mul(self) -> Node:
-        node = self.unary()
+        items: list = [("*", self.unary())]
         while self.peek().text in ("*", "/") and self.peek().kind == "op":
-            op = self.take().text
-            node = Bin(op, node, self.unary())
-        return node
+            op = self.take()
+            arg = self.unary()
+            if op.text == "/" and isinstance(arg, Num) and arg.value == 0:
+                raise _SyntaxError("division by zero", op.col)
+            items.append((op.text, arg))
+        return _chain(items, "*", "/")
 
     def unary(self) -> Node:
         tok = self.peek()
         if tok.kind == "op" and tok.text in "+-":
             self.take()
+            self.enter(tok)
             arg = self.unary()
+            self.depth -= 1
             return Neg(arg) if tok.text == "-" else arg
         return self.primary()
 
@@ -210,11 +248,13 @@ class _Parser:
                         f"unknown function '{tok.text}' (known: {', '.join(FUNCTIONS)})", tok.col
                     )
                 self.take()
+                self.enter(tok)
                 args = [self.expr()]
                 while self.peek().text == ",":
                     self.take()
                     args.append(self.expr())
                 self.expect(")")
+                self.depth -= 1
                 if len(args) != FUNCTIONS[tok.text]:
                     raise _SyntaxError(
                         f"{tok.text}() takes {FUNCTIONS[tok.text]} argument(s), got {len(args)}",
@@ -225,17 +265,70 @@ class _Parser:
                 raise _SyntaxError(f"function '{tok.text}' needs parentheses", tok.col)
             return Name(tok.text, tok.col)
         if tok.text == "(":
+            self.enter(tok)
             first = self.expr()
             if self.peek().text == ",":
                 self.take()
                 second = self.expr()
                 self.expect(")")
+                self.depth -= 1
                 return Vec(first, second)
             self.expect(")")
+            self.depth -= 1
             return first
         if tok.kind == "end":
             raise _SyntaxError("the expression ends too early", tok.col)
         raise _SyntaxError(f"unexpected '{tok.text}'", tok.col)
+
+
+def _chain(items: list, unit: str, inverse: str) -> Node:
+    """`t0 op1 t1 op2 t2 …` (items `[(unit, t0), (op1, t1), …]`) as a tree of `Bin`: folded left to
+    right when short; balanced when long (`a − b + c − d` = `(a − b) − (c − d)`: the right half's
+    operators flip when it is joined by the inverse operator), so that its depth is log2 of its
+    length."""
+    if len(items) <= _BALANCE_ABOVE:
+        node = items[0][1]
+        for op, arg in items[1:]:
+            node = Bin(op, node, arg)
+        return node
+
+    def build(part: list) -> Node:
+        if len(part) == 1:
+            return part[0][1]
+        mid = len(part) // 2
+        op = part[mid][0]
+        right = part[mid:]
+        if op == inverse:  # a − (b ∓ c …): the operators after b flip
+            right = [(unit, right[0][1])] + [(unit if o == inverse else inverse, t) for o, t in right[1:]]
+        else:
+            right = [(unit, right[0][1])] + right[1:]
+        return Bin(op, build(part[:mid]), build(right))
+
+    return build(items)
+
+
+def depth(node: Node) -> int:
+    """Levels of the expression tree (1 for a number or a name), without recursion."""
+    best, stack = 0, [(node, 1)]
+    while stack:
+        nd, d = stack.pop()
+        best = max(best, d)
+        if isinstance(nd, Neg):
+            stack.append((nd.arg, d + 1))
+        elif isinstance(nd, Bin):
+            stack += [(nd.left, d + 1), (nd.right, d + 1)]
+        elif isinstance(nd, Call):
+            stack += [(a, d + 1) for a in nd.args]
+        elif isinstance(nd, Vec):
+            stack += [(nd.x, d + 1), (nd.y, d + 1)]
+    return best
+
+
+def _bounded(node: Node) -> Node:
+    d = depth(node)
+    if d > MAX_DEPTH:
+        raise _SyntaxError(f"the expression is nested too deeply: {d} levels, at most {MAX_DEPTH}", 0)
+    return node
 
 
 def _contains_vec(node: Node) -> bool:
@@ -254,7 +347,7 @@ def parse_expr(text: str) -> Node:
     """Parse a scalar expression; raises `ExprSyntaxError` with the column."""
     try:
         p = _Parser(text)
-        node = p.expr()
+        node = _bounded(p.expr())
         if p.peek().kind != "end":
             tok = p.peek()
             raise _SyntaxError(f"unexpected '{tok.text}' after the expression", tok.col)
@@ -273,12 +366,12 @@ def parse_term(text: str) -> Term:
         p = _Parser(text)
         if p.peek().kind == "end":
             raise _SyntaxError("empty term", 0)
-        left = p.expr()
+        left = _bounded(p.expr())
         if p.peek().text == "@":
             at = p.take()
             if _contains_vec(left):
                 raise _SyntaxError("'(X, Y) @ ...' mixes the two term forms", at.col)
-            right = p.expr()
+            right = _bounded(p.expr())
             if p.peek().kind != "end":
                 tok = p.peek()
                 raise _SyntaxError(f"unexpected '{tok.text}' after the angle", tok.col)
@@ -309,8 +402,13 @@ class ExprSyntaxError(Exception):
         self.message = message
         self.text = text
         self.col = col
-        caret = " " * col + "^"
-        super().__init__(f"syntax error at column {col + 1}: {message}\n    {text}\n    {caret}")
+        shown, at = text, col
+        if len(text) > 80:  # a window of the text around the column
+            lo = max(0, min(col - 40, len(text) - 80))
+            shown = ("…" if lo else "") + text[lo:lo + 80] + ("…" if lo + 80 < len(text) else "")
+            at = col - lo + (1 if lo else 0)
+        caret = " " * at + "^"
+        super().__init__(f"syntax error at column {col + 1}: {message}\n    {shown}\n    {caret}")
 
 
 def names_in(node: Node | None) -> list[Name]:
@@ -536,7 +634,14 @@ def _eval(node: Node, env, kinds, units):
         else:
             xa, xb = da or NUMBER, db or NUMBER
             d = (xa[0] + xb[0], xa[1] + xb[1]) if node.op == "*" else (xa[0] - xb[0], xa[1] - xb[1])
-        return (a * b if node.op == "*" else a / b), d
+        if node.op == "*":
+            return a * b, d
+        if isinstance(a, (int, float)) and isinstance(b, (int, float)):
+            # two constants: IEEE division (inf or nan, caught by the finiteness checks), not
+            # Python's ZeroDivisionError
+            with np.errstate(divide="ignore", invalid="ignore"):
+                return float(np.float64(a) / np.float64(b)), d
+        return a / b, d
     if isinstance(node, Call):
         vals = [_eval(x, env, kinds, units) for x in node.args]
         f = node.func

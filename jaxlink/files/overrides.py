@@ -22,7 +22,7 @@ def parse_value(raw: str):
     raw = raw.strip()
     try:
         return tomllib.loads(f"v = {raw}")["v"]
-    except tomllib.TOMLDecodeError:
+    except (tomllib.TOMLDecodeError, ValueError, RecursionError):
         pass
     try:
         return float(raw)
@@ -49,8 +49,13 @@ def parse_numbers(items) -> dict[str, float]:
     out = {}
     for (name, value), item in zip(parse_set(items), items or []):
         if isinstance(value, bool) or not isinstance(value, (int, float)):
-            raise MechanismError(f"--set {item!r}: '{item.split('=', 1)[1].strip()}' is not a number")
-        if not math.isfinite(value):
-            raise MechanismError(f"--set {item!r}: the value must be finite")
+            raise MechanismError(f"--set {_short(item)}: '{_short(item.split('=', 1)[1].strip())[1:-1]}' "
+                                 "is not a number")
+        if isinstance(value, int) and abs(value) > 1e15 or not math.isfinite(value):
+            raise MechanismError(f"--set {_short(item)}: the value must be finite, within ±1e15")
         out[name] = float(value)
     return out
+
+
+def _short(item: str, n: int = 60) -> str:
+    return repr(item) if len(item) <= n else repr(item[:n]) + f"… ({len(item)} characters)"

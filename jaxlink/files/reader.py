@@ -1,6 +1,10 @@
 """Mechanism files: read the TOML text, validate every section, convert to SI, build a `Mechanism`.
 
 Every error names the file, the line (found in the text that was parsed) and the key.
+
+**Domains.** Every number is checked where it is read (`NUMBER_LIMIT` as written, then the
+domain of its kind in SI, `DOMAINS`): a value outside them is refused with the file, line, key,
+the value and the allowed range. A `--set` value is checked the same way and blamed on `--set`.
 """
 
 from __future__ import annotations
@@ -20,14 +24,17 @@ from . import expr as _expr
 from .bodies import read_bodies
 from .expr import ANGLE, LENGTH, ExprSyntaxError, UnitError
 from .locator import Locator
-
-try:
-    import tomllib
-except ModuleNotFoundError:  # Python < 3.11
-    import tomli as tomllib  # type: ignore[no-redef]
+from .source import parse_toml
 
 LENGTH_UNITS = {"m": 1.0, "mm": 1e-3, "cm": 1e-2}
 ANGLE_UNITS = {"rad": 1.0, "deg": math.pi / 180.0}
+#: largest magnitude of any number written in a mechanism file (in its units)
+NUMBER_LIMIT = 1e15
+#: SI domain of each kind of value: (smallest non-zero magnitude, largest magnitude). Lengths from a
+#: nanometre to 1000 km (0 allowed: an offset), angles within ±1e4 rad (about 1600 turns), pure
+#: numbers within ±1e9.
+DOMAINS = {"length": (1e-9, 1e6), "angle": (0.0, 1e4), "number": (0.0, 1e9)}
+_SI_UNIT = {"length": "m", "angle": "rad", "number": ""}
 KNOWN_TABLES = {
     "mechanism", "parameters", "input", "unknowns", "loops", "points",
     "bodies", "joints", "loads", "environment", "optimize", "dynamics",
@@ -41,10 +48,9 @@ def load(source: str | pathlib.Path, *, overrides: Mapping[str, float] | None = 
     (`jaxlink/files/overrides.py` reads them). Raises `MechanismError` naming the file, line, key
     and reason for anything wrong.
     """
-    from ..scenes import resolve
+    from .source import read_source
 
-    path = resolve(str(source))
-    text = path.read_text(encoding="utf-8")
+    path, text = read_source(source)
     return loads(text, file=str(path), overrides=overrides)
 
 
@@ -59,12 +65,15 @@ def loads(text: str, *, file: str = "<string>", overrides: Mapping[str, float] |
         k = keyname or (f"{table}.{key}" if key else table)
         return MechanismError(msg, file=file, line=line, key=k)
 
-    try:
-        data = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        m = re.search(r"line (\d+)", str(exc))
-        raise MechanismError(f"not valid TOML: {exc}", file=file, line=int(m.group(1)) if m else None) from None
+    data = parse_toml(text, file)
 
+    mech = data.get("mechanism")
+    kind = mech.get("kind", "linkage") if isinstance(mech, dict) else "linkage"
+    if kind != "linkage":
+        handled = (" (`jaxlink simulate` and `jaxlink jamming` handle it)" if kind == "cam-follower"
+                   else " (only kind = \"linkage\" files are mechanisms)")
+        raise err(f"this is a {kind!r} scene, not a linkage: the loop solver does not apply{handled}",
+                  "mechanism", "kind")
     for table in data:
         if table not in KNOWN_TABLES:
             raise err(
@@ -72,21 +81,14 @@ def loads(text: str, *, file: str = "<string>", overrides: Mapping[str, float] |
                 + ", ".join(sorted(KNOWN_TABLES)),
                 table,
             )
-    mech = data.get("mechanism")
     if not isinstance(mech, dict):
         raise MechanismError("missing [mechanism] table (name, length_unit, angle_unit)", file=file)
-    kind = mech.get("kind", "linkage")
-    if kind != "linkage":
-        raise err(
-            f"this is a '{kind}' scene, not a linkage: the loop solver does not apply "
-            "(see `jaxlink simulate`)", "mechanism", "kind",
-        )
     name = str(mech.get("name", pathlib.Path(file).stem))
     lu = mech.get("length_unit", "m")
     au = mech.get("angle_unit", "rad")
-    if lu not in LENGTH_UNITS:
+    if not isinstance(lu, str) or lu not in LENGTH_UNITS:
         raise err(f"bad length unit '{lu}'; use one of {', '.join(LENGTH_UNITS)}", "mechanism", "length_unit")
-    if au not in ANGLE_UNITS:
+    if not isinstance(au, str) or au not in ANGLE_UNITS:
         raise err(f"bad angle unit '{au}'; use one of {', '.join(ANGLE_UNITS)}", "mechanism", "angle_unit")
     units = _expr.Units(LENGTH_UNITS[lu], ANGLE_UNITS[au])
 
@@ -99,6 +101,10 @@ def loads(text: str, *, file: str = "<string>", overrides: Mapping[str, float] |
     for pname, v in params_raw.items():
         _check_identifier(pname, err, "parameters")
         if isinstance(v, dict):
+            extra = set(v) - {"value", "unit"}
+            if extra:
+                raise err(f"a parameter table has only 'value' and 'unit', not {', '.join(map(repr, sorted(extra)))}",
+                          "parameters", pname)
             if "value" not in v:
                 raise err("a parameter table needs 'value' (and optionally 'unit')", "parameters", pname)
             unit = v.get("unit")
@@ -115,7 +121,9 @@ def loads(text: str, *, file: str = "<string>", overrides: Mapping[str, float] |
     if not isinstance(inp, dict) or "name" not in inp:
         raise MechanismError("missing [input] table with name = \"...\" (the driving coordinate)", file=file,
                              key="input")
-    input_name = str(inp["name"])
+    if not isinstance(inp["name"], str):
+        raise err(f"'name' must name the driving coordinate (a string), got {inp['name']!r}", "input", "name")
+    input_name = inp["name"]
     _check_identifier(input_name, err, "input", "name")
     input_body = inp.get("body")
     if input_body is not None and not isinstance(input_body, str):
@@ -285,6 +293,7 @@ def loads(text: str, *, file: str = "<string>", overrides: Mapping[str, float] |
 
     # ---------------------------------------------------------------- overrides and SI values
     pnames = tuple(pvalues)
+    overridden: set[str] = set()
     if overrides:
         for k, v in overrides.items():
             if k not in pvalues:
@@ -292,10 +301,36 @@ def loads(text: str, *, file: str = "<string>", overrides: Mapping[str, float] |
                     f"--set {k}: no such parameter{_expr.suggest(k, pnames)}; parameters: {', '.join(pnames)}",
                     file=file,
                 )
-            pvalues[k] = _num(v, err, "parameters", k)
-    fac: dict[str | None, float] = {"length": units.length, "angle": units.angle, "number": 1.0}
-    p_si = np.asarray([pvalues[n] * fac[kinds[n]] for n in pnames], dtype=np.float64)
-    q_si = np.asarray([guesses[n] * fac[kinds[n]] for n in guesses], dtype=np.float64)
+
+            def set_err(msg, *_, _k=k, _v=v, **__):
+                return MechanismError(f"--set {_k}={_v!r}: {msg}")
+
+            pvalues[k] = _num(v, set_err, "parameters", k)
+            overridden.add(k)
+
+    def blame(pname: str, msg: str) -> MechanismError:
+        """An error about parameter `pname`: on `--set` if it was overridden, else on its line."""
+        if pname in overridden:
+            return MechanismError(f"--set {pname}={pvalues[pname]:g}: {msg}")
+        return err(msg, "parameters", pname)
+
+    def in_domain(name: str, value: float, kind: str, make) -> None:
+        """Refuse a value (file units) outside the SI domain of its kind (`DOMAINS`)."""
+        lo, hi = DOMAINS[kind]
+        si = abs(value * fac[kind])
+        if si > hi or 0.0 < si < lo:
+            unit = {"length": lu, "angle": au, "number": ""}[kind]
+            rng = (f"0 or {lo:g} to {hi:g} {_SI_UNIT[kind]}" if lo else f"{-hi:g} to {hi:g} {_SI_UNIT[kind]}").strip()
+            raise make(f"{kind} '{name}' = {value:g}{(' ' + unit) if unit else ''} is out of range: a {kind} "
+                       f"is {rng}" + (" in magnitude" if lo else ""))
+    fac: dict[str, float] = {"length": units.length, "angle": units.angle, "number": 1.0}
+    for n in pnames:
+        in_domain(n, pvalues[n], kinds[n] or "number", lambda m, _n=n: blame(_n, m))
+    for n in guesses:
+        in_domain(n, guesses[n], kinds[n] or "number", lambda m, _n=n: err(m, "unknowns", _n))
+    in_domain(input_name, input_start, kinds[input_name] or "number", lambda m: err(m, "input", "start"))
+    p_si = np.asarray([pvalues[n] * fac[kinds[n] or "number"] for n in pnames], dtype=np.float64)
+    q_si = np.asarray([guesses[n] * fac[kinds[n] or "number"] for n in guesses], dtype=np.float64)
 
     # a parameter standing alone as the LENGTH of a term is a link length: it must be >= 0
     for _, group in (("loops", loops), ("points", points)):
@@ -304,13 +339,13 @@ def loads(text: str, *, file: str = "<string>", overrides: Mapping[str, float] |
                 if term.polar and isinstance(term.length, _expr.Name) and term.length.name in pvalues:
                     pn = term.length.name
                     if pvalues[pn] < 0:
-                        raise err(
+                        raise blame(
+                            pn,
                             f"length '{pn}' = {pvalues[pn]} is negative; a link length must be ≥ 0 "
                             "(put the sign in front of the term instead: \"-{pn} @ ...\")".replace("{pn}", pn),
-                            "parameters", pn,
                         )
 
-    input_start_si = float(input_start) * fac[kinds[input_name]]
+    input_start_si = float(input_start) * fac[kinds[input_name] or "number"]
     body_model = read_bodies(data, file=file, err=err, kinds=kinds, length_unit=units.length,
                              input_name=input_name, input_body=input_body)
 
@@ -344,6 +379,13 @@ def loads(text: str, *, file: str = "<string>", overrides: Mapping[str, float] |
         lname = loops[int(np.flatnonzero(~np.isfinite(r))[0]) // 2][0]
         raise err(f"loop '{lname}' gives a non-finite value at the guess (the input at [input] start); "
                   "check the expressions (sqrt of a negative number? division by zero?)", "loops", lname)
+    if points:
+        xy = np.asarray(mechanism.point_positions(jnp.asarray(q_si), jnp.asarray(input_start_si), jnp.asarray(p_si)))
+        bad = ~np.all(np.isfinite(xy), axis=1)
+        if bad.any():
+            pname = points[int(np.flatnonzero(bad)[0])][0]
+            raise err(f"point '{pname}' is not finite at the guess (the input at [input] start); "
+                      "check its expressions (sqrt of a negative number? division by zero?)", "points", pname)
     return mechanism
 
 
@@ -354,15 +396,33 @@ def _check_identifier(name: str, err, table: str, key: str | None = None) -> Non
 
 
 def _num(v, err, table: str, key: str) -> float:
+    """A finite number within ±`NUMBER_LIMIT` (as written in the file)."""
     if isinstance(v, bool) or not isinstance(v, (int, float)):
-        raise err(f"'{key}' must be a number, got {v!r}", table, key)
+        raise err(f"'{key}' must be a number, got {_show(v)}", table, key)
+    if isinstance(v, int) and abs(v) > NUMBER_LIMIT:
+        raise err(f"'{key}' = {_show(v)} is too large: a number in a mechanism file is within "
+                  f"±{NUMBER_LIMIT:g}", table, key)
     v = float(v)
     if not math.isfinite(v):
         raise err(f"'{key}' = {v} is not finite", table, key)
+    if abs(v) > NUMBER_LIMIT:
+        raise err(f"'{key}' = {v:g} is too large: a number in a mechanism file is within ±{NUMBER_LIMIT:g}",
+                  table, key)
     return v
 
 
-def _kind_of_unit(unit: str, err, pname: str) -> str:
+def _show(v) -> str:
+    """`repr(v)`, shortened (a 400-digit integer is shown by its first digits and its length)."""
+    if isinstance(v, int) and not isinstance(v, bool) and abs(v) > 10**30:
+        digits = len(str(abs(v))) if abs(v) < 10**4000 else "more than 4000"
+        return f"{str(v)[:12] if abs(v) < 10**4000 else ''}… ({digits} digits)"
+    text = repr(v)
+    return text if len(text) <= 60 else text[:57] + "…"
+
+
+def _kind_of_unit(unit, err, pname: str) -> str:
+    if not isinstance(unit, str):
+        raise err(f"'unit' must be a string such as \"mm\", got {_show(unit)}", "parameters", pname)
     if unit in LENGTH_UNITS:
         return "length"
     if unit in ANGLE_UNITS:

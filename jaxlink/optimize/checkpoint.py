@@ -45,6 +45,11 @@ def fingerprint(problem, method: str, seed: int, budget: int, extra: str = "") -
 
 
 def write_json_atomic(path: pathlib.Path, data) -> None:
+    if path.exists() and not path.is_file():  # a named pipe or a device: written to, not replaced
+        with open(path, "w", encoding="utf-8") as fh:
+            json.dump(data, fh, indent=2, allow_nan=False)
+            fh.write("\n")
+        return
     tmp = path.with_name(path.name + ".tmp")
     with open(tmp, "w", encoding="utf-8") as fh:
         json.dump(data, fh, indent=2, allow_nan=False)

@@ -19,12 +19,31 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import os
 from typing import Any, Mapping
 
 import numpy as np
 
 from ..errors import MechanismError
 from ..model.mechanism import Mechanism
+
+#: domains of the integer keys: (smallest, largest)
+INTEGER_DOMAINS = {
+    "samples": (3, 100_000), "report_samples": (3, 1_000_000), "starts": (1, 100_000),
+    "presample": (1, 10_000_000), "iterations": (1, 10_000_000), "chunk": (1, 1_000_000),
+    "budget": (1, 10**12), "seed": (0, 2**32 - 1), "memory": (1, 1000), "al_every": (1, 1_000_000),
+    "sign_changes": (0, 1000),
+}
+#: domains of the number keys (of the searches and of the built-in objectives, file units):
+#: (lower, upper, lower bound included)
+NUMBER_DOMAINS = {
+    "al_rho": (0.0, 1e12, False), "stroke": (0.0, 1e12, False), "stroke_tol": (0.0, 1e12, True),
+    "dwell_weight": (0.0, 1e6, True), "abs_tol": (0.0, 1e12, False), "mu_min": (0.0, 90.0, True),
+    "rod_max": (0.0, 90.0, True), "toggle_min": (0.0, 180.0, True), "amax_max": (0.0, 1e12, False),
+    "penalty": (0.0, 1e12, True), "rpm": (-1e7, 1e7, True),
+}
+#: share of the available memory one batch of the evaluator may take (the rest: JAX, the searches)
+MEMORY_SHARE = 0.5
 
 KNOWN_KEYS = {
     # problem
@@ -107,11 +126,13 @@ def problem_from(mech: Mechanism, overrides: Mapping[str, Any] | None = None) ->
         if k not in KNOWN_KEYS and k not in OBJECTIVES.known_keys():
             raise err(f"unknown key '{k}'; known keys: {', '.join(sorted(KNOWN_KEYS | OBJECTIVES.known_keys()))}", k)
 
+    _check_domains(table, err)
+
     # point
     if not mech.point_names:
         raise err("the mechanism has no [points]; the objective needs one", "point")
     point = table.get("point", mech.point_names[0])
-    if point not in mech.point_names:
+    if not isinstance(point, str) or point not in mech.point_names:
         raise err(f"unknown point '{point}'; points: {', '.join(mech.point_names)}", "point")
 
     # variables
@@ -125,12 +146,18 @@ def problem_from(mech: Mechanism, overrides: Mapping[str, Any] | None = None) ->
             raise err(f"'{name}' is not a parameter; parameters: {', '.join(mech.parameter_names)}",
                       f"variables.{name}")
         if (not isinstance(bounds, (list, tuple)) or len(bounds) != 2
-                or not all(isinstance(b, (int, float)) and not isinstance(b, bool) for b in bounds)):
+                or not all(_finite(b) is not None for b in bounds)):
             raise err(f"bounds of '{name}' must be [lower, upper] numbers, got {bounds!r}", f"variables.{name}")
         a, b = float(bounds[0]), float(bounds[1])
         if not (math.isfinite(a) and math.isfinite(b)) or not a < b:
             raise err(f"bounds of '{name}' must be finite with lower < upper, got [{a}, {b}]", f"variables.{name}")
         kind = mech.kinds[name]
+        from ..files.reader import DOMAINS
+
+        limit = DOMAINS[kind or "number"][1] / mech.kind_factor(kind)
+        if max(abs(a), abs(b)) > limit:
+            raise err(f"bounds of '{name}' must be within ±{limit:g} (file units; the domain of a {kind}), "
+                      f"got [{a:g}, {b:g}]", f"variables.{name}")
         names.append(name)
         index.append(mech.parameter_index(name))
         lo.append(a)
@@ -139,15 +166,15 @@ def problem_from(mech: Mechanism, overrides: Mapping[str, Any] | None = None) ->
 
     # samples and the input positions
     samples = table.get("samples", 72)
-    if isinstance(samples, bool) or not isinstance(samples, int) or samples < 3:
-        raise err(f"'samples' must be an integer ≥ 3, got {samples!r}", "samples")
     start = table.get("start")
     if start is None:
         phi0 = mech.input_start
     else:
-        if isinstance(start, bool) or not isinstance(start, (int, float)) or not math.isfinite(start):
+        if _finite(start) is None:
             raise err(f"'start' must be a number (file units of the input), got {start!r}", "start")
         phi0 = mech.to_si(mech.input_name, start)
+        if abs(phi0) > 1e4:
+            raise err(f"'start' = {start:g} is out of range: the input is within ±1e4 rad", "start")
     if mech.input_kind != "angle":
         raise err("design search needs a rotating (angle) input: the path is a full revolution", "samples")
     phis = phi0 + 2.0 * np.pi * np.arange(samples) / samples
@@ -161,7 +188,7 @@ def problem_from(mech: Mechanism, overrides: Mapping[str, Any] | None = None) ->
                   "start_method")
 
     objective = table.get("objective", "points")
-    if objective not in OBJECTIVES:
+    if not isinstance(objective, str) or objective not in OBJECTIVES:
         raise err(f"unknown objective '{objective}'; known: {', '.join(OBJECTIVES)}", "objective")
 
     return Problem(
@@ -169,3 +196,77 @@ def problem_from(mech: Mechanism, overrides: Mapping[str, Any] | None = None) ->
         factor=np.asarray(fac), point=mech.point_names.index(point), phis=phis, circuits=circuits,
         start_method=start_method, objective=objective, options=table,
     )
+
+
+def _check_domains(table: Mapping[str, Any], err) -> None:
+    """Every integer and number key of `INTEGER_DOMAINS` / `NUMBER_DOMAINS` present in `table`
+    within its domain; the error names the key, the value and the range."""
+    for key, (lo, hi) in INTEGER_DOMAINS.items():
+        if key in table:
+            v = table[key]
+            if isinstance(v, bool) or not isinstance(v, int) or not lo <= v <= hi:
+                shown = repr(v) if not isinstance(v, int) or abs(v) < 10**30 else "a larger integer"
+                raise err(f"'{key}' must be an integer from {lo} to {hi}, got {shown}", key)
+    for key, (low, high, closed) in NUMBER_DOMAINS.items():
+        if key in table:
+            x = table[key]
+            ok = (not isinstance(x, bool) and isinstance(x, (int, float)) and abs(x) <= 1e300
+                  and math.isfinite(float(x)) and (low <= x if closed else low < x) and x <= high)
+            if not ok:
+                shown = repr(x) if not isinstance(x, int) or abs(x) < 10**30 else "a larger integer"
+                raise err(f"'{key}' must be a number {'≥' if closed else '>'} {low:g} and ≤ {high:g}, got {shown}", key)
+
+
+def available_memory() -> int:
+    """Bytes the evaluator may use: the default JAX device's limit on an accelerator, else the
+    host's available memory (`MemAvailable` of /proc/meminfo, else the physical memory)."""
+    import jax
+
+    dev = jax.devices()[0]
+    if dev.platform != "cpu":
+        stats = dev.memory_stats() or {}
+        if stats.get("bytes_limit"):
+            return int(stats["bytes_limit"]) - int(stats.get("bytes_in_use", 0))
+    try:
+        with open("/proc/meminfo") as fh:
+            for line in fh:
+                if line.startswith("MemAvailable:"):
+                    return int(line.split()[1]) * 1024
+    except OSError:
+        pass
+    try:
+        return int(os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES"))
+    except (ValueError, OSError, AttributeError):
+        return 8 * 2**30
+
+
+def batch_bytes(problem: Problem, chunk: int) -> int:
+    """Estimated memory of one batch of `chunk` designs: per design and input position, the
+    unknowns, their Jacobian, the residual, the points and their derivatives (float64), times 8
+    for the intermediates of the solve and of forward-mode differentiation."""
+    n = problem.mech.n_unknowns
+    per_position = n * n + 6 * n + 6 * len(problem.mech.point_names) + 16
+    return int(chunk) * len(problem.phis) * per_position * 8 * 8
+
+
+def check_size(problem: Problem, chunk: int, chunk_from: str = "chunk") -> None:
+    """Refuse a batch (`chunk` designs × `samples` positions) estimated to need more than
+    `MEMORY_SHARE` of the available memory, saying what it would need (`batch_bytes`)."""
+    need, avail = batch_bytes(problem, chunk), available_memory()
+    if need > MEMORY_SHARE * avail:
+        fit = max(0, int(MEMORY_SHARE * avail // max(1, need // max(1, chunk))))
+        raise problem.error(
+            f"samples = {len(problem.phis)} positions × {chunk_from} = {chunk} designs per batch needs about "
+            f"{need / 2**30:.3g} GiB, more than {MEMORY_SHARE:.0%} of the {avail / 2**30:.3g} GiB available; "
+            f"lower 'samples' or the chunk (at most {fit} designs per batch at these samples)", "samples")
+
+
+def _finite(v) -> float | None:
+    """`v` as a finite float, or None if it is not a number or not finite (a 400-digit integer)."""
+    if isinstance(v, bool) or not isinstance(v, (int, float)):
+        return None
+    try:
+        x = float(v)
+    except OverflowError:
+        return None
+    return x if math.isfinite(x) else None

@@ -43,13 +43,13 @@ def put(tree, sharding: NamedSharding):
 # overhead (measured: 256 designs × 36 samples ran at 2.8e6 positions/s, 4096 × 36 at 7.2e6 on 2
 # cores); on an accelerator enough to fill it (an H100 ran Monte Carlo 18× faster with 1e5 designs
 # per batch than with 256), bounded by a quarter of its memory.
-CPU_POSITIONS = 1 << 17
+CPU_POSITIONS = 1 << 18
 ACCELERATOR_POSITIONS = 1 << 23
 
 
 def default_chunk(positions_per_design: int, values_per_position: int, devices=None) -> int:
-    """Designs per batch for this machine: a power of two ≥ 256 (a multiple of the device count),
-    about `CPU_POSITIONS` positions on a CPU and `ACCELERATOR_POSITIONS` on a GPU/TPU, fewer
+    """Designs per batch for this machine: the largest power of two (times the device count) of at
+    most `CPU_POSITIONS` positions on a CPU and `ACCELERATOR_POSITIONS` on a GPU/TPU, fewer
     where a quarter of the device's memory would not hold them (≈ 16 float64 values per solved
     value: `values_per_position` = unknowns + 2 × points)."""
     devices = list(jax.local_devices() if devices is None else devices)
@@ -60,7 +60,7 @@ def default_chunk(positions_per_design: int, values_per_position: int, devices=N
     except Exception:  # no memory statistics (the CPU): the target stands
         pass
     designs = max(1, target // max(1, positions_per_design))
-    chunk = 256
+    chunk = 1
     while 2 * chunk <= designs:
         chunk *= 2
     return -(-chunk // len(devices)) * len(devices)

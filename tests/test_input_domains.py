@@ -1,0 +1,212 @@
+"""Every input value has a domain checked where it enters (the file, `--set`, the options,
+`[optimize]`), and every wrong value is refused with exit status 2 and one message on standard
+error that names where it came from (file and line, or the option). Issue 16's cases, by class."""
+
+from __future__ import annotations
+
+import contextlib
+import io
+import os
+import pathlib
+import re
+import stat
+import threading
+
+import pytest
+
+from jaxlink.cli import main
+
+SCENES = pathlib.Path(__file__).resolve().parent.parent / "jaxlink" / "scenes"
+FOUR_BAR = (SCENES / "four-bar.toml").read_text(encoding="utf-8")
+
+
+def cli(*argv: str) -> tuple[int, str]:
+    """(exit status, standard error) of `jaxlink ARGV`, in process."""
+    err, out = io.StringIO(), io.StringIO()
+    with contextlib.redirect_stderr(err), contextlib.redirect_stdout(out):
+        try:
+            rc = main(list(argv))
+        except SystemExit as exc:  # argparse's refusals
+            rc = int(exc.code or 0)
+    return rc, err.getvalue()
+
+
+def refused(rc_err, *words: str) -> None:
+    rc, err = rc_err
+    assert rc == 2, err
+    assert "internal error" not in err and "Traceback" not in err, err
+    for w in words:
+        assert w in err, (w, err)
+
+
+def four_bar(tmp_path, old: str | None, new: str, *, encoding: str = "utf-8") -> str:
+    text = FOUR_BAR.replace(old, new) if old else FOUR_BAR + new
+    assert old is None or old in FOUR_BAR
+    path = tmp_path / "m.toml"
+    path.write_bytes(text.encode(encoding))
+    return str(path)
+
+
+# ----------------------------------------------------------------------------- the file
+
+
+def test_latin1_file_is_refused_with_its_line(tmp_path):
+    f = four_bar(tmp_path, "# crank", "# crank 90°", encoding="latin-1")
+    refused(cli("check", f), "m.toml:11", "not UTF-8", "0xb0")
+
+
+def test_deeply_nested_toml_is_refused(tmp_path):
+    for depth in (20, 3000):
+        f = four_bar(tmp_path, None, "\n[environment]\nx = " + "[" * depth + "]" * depth + "\n")
+        refused(cli("check", f), "m.toml", "nested")
+
+
+def test_a_sum_of_3000_names_is_solved(tmp_path):
+    # 3000 × cx/3000 = cx: the same point as the file's
+    f = four_bar(tmp_path, '"cx @ phi3"', '"' + " + ".join(["cx / 3000"] * 3000) + ' @ phi3"')
+    rc, err = cli("kinematics", f, "--count", "3", "--outputs", "position")
+    assert rc == 0, err
+
+
+def test_deep_parentheses_are_refused_with_the_limit(tmp_path):
+    f = four_bar(tmp_path, '"cx @ phi3"', '"' + "(" * 3000 + "cx" + ")" * 3000 + ' @ phi3"')
+    refused(cli("check", f), "m.toml:30", "points.P[1]", "nested too deeply", "100 levels")
+    f = four_bar(tmp_path, '"cx @ phi3"', '"' + "(" * 90 + "cx" + ")" * 90 + ' @ phi3"')
+    assert cli("check", f)[0] == 0
+
+
+@pytest.mark.parametrize("term", ['"(0/0, 0)"', '"cx / 0 @ phi3"'])
+def test_division_by_zero_is_refused_by_check(tmp_path, term):
+    f = four_bar(tmp_path, '"cx @ phi3"', term)
+    refused(cli("check", f), "m.toml:30", "division by zero")
+
+
+def test_non_finite_point_at_the_guess_is_refused_by_check(tmp_path):
+    f = four_bar(tmp_path, '"cx @ phi3"', '"cx * (a - a) / (a - a) @ phi3"')
+    refused(cli("check", f), "m.toml", "point 'P' is not finite")
+
+
+@pytest.mark.parametrize("old,new,words", [
+    ("a = 20.0", "a = " + "9" * 400, ("m.toml:11", "parameters.a", "400 digits", "1e+15")),
+    ("phi3 = 30.0", "phi3 = 1e300", ("m.toml:23", "unknowns.phi3", "1e+300")),
+    ("phi3 = 30.0", "phi3 = 1e7", ("m.toml:23", "unknowns.phi3", "out of range")),
+    ('name = "phi2"', 'name = "phi2"\nstart = 1e300', ("input.start", "1e+300")),
+    ("a = 20.0", "a = 1e-300", ("m.toml:11", "parameters.a", "out of range", "1e-09")),
+    ("a = 20.0", "a = 2e12", ("m.toml:11", "out of range", "1e+06 m")),
+])
+def test_values_outside_their_domain_are_refused_on_their_line(tmp_path, old, new, words):
+    refused(cli("check", four_bar(tmp_path, old, new)), *words)
+
+
+def test_check_of_a_cam_scene_names_the_commands_that_handle_it():
+    refused(cli("check", "sinker-cam"), "cam-follower", "jaxlink simulate")
+
+
+def test_a_directory_or_a_pipe_as_file_is_said_to_be_one(tmp_path):
+    refused(cli("check", str(tmp_path)), "is a directory")
+    fifo = tmp_path / "p.toml"
+    os.mkfifo(fifo)
+    refused(cli("check", str(fifo)), "is a named pipe")
+
+
+def test_set_is_blamed_on_the_option():
+    rc, err = cli("kinematics", "four-bar", "--set", "a=-5", "--count", "2")
+    refused((rc, err), "--set a=-5", "negative")
+    assert "four-bar.toml:" not in err
+    refused(cli("kinematics", "four-bar", "--set", "a=1e-300"), "--set a=1e-300", "out of range")
+    refused(cli("kinematics", "four-bar", "--set", "a=" + "9" * 400), "--set", "finite")
+
+
+# ----------------------------------------------------------------------------- the options
+
+
+@pytest.mark.parametrize("args,words", [
+    (("--step", "1e-300"), ("--step", "1000000")),
+    (("--count", "1e20"), ("--count",)),
+    (("--count", str(10**20)), ("--count", "at most 1000000")),
+    (("--start", "nan"), ("--start", "not a finite")),
+    (("--start", "inf"), ("--start", "not a finite")),
+    (("--start", "1e300"), ("--start", "out of range")),
+    (("--start", "1e9"), ("--start", "out of range")),
+    (("--rpm", "nan"), ("--rpm", "not a finite")),
+    (("--omega", "nan"), ("--omega", "not a finite")),
+    (("--rpm", "inf"), ("--rpm", "not a finite")),
+    (("--rpm", "1e300"), ("--rpm", "rpm")),
+    (("--omega=-1e7",), ("--omega", "rad/s")),
+    (("--plot", "out.xyz"), ("--plot out.xyz", ".png")),
+    (("--animate", "out.mp4"), ("--animate", ".gif")),
+    (("--csv", "/dev/full"), ("--csv /dev/full", "No space left")),
+])
+def test_kinematics_options_outside_their_domain(args, words):
+    if "/dev/full" in args and not (os.path.exists("/dev/full") and stat.S_ISCHR(os.stat("/dev/full").st_mode)):
+        pytest.skip("no /dev/full device")
+    few = () if {"--count", "--step"} & set(args) else ("--count", "3")
+    refused(cli("kinematics", "four-bar", *few, *args), *words)
+
+
+def test_outputs_through_a_file_or_into_a_folder_are_refused_before_the_solve(tmp_path):
+    (tmp_path / "f").write_text("")
+    refused(cli("kinematics", "four-bar", "--csv", str(tmp_path / "f" / "x.csv")), "--csv", "is a file, not a folder")
+    refused(cli("reactions", "slider-crank-mass", "--csv", str(tmp_path)), "--csv", "is a folder")
+    refused(cli("kinematics", "four-bar", "--csv", str(tmp_path / "no" / "x.csv")), "--csv", "does not exist")
+
+
+def _opt(*args):
+    return cli("optimize", "sewing-feed-opt", "--method", "montecarlo", "--budget", "4", *args)
+
+
+@pytest.mark.parametrize("args,words", [
+    (("--seed", "-1"), ("--seed -1", "0 to 4294967295")),
+    (("--chunk", "0"), ("--chunk 0", "from 1")),
+    (("--chunk", "-5"), ("--chunk -5",)),
+    (("--starts", "0"), ("--starts 0",)),
+    (("--budget", "0"), ("--budget 0",)),
+    (("--out", "/dev/stdout"), ("--out /dev/stdout", "checkpoint")),
+])
+def test_optimize_options_outside_their_domain(args, words):
+    refused(_opt(*args), *words)
+
+
+@pytest.mark.parametrize("key,value,words", [
+    ("report_samples", "0", ("optimize.report_samples", "from 3")),
+    ("iterations", "-3", ("optimize.iterations",)),
+    ("starts", "0", ("optimize.starts",)),
+    ("chunk", "0", ("optimize.chunk",)),
+    ("seed", "-1", ("optimize.seed",)),
+    ("budget", "0", ("optimize.budget",)),
+    ("stroke", "-20", ("optimize.stroke", "> 0")),
+    ("sign_changes", "-1", ("optimize.sign_changes",)),
+    ("samples", "100000000", ("optimize.samples", "100000")),
+    ("samples", "100000", ("optimize.samples", "GiB")),
+])
+def test_optimize_keys_outside_their_domain_name_the_file_and_key(tmp_path, key, value, words):
+    text = (SCENES / "sewing-feed-opt.toml").read_text(encoding="utf-8")
+    path = tmp_path / "opt.toml"
+    text = re.sub(rf"^{key} = .*$", "", text, flags=re.M)  # the file's own value, if any
+    path.write_text(text.replace("[optimize]\n", f"[optimize]\n{key} = {value}\n"), encoding="utf-8")
+    rc, err = cli("optimize", str(path), "--method", "montecarlo", "--budget", "4",
+                  *(("--chunk", "100000") if value == "100000" else ()))
+    refused((rc, err), "opt.toml", *words)
+    assert "--chunk " not in err.split("GiB")[0] or value == "100000"
+
+
+def test_optimize_out_to_a_named_pipe_writes_to_the_pipe(tmp_path):
+    fifo = tmp_path / "result.json"
+    os.mkfifo(fifo)
+    got = []
+
+    def reader():  # the reader of the pipe: each rewrite of OUT opens and closes it once
+        while True:
+            with open(fifo, encoding="utf-8") as fh:
+                data = fh.read()
+            got.append(data)
+            if '"complete": true' in data:
+                return
+
+    t = threading.Thread(target=reader, daemon=True)
+    t.start()
+    rc, err = _opt("--out", str(fifo), "--chunk", "4")
+    t.join(timeout=60)
+    assert rc == 0, err
+    assert stat.S_ISFIFO(os.stat(fifo).st_mode)  # still a pipe, not replaced by a file
+    assert got and '"complete": true' in got[-1]
