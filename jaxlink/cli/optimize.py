@@ -81,7 +81,9 @@ def cmd_optimize(args) -> int:
     else:
         print("best        none: no feasible design found")
     print(f"evaluations {result.evaluations} ({result.designs} designs, "
-          f"{100 * result.infeasible_fraction:.1f} % infeasible), {result.wall_s:.2f} s")
+          f"{100 * result.infeasible_fraction:.1f} % infeasible), {result.wall_s:.2f} s "
+          f"({result.search_wall_s:.2f} s searching, {result.compile_s:.2f} s compiling)")
     if args.out:
-        print(f"wrote {args.out}")
+        print(f"wrote {args.out}" + (f" and {result.best_file} (the best design: jaxlink kinematics "
+                                     f"{result.best_file})" if result.best_file else ""))
     return 0 if result.parameters else 1

@@ -3,7 +3,9 @@ optional progress bar; returns a `SearchResult`."""
 
 from __future__ import annotations
 
+import dataclasses
 import os
+import pathlib
 import time
 
 import numpy as np
@@ -12,8 +14,9 @@ from ...errors import MechanismError
 from .. import checkpoint as _checkpoint
 from ..evaluator import Evaluator
 from ..problem import Problem
+from ..timing import compile_clock
 from . import searcher
-from .result import SearchResult, summarized
+from .result import SearchResult, summarized, trace_point, traced
 
 
 def run(problem_or_evaluator: Problem | Evaluator, method: str, *, budget: int, seed: int = 0,
@@ -56,8 +59,15 @@ def run(problem_or_evaluator: Problem | Evaluator, method: str, *, budget: int, 
         files[2].unlink(missing_ok=True)
         files[1].unlink(missing_ok=True)
 
+    # best-so-far over time: (evaluations, search seconds without compilation, objective) at
+    # every chunk that improved it (a resumed search reads the earlier ones from its log)
+    trace: list[dict] = []
+    if saved is not None and files and files[2].exists():
+        trace = traced(files[2])
+
     def result(complete: bool) -> SearchResult:
-        return summarized(ev, method, st.progress, seed=seed, budget=budget, complete=complete, extra=extra)
+        return summarized(ev, method, st.progress, seed=seed, budget=budget, complete=complete, extra=extra,
+                          trace=trace)
 
     bar = None
     if progress:
@@ -71,9 +81,14 @@ def run(problem_or_evaluator: Problem | Evaluator, method: str, *, budget: int, 
                 break
             t0 = time.perf_counter()
             before = int(st.progress.evaluations)
-            st = search.step(st)
-            p = st.progress._replace(wall_s=np.float64(st.progress.wall_s + time.perf_counter() - t0))
+            best_before = float(st.progress.best_value)
+            with compile_clock() as clock:
+                st = search.step(st)
+            p = st.progress._replace(wall_s=np.float64(st.progress.wall_s + time.perf_counter() - t0),
+                                     compile_s=np.float64(st.progress.compile_s + clock[0]))
             st = st._replace(progress=p)
+            if p.found and float(p.best_value) < best_before:
+                trace.append(trace_point(p))
             chunks += 1
             if bar is not None:
                 bar.update(int(p.evaluations) - before)
@@ -86,7 +101,7 @@ def run(problem_or_evaluator: Problem | Evaluator, method: str, *, budget: int, 
                     "infeasible": int(p.infeasible), "best_value": float(p.best_value) if p.found else None,
                     "best_parameters": (dict(zip(ev.problem.names, map(float, ev.problem.to_file_units(p.best_u))))
                                         if p.found else None),
-                    "wall_s": float(p.wall_s),
+                    "wall_s": float(p.wall_s), "compile_s": float(p.compile_s),
                 })
                 _checkpoint.write_json_atomic(files[0], result(False).to_json())
     finally:
@@ -94,5 +109,16 @@ def run(problem_or_evaluator: Problem | Evaluator, method: str, *, budget: int, 
             bar.close()
     res = result(search.done(st))
     if files:
+        if res.parameters is not None and ev.mech.file and os.path.isfile(ev.mech.file):
+            path = best_file_path(files[0])
+            path.write_text(res.best_file_text(), encoding="utf-8")
+            res = dataclasses.replace(res, best_file=str(path))
         _checkpoint.write_json_atomic(files[0], res.to_json())
     return res
+
+
+def best_file_path(out) -> pathlib.Path:
+    """`OUT.best.toml` beside the search's JSON document `OUT.json`."""
+    out = pathlib.Path(out)
+    stem = out.with_suffix("") if out.suffix == ".json" else out
+    return pathlib.Path(str(stem) + ".best.toml")
