@@ -26,7 +26,11 @@ def register(sub) -> None:
     p.add_argument("--method", required=True, choices=("uniform", "montecarlo", "gradient"),
                    help="search method")
     p.add_argument("--budget", type=int, default=None,
-                   help="mechanism evaluations allowed (default: [optimize] budget, else 10000)")
+                   help="mechanism evaluations allowed (default: [optimize] budget; else the gradient search "
+                        "chooses its sizes from the problem and stops when no start improves, the others 10000)")
+    p.add_argument("--time", type=float, default=None, metavar="SECONDS",
+                   help="stop the search after this wall time, compilation included (default: [optimize] time, "
+                        "else none)")
     p.add_argument("--seed", type=int, default=None, help="random seed (default: [optimize] seed, else 0)")
     p.add_argument("--out", metavar="OUT.json", help="write the result JSON here (and checkpoint beside it)")
     p.add_argument("--resume", action="store_true", help="continue the interrupted search of --out")
@@ -48,13 +52,16 @@ def cmd_optimize(args) -> int:
 
     mech = load_from_args(args)
     problem = problem_from(mech)
-    budget = args.budget if args.budget is not None else problem.option("budget", 10000)
+    budget = args.budget if args.budget is not None else problem.option("budget")
     seed = args.seed if args.seed is not None else problem.option("seed", 0)
     for name, v in (("--budget", budget), ("--seed", seed)):
-        if isinstance(v, bool) or not isinstance(v, int):
+        if v is not None and (isinstance(v, bool) or not isinstance(v, int)):
             raise MechanismError(f"{name} must be an integer, got {v!r}")
-    if budget < 1:
+    if budget is not None and budget < 1:
         raise MechanismError("--budget must be at least 1")
+    time_s = args.time if args.time is not None else problem.option("time")
+    if time_s is not None and (isinstance(time_s, bool) or not isinstance(time_s, (int, float)) or not time_s > 0):
+        raise MechanismError(f"--time must be a positive number of seconds, got {time_s!r}")
     if args.starts is not None and args.starts < 1:
         raise MechanismError("--starts must be at least 1")
     chunk = args.chunk or problem.option("chunk", 256)
@@ -71,7 +78,7 @@ def cmd_optimize(args) -> int:
         knobs["starts"] = args.starts
     ev = Evaluator(problem, chunk=chunk)
     result = run(ev, args.method, budget=budget, seed=seed, out=args.out, resume=args.resume,
-                 progress=progress, **knobs)
+                 progress=progress, time=time_s, **knobs)
     print(f"method      {result.method}" + (f" ({knobs['uniform']})" if "uniform" in knobs else ""))
     if result.parameters:
         print("best        " + ", ".join(f"{k} = {v:.6g}" for k, v in result.parameters.items()))
@@ -79,7 +86,8 @@ def cmd_optimize(args) -> int:
         if result.metrics:
             print("metrics     " + ", ".join(f"{k} = {v:.6g}" for k, v in result.metrics.items() if v is not None))
     else:
-        print("best        none: no feasible design found")
+        print("best        none: no feasible design found: every design tried failed to assemble over its "
+              "revolution (widen the bounds, check the file's design, or give more --budget / --time)")
     print(f"evaluations {result.evaluations} ({result.designs} designs, "
           f"{100 * result.infeasible_fraction:.1f} % infeasible), {result.wall_s:.2f} s "
           f"({result.search_wall_s:.2f} s searching, {result.compile_s:.2f} s compiling)")

@@ -211,6 +211,8 @@ class PresampledStarts(abc.ABC):
             st, U, values, circuits = self.presampled(st, U)
             st = st._replace(pool=pooled(st.pool, U, values, circuits)._replace(n=st.pool.n + np.int64(n)))
         st = st._replace(progress=next_chunk(st.progress))
-        if int(st.pool.n) >= self.presample or n == 0:
+        limit = getattr(self, "time", None)
+        out_of_time = limit is not None and float(st.progress.wall_s) >= 0.3 * float(limit)
+        if int(st.pool.n) >= self.presample or n == 0 or (out_of_time and bool(np.isfinite(st.pool.value).any())):
             st = self.started(st)
         return st

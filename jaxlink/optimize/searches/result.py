@@ -56,7 +56,7 @@ class SearchResult:
     wall_s: float
     complete: bool
     seed: int
-    budget: int
+    budget: int | None
     file: str | None
     objective_kind: str
     variables: Mapping[str, list]
@@ -142,7 +142,7 @@ def traced(log_path) -> list:
     return out
 
 
-def summarized(ev: Evaluator, method: str, p: Progress, *, seed: int, budget: int, complete: bool,
+def summarized(ev: Evaluator, method: str, p: Progress, *, seed: int, budget: int | None, complete: bool,
                extra: Mapping[str, Any] | None = None, trace=(), best_file: str | None = None) -> SearchResult:
     """The result of a search on `ev` whose progress is `p`; the best design is re-measured
     (`Evaluator.report`)."""
@@ -157,7 +157,8 @@ def summarized(ev: Evaluator, method: str, p: Progress, *, seed: int, budget: in
     return SearchResult(
         method=method, **best, evaluations=int(p.evaluations), designs=designs,
         infeasible_fraction=(int(p.infeasible) / designs) if designs else 0.0, wall_s=float(p.wall_s),
-        complete=bool(complete), seed=int(seed), budget=int(budget), file=pr.mech.file, objective_kind=pr.objective,
+        complete=bool(complete), seed=int(seed), budget=None if budget is None else int(budget),
+        file=pr.mech.file, objective_kind=pr.objective,
         variables={n: [float(a), float(b)] for n, a, b in zip(pr.names, pr.lower, pr.upper)},
         samples=len(pr.phis), devices=ev.n_devices, extra=dict(extra or {}),
         search_wall_s=float(p.wall_s - p.compile_s), compile_s=float(p.compile_s),

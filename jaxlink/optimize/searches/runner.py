@@ -6,7 +6,7 @@ from __future__ import annotations
 import dataclasses
 import os
 import pathlib
-import time
+import time as _time
 
 import numpy as np
 
@@ -19,9 +19,10 @@ from . import searcher
 from .result import SearchResult, summarized, trace_point, traced
 
 
-def run(problem_or_evaluator: Problem | Evaluator, method: str, *, budget: int, seed: int = 0,
+def run(problem_or_evaluator: Problem | Evaluator, method: str, *, budget: int | None = None, seed: int = 0,
         out: str | os.PathLike | None = None, resume: bool = False, progress: bool = False,
-        chunk: int | None = None, stop_after_chunks: int | None = None, **knobs) -> SearchResult:
+        chunk: int | None = None, stop_after_chunks: int | None = None, time: float | None = None,
+        **knobs) -> SearchResult:
     """Search the design space of a problem for the lowest objective.
 
     **Arguments:**
@@ -29,7 +30,12 @@ def run(problem_or_evaluator: Problem | Evaluator, method: str, *, budget: int, 
     - `problem_or_evaluator`: a `Problem` (an `Evaluator` is built for it) or an `Evaluator`
       (its compiled functions are reused by later searches on it).
     - `method`: "uniform", "montecarlo" or "gradient" (`jaxlink.optimize.searches.searcher`).
-    - `budget`: mechanism evaluations allowed; `seed`: the random seed (same seed, same result).
+    - `budget`: mechanism evaluations allowed; None (default): the gradient search chooses its
+      sizes from the problem and stops when no start improves, the others take 10000
+      (`searches.searcher`). `seed`: the random seed (same seed, same result).
+    - `time`: seconds of wall time (compilation included) after which the search stops (its
+      result is then `complete`, with `"stopped": "time"` in `extra`); the gradient search ends
+      its presample after 30 % of it. A search stopped by time depends on the machine's speed.
     - `out`: the JSON document's path; the state is checkpointed beside it after every chunk
       (`OUT.state.npz`, `OUT.log.jsonl`, `OUT` rewritten with the best so far) and `OUT` ends
       with `SearchResult.to_json()`. `resume`: continue the interrupted search of `out`; it ends
@@ -43,9 +49,13 @@ def run(problem_or_evaluator: Problem | Evaluator, method: str, *, budget: int, 
         ev = problem_or_evaluator
     else:
         ev = Evaluator(problem_or_evaluator, chunk=chunk or problem_or_evaluator.option("chunk", 256))
-    search = searcher(ev, method, budget=budget, seed=seed, **knobs)
+    if time is None:
+        time = ev.problem.option("time")
+    search = searcher(ev, method, budget=budget, seed=seed, time=time, **knobs)
+    if budget is None and not getattr(search, "auto", False):
+        budget = int(search.budget)  # type: ignore[attr-defined]  # the method's default
     extra = {"uniform": knobs.get("uniform", "grid")} if method == "uniform" else {}
-    fp = _checkpoint.fingerprint(ev.problem, method, seed, budget, repr(sorted(knobs.items())))
+    fp = _checkpoint.fingerprint(ev.problem, method, seed, budget, repr(sorted(knobs.items())) + f"|{time}")
     files = _checkpoint.paths(out) if out else None
     st = search.init()
     saved = None
@@ -73,18 +83,24 @@ def run(problem_or_evaluator: Problem | Evaluator, method: str, *, budget: int, 
     if progress:
         from tqdm import tqdm
 
-        bar = tqdm(total=budget, initial=int(st.progress.evaluations), unit="eval", desc=method, dynamic_ncols=True)
+        bar = tqdm(total=budget, initial=int(st.progress.evaluations), unit="eval", desc=method,
+                   dynamic_ncols=True)
     chunks = 0
+    timed_out = False
     try:
         while not search.done(st):
             if stop_after_chunks is not None and chunks >= stop_after_chunks:
                 break
-            t0 = time.perf_counter()
+            if time is not None and float(st.progress.wall_s) >= float(time):
+                timed_out = True
+                extra["stopped"] = "time"
+                break
+            t0 = _time.perf_counter()
             before = int(st.progress.evaluations)
             best_before = float(st.progress.best_value)
             with compile_clock() as clock:
                 st = search.step(st)
-            p = st.progress._replace(wall_s=np.float64(st.progress.wall_s + time.perf_counter() - t0),
+            p = st.progress._replace(wall_s=np.float64(st.progress.wall_s + _time.perf_counter() - t0),
                                      compile_s=np.float64(st.progress.compile_s + clock[0]))
             st = st._replace(progress=p)
             if p.found and float(p.best_value) < best_before:
@@ -107,7 +123,7 @@ def run(problem_or_evaluator: Problem | Evaluator, method: str, *, budget: int, 
     finally:
         if bar is not None:
             bar.close()
-    res = result(search.done(st))
+    res = result(search.done(st) or timed_out)
     if files:
         if res.parameters is not None and ev.mech.file and os.path.isfile(ev.mech.file):
             path = best_file_path(files[0])
