@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import contextlib
+import math
 import os
 import sys
 
@@ -28,7 +29,11 @@ def register(sub) -> None:
     p.add_argument("--method", required=True, choices=("uniform", "montecarlo", "gradient"),
                    help="search method")
     p.add_argument("--budget", type=int, default=None,
-                   help="mechanism evaluations allowed (default: [optimize] budget, else 10000)")
+                   help="mechanism evaluations allowed (default: [optimize] budget; else the gradient search "
+                        "chooses its sizes from the problem and stops when no start improves, the others 10000)")
+    p.add_argument("--time", type=float, default=None, metavar="SECONDS",
+                   help="stop the search after this wall time, compilation included (default: [optimize] time, "
+                        "else none)")
     p.add_argument("--seed", type=int, default=None, help="random seed (default: [optimize] seed, else 0)")
     p.add_argument("--out", metavar="OUT.json", help="write the result JSON here (and checkpoint beside it)")
     p.add_argument("--resume", action="store_true", help="continue the interrupted search of --out")
@@ -101,8 +106,12 @@ def cmd_optimize(args) -> int:
                                  "pipe) in an ordinary folder")
     mech = load_from_args(args)
     problem = problem_from(mech)
-    budget = args.budget if args.budget is not None else problem.option("budget", 10000)
+    budget = args.budget if args.budget is not None else problem.option("budget")
     seed = args.seed if args.seed is not None else problem.option("seed", 0)
+    time_s = args.time if args.time is not None else problem.option("time")
+    if time_s is not None and (isinstance(time_s, bool) or not isinstance(time_s, (int, float))
+                               or not math.isfinite(time_s) or not 0 < time_s <= 1e7):
+        raise MechanismError(f"--time {time_s!r}: must be a number of seconds, more than 0 and at most 1e7")
     chunk = args.chunk if args.chunk is not None else problem.option("chunk", None)
     progress = sys.stderr.isatty() if args.progress == "auto" else args.progress == "on"
     knobs = {}
@@ -117,7 +126,7 @@ def cmd_optimize(args) -> int:
     check_size(problem, ev.chunk, "--chunk" if args.chunk is not None else "chunk")
     with writing("--out", args.out) if args.out and printer else contextlib.nullcontext():
         result = run(ev, args.method, budget=budget, seed=seed, out=args.out, resume=args.resume,
-                     progress=progress and printer, **knobs)
+                     progress=progress and printer, time=time_s, **knobs)
     if not printer:
         return 0 if result.parameters else 1
     print(f"method      {result.method}" + (f" ({knobs['uniform']})" if "uniform" in knobs else ""))
@@ -127,9 +136,12 @@ def cmd_optimize(args) -> int:
         if result.metrics:
             print("metrics     " + ", ".join(f"{k} = {v:.6g}" for k, v in result.metrics.items() if v is not None))
     else:
-        print("best        none: no feasible design found")
+        print("best        none: no feasible design found: every design tried failed to assemble over its "
+              "revolution (widen the bounds, check the file's design, or give more --budget / --time)")
     print(f"evaluations {result.evaluations} ({result.designs} designs, "
-          f"{100 * result.infeasible_fraction:.1f} % infeasible), {result.wall_s:.2f} s")
+          f"{100 * result.infeasible_fraction:.1f} % infeasible), {result.wall_s:.2f} s "
+          f"({result.search_wall_s:.2f} s searching, {result.compile_s:.2f} s compiling)")
     if args.out:
-        print(f"wrote {args.out}")
+        print(f"wrote {args.out}" + (f" and {result.best_file} (the best design: jaxlink kinematics "
+                                     f"{result.best_file})" if result.best_file else ""))
     return 0 if result.parameters else 1

@@ -55,11 +55,13 @@ def icp_similarity(paths, targets, *, iterations: int = 15):
     return jax.vmap(one)(paths)
 
 
-def placement_of(problem):
-    """(x index, y index, angle index, length indices) into the variables, or None."""
+def placement_of(problem, ev=None):
+    """(x index, y index, angle index, length indices) into the variables, or None. Without the
+    `placement` key, found from the structure when `ev` (the problem's `Evaluator`) is given
+    (`detect_placement`)."""
     pl = problem.option("placement")
     if pl is None:
-        return None
+        return detect_placement(ev) if ev is not None else None
     names = list(problem.names)
     if not isinstance(pl, dict) or set(pl) != {"x", "y", "angle"}:
         raise problem.error("'placement' must be { x = NAME, y = NAME, angle = NAME } (variables)", "placement")
@@ -77,10 +79,11 @@ def placement_of(problem):
             [names.index(mech.parameter_names[i]) for i in lengths])
 
 
-def apply_similarity(problem, X, s, theta, t):
+def apply_similarity(problem, X, s, theta, t, placement=None):
     """Designs X (B, V) in file units moved by x ↦ sRx + t (θ in rad); bounds enforced (angles
-    wrapped into a bound range that spans a full turn, everything else clipped)."""
-    ix, iy, ia, il = placement_of(problem)
+    wrapped into a bound range that spans a full turn, everything else clipped). `placement`:
+    the indices (`placement_of`; default: from the `placement` key)."""
+    ix, iy, ia, il = placement if placement is not None else placement_of(problem)
     mech = problem.mech
     X = np.array(X, dtype=float)
     lf = mech.units.length
@@ -97,3 +100,54 @@ def apply_similarity(problem, X, s, theta, t):
     if hi[ia] - lo[ia] >= full * (1 - 1e-6):
         X[:, ia] = lo[ia] + np.mod(X[:, ia] - lo[ia], full)
     return np.clip(X, lo, hi)
+
+
+def detect_placement(ev):
+    """The similarity placement of the problem found from the mechanism itself: variables x, y
+    (lengths) and an angle such that moving the whole mechanism by x ↦ sRx + t (x, y ↦ s R (x, y)
+    + t, the angle + θ, every other length × s) moves the traced path of the point by the same
+    similarity. Every candidate (ordered pairs of length variables × angle variables) is checked
+    on the file's design at 8 inputs with one batched path solve (s = 1.3, θ = 0.7 rad, a shift of
+    (0.3, −0.2) × the path's size): the first whose path matches to 10⁻⁷ of its size is the
+    placement. None if no candidate matches, or if some length is not a variable (a similarity
+    scales them all), or for a mechanism solved by continuation (its start needs no placement)."""
+    pr = ev.problem
+    mech = pr.mech
+    names = list(pr.names)
+    lengths = [i for i, n in enumerate(names) if mech.kinds[n] == "length"]
+    angles = [i for i, n in enumerate(names) if mech.kinds[n] == "angle"]
+    all_lengths = [n for n in mech.parameter_names if mech.kinds[n] == "length"]
+    if ev.start_method != "closed_form" or not angles or len(lengths) < 2 or any(n not in names for n in all_lengths):
+        return None
+    cands = [(ix, iy, ia) for ix in lengths for iy in lengths if ix != iy for ia in angles]
+    x0 = pr.file_design()
+    phis = jnp.asarray(pr.phis[0] + 2 * np.pi * np.arange(8) / 8)
+    s, th = 1.3, 0.7
+    c, sn = np.cos(th), np.sin(th)
+
+    def path_of(x):
+        u = jnp.asarray((x - pr.lower) / (pr.upper - pr.lower))
+        xy, ok = ev.path(u, 0, phis, 0)
+        return xy.xy, ok
+
+    xy0, ok0 = jax.jit(path_of)(x0)
+    xy0 = np.asarray(xy0)
+    if not bool(ok0):
+        return None
+    size = float(np.max(np.ptp(xy0, axis=0))) or 1.0
+    t = np.array([0.3, -0.2]) * size
+    X = []
+    for ix, iy, ia in cands:
+        x = np.array(x0, dtype=float)
+        x[lengths] *= s
+        x[ix] = s * (c * x0[ix] - sn * x0[iy]) + t[0]
+        x[iy] = s * (sn * x0[ix] + c * x0[iy]) + t[1]
+        x[ia] = x0[ia] + mech.from_si(names[ia], th)
+        X.append(x)
+    xys, oks = jax.jit(jax.vmap(path_of))(jnp.asarray(np.array(X)))
+    want = s * xy0 @ np.array([[c, -sn], [sn, c]]).T + t
+    err = np.max(np.abs(np.asarray(xys) - want[None]), axis=(1, 2))
+    for k in np.flatnonzero(np.asarray(oks) & (err <= 1e-7 * s * size)):
+        ix, iy, ia = cands[int(k)]
+        return ix, iy, ia, [i for i in lengths if i not in (ix, iy)]
+    return None

@@ -35,7 +35,7 @@ def paths(out: str | os.PathLike) -> tuple[pathlib.Path, pathlib.Path, pathlib.P
     return out, pathlib.Path(str(stem) + ".state.npz"), pathlib.Path(str(stem) + ".log.jsonl")
 
 
-def fingerprint(problem, method: str, seed: int, budget: int, extra: str = "") -> str:
+def fingerprint(problem, method: str, seed: int, budget: int | None, extra: str = "") -> str:
     """What a checkpoint must match to be resumed."""
     h = hashlib.sha256()
     h.update(json.dumps(problem.options, sort_keys=True, default=str).encode())

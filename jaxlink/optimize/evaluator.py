@@ -67,8 +67,13 @@ class Evaluator:
         if problem.circuits == "all" and self.dyads is None:
             raise problem.error("circuits = \"all\" needs a mechanism made of dyads; use \"file\"", "circuits")
         self.start_method = method
+        # "auto": every circuit when the objective is the untimed path (`points`): which branch
+        # traces the shape is part of the answer; the file's otherwise
+        self.circuits = problem.circuits
+        if self.circuits == "auto":
+            self.circuits = "all" if problem.objective == "points" and method == "closed_form" else "file"
         if self.dyads is not None:
-            self.sigmas = circuit_signs(mech, self.q_file, phi0, all_circuits=problem.circuits == "all")
+            self.sigmas = circuit_signs(mech, self.q_file, phi0, all_circuits=self.circuits == "all")
         else:
             self.sigmas = np.zeros((1, 0))
         self.n_circuits = len(self.sigmas)

@@ -7,8 +7,10 @@ variables = { l2 = [0, 4], l22 = [0, 4], gamma = [-30, 30] }   # bounds, file un
 samples = 36                                  # input positions per design (a full revolution)
 objective = "ellipse"                         # a name of the objective registry
 start = 75                                    # first input value (file units; default [input] start)
-circuits = "file"                             # "file": keep the file's assembly branch; "all": try
-                                              # every circuit of a closed-form (dyad) mechanism
+circuits = "auto"                             # "file": keep the file's assembly branch; "all": try
+                                              # every circuit of a closed-form (dyad) mechanism;
+                                              # "auto" (default): "all" for the path objective
+                                              # `points` on a dyad mechanism, else "file"
 ```
 
 Objective-specific keys (`axes`, `targets`, …) are read by the objective (`objectives/`); search
@@ -50,7 +52,7 @@ KNOWN_KEYS = {
     "point", "variables", "samples", "objective", "start", "circuits", "start_method",
     "report_samples", "placement",
     # searches
-    "starts", "presample", "iterations", "uniform", "chunk", "budget", "seed",
+    "starts", "presample", "iterations", "uniform", "chunk", "budget", "seed", "time",
     "gradient_solver", "memory", "al_rho", "al_every",
 }
 
@@ -68,7 +70,8 @@ class Problem:
     - `lower`, `upper`: bounds in file units, shape (V,); `factor`: file unit → SI per variable.
     - `point`: index of the point in `mech.point_names`.
     - `phis`: (samples,) input values (SI), a full revolution from `start` (angle input).
-    - `circuits`: "file" | "all".
+    - `circuits`: "file" | "all" | "auto" (resolved by the `Evaluator`: "all" for `points` on a
+      dyad mechanism, else "file").
     - `options`: the whole `[optimize]` table (objective and search options).
     """
 
@@ -179,9 +182,9 @@ def problem_from(mech: Mechanism, overrides: Mapping[str, Any] | None = None) ->
         raise err("design search needs a rotating (angle) input: the path is a full revolution", "samples")
     phis = phi0 + 2.0 * np.pi * np.arange(samples) / samples
 
-    circuits = table.get("circuits", "file")
-    if circuits not in ("file", "all"):
-        raise err(f"'circuits' must be \"file\" or \"all\", got {circuits!r}", "circuits")
+    circuits = table.get("circuits", "auto")
+    if circuits not in ("file", "all", "auto"):
+        raise err(f"'circuits' must be \"file\", \"all\" or \"auto\", got {circuits!r}", "circuits")
     start_method = table.get("start_method", "auto")
     if start_method not in ("auto", "closed_form", "continuation"):
         raise err(f"'start_method' must be \"auto\", \"closed_form\" or \"continuation\", got {start_method!r}",

@@ -13,6 +13,8 @@ evaluations (`base.py`); `runner.run` drives one with checkpoints (`jaxlink.opti
 
 from __future__ import annotations
 
+from typing import Any
+
 from ..evaluator import Evaluator
 from .augmented_lagrangian import AugmentedLagrangian as AugmentedLagrangian
 from .base import Search as Search
@@ -23,26 +25,39 @@ from .uniform import UniformGrid as UniformGrid
 
 METHODS = ("uniform", "montecarlo", "gradient")
 UNIFORM = {"grid": UniformGrid, "coordinate": UniformCoordinate}
-GRADIENT_SOLVERS = {"lbfgs": Gradient, "al-lbfgs": AugmentedLagrangian}
+GRADIENT_SOLVERS: dict[str, Any] = {"lbfgs": Gradient, "al-lbfgs": AugmentedLagrangian}
 
 
-def searcher(ev: Evaluator, method: str, *, budget: int, seed: int, uniform: str = "grid", **knobs) -> Search:
+DEFAULT_BUDGET = 10000
+
+
+def searcher(ev: Evaluator, method: str, *, budget: int | None, seed: int, uniform: str = "grid",
+             time: float | None = None, **knobs) -> Search:
     """The search `method` on `ev` with a `budget` of mechanism evaluations and `seed`.
 
-    **Arguments:** `uniform` ("grid" or "coordinate", method `uniform`); `knobs`: the method's
-    keyword arguments (`starts`, `presample`, `iterations`, …; see each class), and for
-    `gradient` also `gradient_solver` (default: `[optimize] gradient_solver`, else "lbfgs").
+    **Arguments:** `budget` None: the `lbfgs` gradient search chooses its sizes from the problem
+    and stops when no start improves (`Gradient`); the other methods take `DEFAULT_BUDGET`.
+    `time`: seconds (the gradient search ends its presample after 30 % of it; the runner stops
+    every search when it is spent). `uniform` ("grid" or "coordinate", method `uniform`);
+    `knobs`: the method's keyword arguments (`starts`, `presample`, `iterations`, …; see each
+    class), and for `gradient` also `gradient_solver` (default: `[optimize] gradient_solver`,
+    else "lbfgs").
     """
+    solver = None
+    if method == "gradient":
+        solver = knobs.pop("gradient_solver", None) or ev.problem.option("gradient_solver", "lbfgs")
+    fixed = DEFAULT_BUDGET if budget is None else budget  # what the methods without a default take
     if method == "montecarlo":
-        return MonteCarlo(ev, budget=budget, seed=seed, **knobs)
+        return MonteCarlo(ev, budget=fixed, seed=seed, **knobs)
     if method == "uniform":
         if uniform not in UNIFORM:
             raise ev.problem.error(f"'uniform' must be \"grid\" or \"coordinate\", got {uniform!r}", "uniform")
-        return UNIFORM[uniform](ev, budget=budget, seed=seed, **knobs)
+        return UNIFORM[uniform](ev, budget=fixed, seed=seed, **knobs)
     if method == "gradient":
-        solver = knobs.pop("gradient_solver", None) or ev.problem.option("gradient_solver", "lbfgs")
         if solver not in GRADIENT_SOLVERS:
             raise ev.problem.error(f"'gradient_solver' must be \"lbfgs\" or \"al-lbfgs\", got {solver!r}",
                                    "gradient_solver")
-        return GRADIENT_SOLVERS[solver](ev, budget=budget, seed=seed, **knobs)
+        if solver == "lbfgs":
+            return Gradient(ev, budget=budget, seed=seed, time=time, **knobs)
+        return GRADIENT_SOLVERS[solver](ev, budget=fixed, seed=seed, **knobs)
     raise ValueError(f"unknown method {method!r}; use one of {METHODS}")

@@ -14,12 +14,14 @@ about one more solve). Under `vmap` every start is charged for every trial it is
 from __future__ import annotations
 
 import abc
+import time
 from concurrent.futures import Future, ThreadPoolExecutor
 from typing import NamedTuple, Protocol
 
 import numpy as np
 
 from ..evaluator import Evaluator
+from ..timing import waited
 
 
 class Progress(NamedTuple):
@@ -34,6 +36,7 @@ class Progress(NamedTuple):
     best_circuit: np.int64  # its circuit
     wall_s: np.float64  # seconds spent in `step`
     done: np.bool_  # the search ended by itself
+    compile_s: np.float64 = np.float64(0.0)  # of `wall_s`, seconds of compilation (`timing.py`)
 
     @property
     def found(self) -> bool:
@@ -43,7 +46,7 @@ class Progress(NamedTuple):
 def progress_start(n_variables: int) -> Progress:
     return Progress(chunk=np.int64(0), evaluations=np.int64(0), designs=np.int64(0), infeasible=np.int64(0),
                     best_value=np.float64(np.inf), best_u=np.zeros(n_variables), best_circuit=np.int64(0),
-                    wall_s=np.float64(0.0), done=np.bool_(False))
+                    wall_s=np.float64(0.0), done=np.bool_(False), compile_s=np.float64(0.0))
 
 
 class Search(Protocol):
@@ -119,15 +122,34 @@ def drawn(key: tuple[int, ...], start: int, n: int, n_variables: int) -> np.ndar
     return rows[off:off + n]
 
 
-def compile_ahead(fn, *args) -> Future:
+def compile_ahead(fn, *args):
     """Compile the jitted `fn` for `args` in a thread (XLA compiles without holding the GIL, so
     the caller goes on evaluating meanwhile). The future's `result()` is the compiled executable,
     or raises what the tracing or compilation raised."""
     executor = ThreadPoolExecutor(max_workers=1, thread_name_prefix="jaxlink-compile")
     try:
-        return executor.submit(lambda: fn.lower(*args).compile())
+        return _TimedFuture(executor.submit(lambda: fn.lower(*args).compile()))
     finally:
         executor.shutdown(wait=False)
+
+
+class _TimedFuture:
+    """A future whose first blocking `result()` counts its wait as compilation (`timing.waited`)."""
+
+    def __init__(self, future: Future):
+        self._future = future
+
+    def done(self) -> bool:
+        return self._future.done()
+
+    def result(self):
+        if not self._future.done():
+            t0 = time.perf_counter()
+            try:
+                return self._future.result()
+            finally:
+                waited(time.perf_counter() - t0)
+        return self._future.result()
 
 
 # ----------------------------------------------------------------------------- presampled starts
@@ -205,6 +227,8 @@ class PresampledStarts(abc.ABC):
             st, U, values, circuits = self.presampled(st, U)
             st = st._replace(pool=pooled(st.pool, U, values, circuits)._replace(n=st.pool.n + np.int64(n)))
         st = st._replace(progress=next_chunk(st.progress))
-        if int(st.pool.n) >= self.presample or n == 0:
+        limit = getattr(self, "time", None)
+        out_of_time = limit is not None and float(st.progress.wall_s) >= 0.3 * float(limit)
+        if int(st.pool.n) >= self.presample or n == 0 or (out_of_time and bool(np.isfinite(st.pool.value).any())):
             st = self.started(st)
         return st

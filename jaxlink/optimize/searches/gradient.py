@@ -59,6 +59,8 @@ class GradientState(NamedTuple):
     grad: np.ndarray  # (S, V) its gradient
     active: np.ndarray  # (S,) starts still moving
     lbfgs: Any  # optax's ScaleByLBFGSState, leading axis = starts
+    mark: np.float64 = np.float64(np.inf)  # the best exact value when it last dropped by 1e-6
+    stall: np.int64 = np.int64(0)  # iterations since then
 
 
 class Gradient(PresampledStarts):
@@ -75,26 +77,39 @@ class Gradient(PresampledStarts):
     **Arguments** (keyword, else `[optimize]`): `starts` (16), `presample` (8 × starts, at most
     a quarter of the budget), `iterations` (200), `memory` (10), `linesearch_steps` (10),
     `chunk_iterations` (5, iterations per checkpoint).
+
+    **Defaults from the problem** (`budget=None`: no budget given, neither as argument nor as
+    `[optimize] budget`): `starts` = clip(5 V, 16, 64) for V variables, `presample` = 1024 V
+    designs (each on every circuit), `iterations` = 400, no evaluation budget; the search stops
+    when no start improves: the best exact objective has not dropped by 10⁻⁶ (relative) over
+    the last `patience` iterations (40). With `time` (seconds, `[optimize] time`), the presample
+    ends after 30 % of it and the search when it is spent (the runner stops there too). Keys
+    and arguments that are given override each of these.
     """
 
     name = "gradient"
 
-    def __init__(self, ev: Evaluator, *, budget: int, seed: int, starts: int | None = None,
+    def __init__(self, ev: Evaluator, *, budget: int | None, seed: int, starts: int | None = None,
                  presample: int | None = None, iterations: int | None = None, memory: int = 10,
-                 linesearch_steps: int = 10, chunk_iterations: int = 5):
-        self.ev, self.budget, self.seed = ev, int(budget), int(seed)
+                 linesearch_steps: int = 10, chunk_iterations: int = 5, time: float | None = None,
+                 patience: int | None = None):
         pr = ev.problem
-        s = int(starts or pr.option("starts", 16))
+        V = pr.n_variables
+        self.auto = budget is None
+        self.ev, self.budget, self.seed = ev, (2**62 if budget is None else int(budget)), int(seed)
+        s = int(starts or pr.option("starts", int(np.clip(5 * V, 16, 64)) if self.auto else 16))
         self.S = -(-s // ev.n_devices) * ev.n_devices
-        self.presample = min(int(presample or pr.option("presample", 8 * self.S)),
+        self.presample = min(int(presample or pr.option("presample", 1024 * V if self.auto else 8 * self.S)),
                              max(self.S, self.budget // (4 * ev.n_circuits)))
-        self.iterations = int(iterations or pr.option("iterations", 200))
+        self.iterations = int(iterations or pr.option("iterations", 400 if self.auto else 200))
         self.linesearch_steps = int(linesearch_steps)
         self.chunk_iterations = int(chunk_iterations)
         self.memory = int(memory)
+        self.time = time if time is not None else pr.option("time")
+        self.patience = patience if patience is not None else (40 if self.auto else None)
         from ..align import placement_of
 
-        self.placement = placement_of(pr) if pr.objective == "points" else None
+        self.placement = placement_of(pr, ev) if pr.objective == "points" else None
 
     def init(self) -> GradientState:
         S, V = self.S, self.ev.problem.n_variables
@@ -123,7 +138,7 @@ class Gradient(PresampledStarts):
         p = counted(p, len(ok))
         targets = jnp.asarray(np.asarray(pr.option("targets"), dtype=float))
         s, th, t, _ = (np.asarray(a) for a in icp_similarity(jnp.asarray(xy), targets))
-        X = apply_similarity(pr, pr.to_file_units(U[ok]), s, th, t)
+        X = apply_similarity(pr, pr.to_file_units(U[ok]), s, th, t, self.placement)
         U2 = np.clip(pr.to_unit(X), 0.0, 1.0)
         b2 = evaluate(ev, U2, b.circuit[ok])
         p = recorded(p, U2, b2)
@@ -177,14 +192,23 @@ class Gradient(PresampledStarts):
                            lbfgs=lbfgs.select(moved, lbfgs.to_numpy(new_state), st.lbfgs))
 
     def searched(self, st: GradientState) -> GradientState:
+        n = 0
         for _ in range(self.chunk_iterations):
             if (int(st.iteration) >= self.iterations or not st.active.any()
-                    or int(st.progress.evaluations) + 2 * self.S + self.S > self.budget):
+                    or int(st.progress.evaluations) + 2 * self.S + self.S > self.budget
+                    or (self.time is not None and float(st.progress.wall_s) >= float(self.time))
+                    or (self.patience is not None and int(st.stall) >= self.patience)):
                 st = st._replace(progress=st.progress._replace(done=np.bool_(True)))
                 break
             st = self._iteration(st)
+            n += 1
         # the exact objective at the current iterates decides the best (S evaluations)
         U = np.asarray(lbfgs.u_of_v(jnp.asarray(st.v)))
         p = recorded(st.progress, U, evaluate(self.ev, U, st.c))
+        # no start improves: the best has not dropped by 1e-6 (relative) for `patience` iterations
+        if float(p.best_value) < float(st.mark) - 1e-6 * abs(float(st.mark)) or not np.isfinite(st.mark):
+            st = st._replace(mark=np.float64(p.best_value), stall=np.int64(0))
+        else:
+            st = st._replace(stall=np.int64(st.stall + n))
         return st._replace(progress=next_chunk(p))
 

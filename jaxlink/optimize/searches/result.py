@@ -29,7 +29,18 @@ class SearchResult:
       was stopped before its end).
     - `seed`, `budget`, `file`, `objective_kind`, `variables` (bounds in file units), `samples`,
       `devices`: what was searched, and how.
+    - `search_wall_s`: `wall_s` without compilation, `compile_s`: the compilation in it
+      (tracing, lowering, XLA; `jaxlink/optimize/timing.py`); `trace`: the best-so-far over time,
+      a list of `{evaluations, seconds, objective}` (seconds: search seconds without compilation;
+      objective: the search's exact value at its samples) at every chunk that improved it.
+    - `best_file`: the path of the best design's mechanism file, when one was written
+      (`run(..., out=...)`: `OUT.best.toml`), else None.
     - `extra`: method-specific entries of the JSON document (`uniform`: "grid" or "coordinate").
+
+    **Methods:** `best_file_text()` (the input file's text with the best design's values and its
+    guesses on the found circuit: `jaxlink kinematics` on it traces the search's path) and
+    `best_mechanism()` (that file read back, a `Mechanism`); both need the result of `run` on
+    this process's evaluator (a result read back from JSON has neither).
     """
 
     method: str
@@ -45,13 +56,35 @@ class SearchResult:
     wall_s: float
     complete: bool
     seed: int
-    budget: int
+    budget: int | None
     file: str | None
     objective_kind: str
     variables: Mapping[str, list]
     samples: int
     devices: int
     extra: Mapping[str, Any] = dataclasses.field(default_factory=dict)
+    search_wall_s: float = 0.0
+    compile_s: float = 0.0
+    trace: tuple = ()
+    best_file: str | None = None
+    _best: Any = dataclasses.field(default=None, repr=False, compare=False)  # (evaluator, u, circuit)
+
+    def best_file_text(self, text: str | None = None) -> str:
+        """The best design as a complete mechanism file (`jaxlink/optimize/best_file.py`): the
+        searched file's text (or `text`) with the design's parameters and guesses on its circuit."""
+        if self._best is None:
+            raise ValueError("this result has no feasible design (or was not made by `run` in this process)")
+        from ..best_file import best_file_text
+
+        ev, u, c = self._best
+        return best_file_text(ev, u, c, text)
+
+    def best_mechanism(self):
+        """The best design as a `Mechanism` (`best_file_text()` read back): `jaxlink.solve` on it,
+        from its own guesses, traces the search's path."""
+        from ...files.reader import loads
+
+        return loads(self.best_file_text(), file=self.best_file or (self.file or "<best design>"))
 
     def to_json(self) -> dict:
         """The JSON document of `jaxlink optimize --out` (a fresh dict)."""
@@ -77,13 +110,40 @@ class SearchResult:
             "samples": self.samples,
             "devices": self.devices,
             "complete": self.complete,
+            "search_wall_s": self.search_wall_s,
+            "compile_s": self.compile_s,
+            "trace": [dict(t) for t in self.trace],
+            "best_file": self.best_file,
         }
         out.update(self.extra)
         return out
 
 
-def summarized(ev: Evaluator, method: str, p: Progress, *, seed: int, budget: int, complete: bool,
-               extra: Mapping[str, Any] | None = None) -> SearchResult:
+def trace_point(p: Progress) -> dict:
+    """One entry of the best-so-far trace: evaluations, search seconds (without compilation), the
+    best objective at the search's samples."""
+    return {"evaluations": int(p.evaluations), "seconds": float(p.wall_s - p.compile_s),
+            "objective": float(p.best_value)}
+
+
+def traced(log_path) -> list:
+    """The best-so-far trace recorded in a search's log (`OUT.log.jsonl`), for a resumed search."""
+    import json
+
+    out: list = []
+    best = float("inf")
+    for line in open(log_path, encoding="utf-8").read().splitlines():
+        r = json.loads(line)
+        v = r.get("best_value")
+        if v is not None and v < best:
+            best = v
+            out.append({"evaluations": int(r["evaluations"]),
+                        "seconds": float(r["wall_s"] - r.get("compile_s", 0.0)), "objective": float(v)})
+    return out
+
+
+def summarized(ev: Evaluator, method: str, p: Progress, *, seed: int, budget: int | None, complete: bool,
+               extra: Mapping[str, Any] | None = None, trace=(), best_file: str | None = None) -> SearchResult:
     """The result of a search on `ev` whose progress is `p`; the best design is re-measured
     (`Evaluator.report`)."""
     pr = ev.problem
@@ -97,6 +157,10 @@ def summarized(ev: Evaluator, method: str, p: Progress, *, seed: int, budget: in
     return SearchResult(
         method=method, **best, evaluations=int(p.evaluations), designs=designs,
         infeasible_fraction=(int(p.infeasible) / designs) if designs else 0.0, wall_s=float(p.wall_s),
-        complete=bool(complete), seed=int(seed), budget=int(budget), file=pr.mech.file, objective_kind=pr.objective,
+        complete=bool(complete), seed=int(seed), budget=None if budget is None else int(budget),
+        file=pr.mech.file, objective_kind=pr.objective,
         variables={n: [float(a), float(b)] for n, a, b in zip(pr.names, pr.lower, pr.upper)},
-        samples=len(pr.phis), devices=ev.n_devices, extra=dict(extra or {}))
+        samples=len(pr.phis), devices=ev.n_devices, extra=dict(extra or {}),
+        search_wall_s=float(p.wall_s - p.compile_s), compile_s=float(p.compile_s),
+        trace=tuple(dict(t) for t in trace), best_file=best_file,
+        _best=(ev, tuple(map(float, p.best_u)), int(p.best_circuit)) if p.found else None)

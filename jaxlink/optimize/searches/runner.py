@@ -3,8 +3,10 @@ optional progress bar; returns a `SearchResult`."""
 
 from __future__ import annotations
 
+import dataclasses
 import os
-import time
+import pathlib
+import time as _time
 
 import jax
 import numpy as np
@@ -13,13 +15,15 @@ from ...errors import MechanismError
 from .. import checkpoint as _checkpoint
 from ..evaluator import Evaluator
 from ..problem import Problem
+from ..timing import compile_clock
 from . import searcher
-from .result import SearchResult, summarized
+from .result import SearchResult, summarized, trace_point, traced
 
 
-def run(problem_or_evaluator: Problem | Evaluator, method: str, *, budget: int, seed: int = 0,
+def run(problem_or_evaluator: Problem | Evaluator, method: str, *, budget: int | None = None, seed: int = 0,
         out: str | os.PathLike | None = None, resume: bool = False, progress: bool = False,
         chunk: int | None = None, stop_after_chunks: int | None = None, checkpoint_s: float = 2.0,
+        time: float | None = None,
         **knobs) -> SearchResult:
     """Search the design space of a problem for the lowest objective.
 
@@ -28,8 +32,13 @@ def run(problem_or_evaluator: Problem | Evaluator, method: str, *, budget: int, 
     - `problem_or_evaluator`: a `Problem` (an `Evaluator` is built for it) or an `Evaluator`
       (its compiled functions are reused by later searches on it).
     - `method`: "uniform", "montecarlo" or "gradient" (`jaxlink.optimize.searches.searcher`).
-    - `budget`: mechanism evaluations allowed; `seed`: the random seed (same seed, same result).
-    - `out`: the JSON document's path; the state is checkpointed beside it after every chunk
+    - `budget`: mechanism evaluations allowed; None (default): the gradient search chooses its
+      sizes from the problem and stops when no start improves, the others take 10000
+      (`searches.searcher`). `seed`: the random seed (same seed, same result).
+    - `time`: seconds of wall time (compilation included) after which the search stops (its
+      result is then `complete`, with `"stopped": "time"` in `extra`); the gradient search ends
+      its presample after 30 % of it. A search stopped by time depends on the machine's speed.
+    - `out`: the JSON document's path; the state is checkpointed beside it (`checkpoint_s`)
       (`OUT.state.npz`, `OUT.log.jsonl`, `OUT` rewritten with the best so far) and `OUT` ends
       with `SearchResult.to_json()`. `resume`: continue the interrupted search of `out`; it ends
       with exactly the result of an uninterrupted one.
@@ -45,9 +54,13 @@ def run(problem_or_evaluator: Problem | Evaluator, method: str, *, budget: int, 
         ev = problem_or_evaluator
     else:
         ev = Evaluator(problem_or_evaluator, chunk=chunk or problem_or_evaluator.option("chunk", None))
-    search = searcher(ev, method, budget=budget, seed=seed, **knobs)
+    if time is None:
+        time = ev.problem.option("time")
+    search = searcher(ev, method, budget=budget, seed=seed, time=time, **knobs)
+    if budget is None and not getattr(search, "auto", False):
+        budget = int(search.budget)  # type: ignore[attr-defined]  # the method's default
     extra = {"uniform": knobs.get("uniform", "grid")} if method == "uniform" else {}
-    fp = _checkpoint.fingerprint(ev.problem, method, seed, budget, repr(sorted(knobs.items())))
+    fp = _checkpoint.fingerprint(ev.problem, method, seed, budget, repr(sorted(knobs.items())) + f"|{time}")
     files = _checkpoint.paths(out) if out else None
     writer = jax.process_index() == 0  # several processes (distributed.py): process 0 writes
     st = search.init()
@@ -62,14 +75,22 @@ def run(problem_or_evaluator: Problem | Evaluator, method: str, *, budget: int, 
         files[2].unlink(missing_ok=True)
         files[1].unlink(missing_ok=True)
 
+    # best-so-far over time: (evaluations, search seconds without compilation, objective) at
+    # every chunk that improved it (a resumed search reads the earlier ones from its log)
+    trace: list[dict] = []
+    if saved is not None and files and files[2].exists():
+        trace = traced(files[2])
+
     def result(complete: bool) -> SearchResult:
-        return summarized(ev, method, st.progress, seed=seed, budget=budget, complete=complete, extra=extra)
+        return summarized(ev, method, st.progress, seed=seed, budget=budget, complete=complete, extra=extra,
+                          trace=trace)
 
     bar = None
     if progress:
         from tqdm import tqdm
 
-        bar = tqdm(total=budget, initial=int(st.progress.evaluations), unit="eval", desc=method, dynamic_ncols=True)
+        bar = tqdm(total=budget, initial=int(st.progress.evaluations), unit="eval", desc=method,
+                   dynamic_ncols=True)
     chunks = 0
     pending: list[dict] = []  # log records of the chunks since the last checkpoint
     saved_at = -float("inf")
@@ -84,17 +105,27 @@ def run(problem_or_evaluator: Problem | Evaluator, method: str, *, budget: int, 
             _checkpoint.append_log(files[2], record)
         pending.clear()
         _checkpoint.write_json_atomic(files[0], result(False).to_json())
-        saved_at = time.perf_counter()
+        saved_at = _time.perf_counter()
 
+    timed_out = False
     try:
         while not search.done(st):
             if stop_after_chunks is not None and chunks >= stop_after_chunks:
                 break
-            t0 = time.perf_counter()
+            if time is not None and float(st.progress.wall_s) >= float(time):
+                timed_out = True
+                extra["stopped"] = "time"
+                break
+            t0 = _time.perf_counter()
             before = int(st.progress.evaluations)
-            st = search.step(st)
-            p = st.progress._replace(wall_s=np.float64(st.progress.wall_s + time.perf_counter() - t0))
+            best_before = float(st.progress.best_value)
+            with compile_clock() as clock:
+                st = search.step(st)
+            p = st.progress._replace(wall_s=np.float64(st.progress.wall_s + _time.perf_counter() - t0),
+                                     compile_s=np.float64(st.progress.compile_s + clock[0]))
             st = st._replace(progress=p)
+            if p.found and float(p.best_value) < best_before:
+                trace.append(trace_point(p))
             chunks += 1
             if bar is not None:
                 bar.update(int(p.evaluations) - before)
@@ -106,16 +137,27 @@ def run(problem_or_evaluator: Problem | Evaluator, method: str, *, budget: int, 
                     "infeasible": int(p.infeasible), "best_value": float(p.best_value) if p.found else None,
                     "best_parameters": (dict(zip(ev.problem.names, map(float, ev.problem.to_file_units(p.best_u))))
                                         if p.found else None),
-                    "wall_s": float(p.wall_s),
+                    "wall_s": float(p.wall_s), "compile_s": float(p.compile_s),
                 })
-                if time.perf_counter() - saved_at >= checkpoint_s:
+                if _time.perf_counter() - saved_at >= checkpoint_s:
                     checkpoint()
         if files and pending:
             checkpoint()  # the last chunks (also of a search stopped by stop_after_chunks)
     finally:
         if bar is not None:
             bar.close()
-    res = result(search.done(st))
+    res = result(search.done(st) or timed_out)
     if files and writer:
+        if res.parameters is not None and ev.mech.file and os.path.isfile(ev.mech.file):
+            path = best_file_path(files[0])
+            path.write_text(res.best_file_text(), encoding="utf-8")
+            res = dataclasses.replace(res, best_file=str(path))
         _checkpoint.write_json_atomic(files[0], res.to_json())
     return res
+
+
+def best_file_path(out) -> pathlib.Path:
+    """`OUT.best.toml` beside the search's JSON document `OUT.json`."""
+    out = pathlib.Path(out)
+    stem = out.with_suffix("") if out.suffix == ".json" else out
+    return pathlib.Path(str(stem) + ".best.toml")

@@ -1,0 +1,56 @@
+"""Defaults that work on a plain file: the similarity placement found from the structure, every
+circuit for the path objective, a search sized from the problem that stops by itself, `time`."""
+
+import json
+import pathlib
+import sys
+
+import jax
+import numpy as np
+
+from jaxlink import load
+from jaxlink.optimize import Evaluator, problem_from, run
+from jaxlink.optimize.align import detect_placement
+
+ROOT = pathlib.Path(__file__).resolve().parents[1]
+BENCH = ROOT / "benchmarks" / "fourbar-path" / "fourbar_path_benchmarks.json"
+sys.path.insert(0, str(ROOT / "experiments" / "fourbar_plain"))
+from generate import plain_text  # noqa: E402
+
+jax.config.update("jax_enable_x64", True)
+
+
+def plain(tmp_path, unit="deg"):
+    path = tmp_path / "yu1.toml"
+    path.write_text(plain_text("yu1", json.loads(BENCH.read_text())["yu1"]["target"], angle_unit=unit))
+    return load(path)
+
+
+def test_placement_and_circuits_are_found_from_the_structure(tmp_path):
+    ev = Evaluator(problem_from(plain(tmp_path)), chunk=16)
+    names = ev.problem.names
+    ix, iy, ia, il = detect_placement(ev)
+    assert (names[ix], names[iy], names[ia]) == ("p1x", "p1y", "a")
+    assert sorted(names[i] for i in il) == ["l1", "l2", "l3", "l4", "l5"]
+    assert ev.circuits == "all" and ev.n_circuits == 2
+    # not the path objective: the file's circuit; a length left fixed: no placement
+    assert Evaluator(problem_from(load("sewing-feed-opt")), chunk=16).n_circuits == 1
+    mech = plain(tmp_path)
+    table = dict(mech.tables["optimize"])
+    table["variables"] = {k: v for k, v in table["variables"].items() if k != "l5"}
+    assert detect_placement(Evaluator(problem_from(mech, table), chunk=16)) is None
+
+
+def test_a_search_without_budget_stops_by_itself_and_by_time(tmp_path):
+    ev = Evaluator(problem_from(plain(tmp_path), {"samples": 72, "report_samples": 720}), chunk=64)
+    small = dict(starts=4, presample=128, iterations=1000, patience=10)
+    res = run(ev, "gradient", seed=0, **small)
+    assert res.complete and res.budget is None and res.value is not None
+    # it stopped on no improvement, long before 1000 iterations
+    assert res.evaluations < 128 * 2 * 3 + 1000 * 4 * 2 * 5
+    assert res.trace and all(a["objective"] > b["objective"] for a, b in zip(res.trace, res.trace[1:]))
+    assert res.search_wall_s >= 0 and res.compile_s >= 0
+    timed = run(ev, "gradient", seed=0, time=1e-3, starts=4, presample=128)
+    assert timed.complete and timed.extra.get("stopped") == "time"
+    assert timed.evaluations < res.evaluations
+    assert np.isfinite(res.value)
