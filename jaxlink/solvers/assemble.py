@@ -14,13 +14,22 @@ centre, change point).
 
 - **first position**: Newton from the guess q0, with a step limit (0.5 rad for angles, 0.5 × the
   length scale for lengths) so that a rough guess does not jump to another branch;
+- **lead-in**: with the file's guesses, from `[input] start` to the first input, by the same
+  continuation; for a 2π-periodic input (`periodic_input`: a crank) reduced to at most half a
+  revolution, else at most `MAX_LEAD_IN` steps (`_lead_in_inputs`): bounded, never a hang;
 - **continuation**: position k starts from a Lagrange extrapolation of the last (up to three)
   converged solutions, which keeps the assembly branch of the guess through the revolution and
-  typically needs two or three Newton steps. After a failed position (e.g. past the reach of a
-  non-Grashof linkage) the next one restarts like a first position from the last converged q. The
-  sign of det of each diagonal block of Φ_q (each dyad's circuit) is tracked: a step that lands on
-  another circuit without a singular or failed position in between is redone in sub-steps, and
-  reported `max_steps` if that does not help — never as a converged position on another circuit;
+  typically needs two or three Newton steps. The sign of det of each diagonal block of Φ_q (each
+  dyad's circuit; for a dyad, the side σ of `_dyads`) is tracked: a step that lands on another
+  circuit without a singular or failed position in between is redone in sub-steps, and reported
+  `max_steps` if that does not help — never as a converged position on another circuit;
+- **re-assembly (the branch rule)**: at the first position, after a failed position (e.g. past the
+  reach of a non-Grashof linkage) and where a continuation step fails, the position is assembled
+  afresh *on the circuit kept* (that of the guess until a position converges, then of the last
+  converged one): from the closed form of the dyads where every block is one, else by
+  step-limited Newton from the last converged q and from the file's guess, with deflation of a
+  solution found on another circuit (`_reassemble`). So every window of inputs where the linkage
+  can be assembled is found, on the branch the closed form keeps;
 - **Newton step**: Φ_q from forward-mode AD (`jax.jacfwd`) with the sines and cosines of the
   angles computed once per iteration and stored (`_fusion.materialize`; XLA on CPU would otherwise
   recompute them in every fused kernel), solved by forward substitution over the diagonal blocks
@@ -28,6 +37,8 @@ centre, change point).
   `_linalg`), so that `vmap` over designs fuses. The part of Φ that does not depend on q is
   evaluated once per position. The pivot ratio is column-scaled (invariant under the units of the
   unknowns); below `singular_ratio` (default 10 √eps) an assembled position is `singular`;
+- **checked**: the residual at every returned q is evaluated afresh (with its own trigonometry,
+  `_check_residual`), independently of Newton's stopping rule;
 - **convergence** (`newton`): the loop stops at a √eps-level residual when the step is small
   enough that one final correction leaves an error below rtol / 100, applies that correction and
   reports the residual after it (evaluated once more, without trigonometry); at double roots
@@ -84,7 +95,7 @@ class NewtonOptions(NamedTuple):
       double root, e.g. an exact toggle). A position that ran out of steps returns its last
       evaluated iterate.
     - `max_steps_first`: iterations for the first position (from the file's guess), for every
-      position of `"independent"`, and after a position that failed (the continuation restarts).
+      position of `"independent"`, and for each try of a re-assembly after a position that failed.
     - `continuation`: False is the same as `method="independent"` (kept for compatibility).
     - `predictor_order`: 0 (previous solution), 1 (secant) or 2 (quadratic) extrapolation.
     - `singular_ratio`: below this column-scaled pivot ratio of Φ_q (≈ the sine of the angle
