@@ -19,7 +19,7 @@ class RESULTS:
 
     | code | name | from | meaning |
     |---|---|---|---|
-    | 0 | `converged` | all | solved (loops closed; reactions solved; ODE reached its end time) |
+    | 0 | `converged` | all | solved (loops closed, finite, regular; reactions solved; ODE at its end time) |
     | 1 | `max_steps` | assembly, cam | ran out of iterations / integration steps |
     | 2 | `singular` | assembly, reactions | a singular Jacobian or system (toggle, dead centre) |
     | 3 | `cannot_assemble` | assembly | the loops cannot close at this input |
@@ -30,6 +30,11 @@ class RESULTS:
 
     `RESULTS.name(code)` and `RESULTS.message(code)` read them; `names` and `messages` are the
     same as dictionaries.
+
+    Finiteness is part of convergence: a position whose values (unknowns, points, rates,
+    velocities, accelerations, reactions) are not finite is never `converged`. A position whose
+    loops closed at a singular Jacobian (toggle, change point) is *assembled* but `singular`, not
+    `converged`: its positions are given, its rates are not defined.
     """
 
     converged = 0

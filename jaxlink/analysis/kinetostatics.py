@@ -247,8 +247,13 @@ def reactions_one(mech: Mechanism, mdl: _bodies.Model, q, phi, p, omega, alpha=0
         ratio = jnp.min(jnp.abs(jnp.diag(lu))) / jnp.maximum(jnp.max(jnp.abs(A)), jnp.finfo(dtype).tiny)
         x = jax.scipy.linalg.lu_solve((lu, piv), Q)
     thr = default_singular_ratio(dtype) if singular_ratio is None else singular_ratio
-    finite = jnp.all(jnp.isfinite(x))
-    code = jnp.where(ratio < thr, RESULTS.singular, jnp.where(finite, RESULTS.converged, RESULTS.nonfinite))
+    # finiteness is part of convergence: the system (a NaN speed, non-finite accelerations) and
+    # the solution, in the units returned (forces, moments and torque × the length scale)
+    finite = (jnp.all(jnp.isfinite(x)) & jnp.all(jnp.isfinite(A)) & jnp.all(jnp.isfinite(Q))
+              & jnp.isfinite(L) & jnp.all(jnp.isfinite(x * L)) & jnp.all(jnp.isfinite(axes)))
+    code = jnp.where(~finite & ~(ratio < thr), RESULTS.nonfinite,
+                     jnp.where(ratio < thr, RESULTS.singular, RESULTS.converged))
+    code = jnp.where(jnp.all(jnp.isfinite(A)) & jnp.isfinite(ratio), code, RESULTS.nonfinite)
     ok = code == RESULTS.converged
     x = jnp.where(ok, x, 0.0)
     nj = len(mdl.joints)
@@ -389,6 +394,84 @@ def _jitted_points(mech, mdl, q, phis, p):
     return jax.vmap(one, in_axes=(0, 0, None))(q, phis, p)
 
 
+@functools.partial(jax.jit, static_argnums=(1,))
+def _jitted_velocities(mech, mdl, q, phis, p):
+    """Per position: centroids, angles, joint points and axes with their input derivatives."""
+    def one(q, phi, p):
+        mu, _ = rates(mech, q, phi, p, order=1)
+        one_ = jnp.ones_like(phi)
+        (c, a), (dc, da) = jax.jvp(lambda qq, ph: motion(mech, mdl, qq, ph, p), (q, phi), (mu, one_))
+        (pts, axes), (dpts, daxes) = jax.jvp(lambda qq, ph: _geometry(mech, mdl, qq, ph, p)[:2], (q, phi),
+                                             (mu, one_))
+        return c, dc, a, da, pts, dpts, axes, daxes
+
+    return jax.vmap(one, in_axes=(0, 0, None))(q, phis, p)
+
+
+def prismatic_errors(mech: Mechanism, q, phis, p=None, *, rtol: float = 1e-6) -> list:
+    """Check the `axis` of every prismatic joint against the kinematics: the joint's two bodies must
+    turn with the axis (its input derivative equals each body's angular rate; 0 for the ground), and
+    their relative velocity at the joint point must lie along it (the reaction is taken normal to
+    the axis: an axis naming another direction would put the guide's force in the wrong direction,
+    silently). A body's velocity field comes from its angle and a reference point (its centroid,
+    else one of its revolute joints); a body without them is not checked. Returns messages (empty
+    if all is well); tolerance `rtol` relative to the largest relative speed (m/rad), and rad/rad
+    for the rates. `q` (N, n) converged."""
+    mdl = _bodies.model(mech)
+    if not any(j.kind == "prismatic" for j in mdl.joints):
+        return []
+    q = jnp.asarray(q)
+    p = jnp.asarray(np.asarray(mech.parameters if p is None else p, dtype=q.dtype))
+    c, dc, a, da, pts, dpts, axes, daxes = (np.asarray(x, dtype=float) for x in _jitted_velocities(
+        mech, mdl, q, jnp.asarray(phis, dtype=q.dtype), p))
+    n = len(q)
+    out = []
+
+    def field(body, point):
+        """Velocity (n, 2) of `body` at `point` (n, 2) and its angular rate (n,), or None."""
+        if body < 0:
+            return np.zeros((n, 2)), np.zeros(n)
+        b = mdl.bodies[body]
+        if b.angle is None:
+            return None
+        if b.centroid is not None:
+            ref, dref = c[:, body], dc[:, body]
+        else:
+            rev = [k for k, j in enumerate(mdl.joints) if j.kind == "revolute" and body in (j.a, j.b)]
+            if not rev:
+                return None
+            ref, dref = pts[:, rev[0]], dpts[:, rev[0]]
+        w = da[:, body]
+        r = point - ref
+        return dref + np.stack([-w * r[:, 1], w * r[:, 0]], axis=1), w
+
+    for k, j in enumerate(mdl.joints):
+        if j.kind != "prismatic":
+            continue
+        fa, fb = field(j.a, pts[:, k]), field(j.b, pts[:, k])
+        names = ["the ground" if x < 0 else f"body '{mdl.bodies[x].name}'" for x in (j.a, j.b)]
+        for f, name in ((fa, names[0]), (fb, names[1])):
+            if f is not None and np.max(np.abs(daxes[:, k] - f[1])) > rtol:
+                out.append(f"prismatic joint '{j.name}': its axis does not turn with {name} (the axis turns at "
+                           f"up to {np.max(np.abs(daxes[:, k] - f[1])):.3g} rad/rad relative to it; check `axis`)")
+        if fa is None or fb is None:
+            continue
+        v = fb[0] - fa[0]
+        speed = np.hypot(v[:, 0], v[:, 1])
+        vmax = float(np.max(speed)) if n else 0.0
+        if not vmax > 0:
+            continue
+        u = np.stack([np.cos(axes[:, k]), np.sin(axes[:, k])], axis=1)
+        slip = np.abs(u[:, 0] * v[:, 1] - u[:, 1] * v[:, 0])
+        if np.max(slip) > rtol * vmax:
+            i = int(np.argmax(slip / np.maximum(speed, 1e-300)))
+            deg = float(np.degrees(np.arcsin(min(1.0, slip[i] / speed[i]))))
+            out.append(f"prismatic joint '{j.name}': its axis is not the sliding direction: the relative motion "
+                       f"of its bodies at the joint makes up to {deg:.3g}° with the axis (check `axis`: the "
+                       "reaction is normal to it)")
+    return out
+
+
 def rigidity_errors(mech: Mechanism, q, phis, p=None, *, rtol: float | None = None) -> list:
     """Check that the points the file attaches to each body move with it: its revolute joints, its
     centroid and the points where loads act on it. For a body with an `angle`, their coordinates in
@@ -396,7 +479,8 @@ def rigidity_errors(mech: Mechanism, q, phis, p=None, *, rtol: float | None = No
     positions; for a body without one, their mutual distances. Returns messages (empty if all is
     well) naming the body, the point and how much it drifts; tolerance `rtol` × the length scale
     (default max(1e-7, 1000 eps) of the dtype of `q`).
-    A prismatic joint's point slides on one of its bodies and is not checked. `q` (N, n) converged."""
+    A prismatic joint's point slides on one of its bodies and is not checked here; its axis is
+    (`prismatic_errors`, whose messages are appended). `q` (N, n) converged."""
     mdl = _bodies.model(mech)
     q = jnp.asarray(q)
     if rtol is None:
@@ -439,4 +523,4 @@ def rigidity_errors(mech: Mechanism, q, phis, p=None, *, rtol: float | None = No
             if drift > rtol * scale:
                 out.append(f"{name} is not fixed in body '{b.name}': {what} by {drift / unit:.4g} {lu} over the "
                            "positions (check its vector sum, and the body's angle)")
-    return out
+    return out + prismatic_errors(mech, q, phis, p)

@@ -10,8 +10,9 @@ units) and a circuit index c (which branch signs of the dyads; 0 = the file's). 
    Newton continuation; differentiable in p by implicit differentiation);
 4. the point's path (and its input derivatives if the objective needs them, `_kinematics`),
    with the solved unknowns q and the parameters p (`PathData`);
-5. the objective. A design is *feasible* iff the start and every position converged; an
-   infeasible design gets the value +inf (never NaN), and it is counted.
+5. the objective. A design is *feasible* iff the start and every position converged and the
+   path's pieces (points and their derivatives) are finite; an infeasible design gets the value
+   +inf (never NaN), and it is counted.
 
 One *mechanism evaluation* = one design solved over its revolution (on one circuit: with
 `circuits = "all"` a design costs one evaluation per circuit).
@@ -133,6 +134,10 @@ class Evaluator:
         xy = t.points[:, k] / lf
         dxy = None if t.dpoints is None else t.dpoints[:, k] / lf
         ddxy = None if t.ddpoints is None else t.ddpoints[:, k] / lf
+        # finiteness is part of convergence: a path with non-finite pieces is infeasible
+        for piece in (xy, dxy, ddxy):
+            if piece is not None:
+                feasible = feasible & jnp.all(jnp.isfinite(piece))
         return PathData(xy, dxy, ddxy, sol.q, p), feasible
 
     def value_single(self, u, c, rank: bool = False):

@@ -27,7 +27,7 @@ import numpy as np
 from ..analysis.transfer import transfer
 from ..model.mechanism import Mechanism
 from ..results import RESULTS
-from ..solvers.assemble import solve
+from ..solvers.assemble import default_rtol, solve
 from . import grid as _grid
 
 OUTPUTS = ("position", "velocity", "acceleration", "rates")
@@ -95,22 +95,39 @@ def kinematics_table(mech: Mechanism, phis, *, omega: float = 1.0, outputs=OUTPU
     p = np.asarray(mech.parameters if p is None else p, dtype=dtype)
     phis_a = jnp.asarray(phis, dtype=dtype)
     sol = solve(mech, phis_a, p=jnp.asarray(p))
-    result = np.asarray(sol.result)
-    conv = result == RESULTS.converged
-    assembled = conv | (result == RESULTS.singular)
+    result = np.asarray(sol.result).copy()
     # the residual at the returned q, for every row (the solver's own is measured where it stopped)
-    resid = jax.jit(jax.vmap(lambda qq, ph: jnp.max(jnp.abs(mech.residual(qq, ph, jnp.asarray(p))))))(
-        sol.q, phis_a)
+    resid = np.asarray(jax.jit(jax.vmap(lambda qq, ph: jnp.max(jnp.abs(mech.residual(qq, ph, jnp.asarray(p))))))(
+        sol.q, phis_a), dtype=float)
+    result = _checked(result, resid, mech, p)
     q = np.asarray(sol.q)  # in the dtype of the solve (the drawing measures its rounding)
-    pts = np.where(assembled[:, None, None], np.asarray(sol.points, dtype=float), np.nan)
     v = a = mu = nu = None
     if order:
         tr = transfer(mech, phis_a, sol.q, p=jnp.asarray(p), order=order)
-        mu = np.where(conv[:, None], np.asarray(tr.mu, dtype=float) * omega, np.nan)
-        v = np.where(conv[:, None, None], np.asarray(tr.dpoints, dtype=float) * omega, np.nan)
+        with np.errstate(all="ignore"):
+            mu = np.asarray(tr.mu, dtype=float) * omega
+            v = np.asarray(tr.dpoints, dtype=float) * omega
+            if order == 2:
+                nu = np.asarray(tr.nu, dtype=float) * omega**2
+                a = np.asarray(tr.ddpoints, dtype=float) * omega**2
+        # finiteness is part of convergence: rates, velocities or accelerations that are not finite
+        # (a NaN speed, lengths so small that Φ_q underflows) make the position `nonfinite`
+        finite = np.ones(len(result), bool)
+        for x in (mu, v, nu, a):
+            if x is not None:
+                finite &= np.all(np.isfinite(x.reshape(len(result), -1)), axis=1)
+        result = np.where((result == RESULTS.converged) & ~finite, RESULTS.nonfinite, result).astype(result.dtype)
+    conv = result == RESULTS.converged
+    assembled = conv | (result == RESULTS.singular)
+    pts = np.where(assembled[:, None, None], np.asarray(sol.points, dtype=float), np.nan)
+    if order:
+        assert mu is not None and v is not None
+        mu = np.where(conv[:, None], mu, np.nan)
+        v = np.where(conv[:, None, None], v, np.nan)
         if order == 2:
-            nu = np.where(conv[:, None], np.asarray(tr.nu, dtype=float) * omega**2, np.nan)
-            a = np.where(conv[:, None, None], np.asarray(tr.ddpoints, dtype=float) * omega**2, np.nan)
+            assert nu is not None and a is not None
+            nu = np.where(conv[:, None], nu, np.nan)
+            a = np.where(conv[:, None, None], a, np.nan)
     if input_values is None:
         input_values = (np.rad2deg(np.asarray(phis, dtype=float)) if mech.input_kind == "angle"
                         else np.asarray(phis, dtype=float))
@@ -143,6 +160,22 @@ def kinematics_table(mech: Mechanism, phis, *, omega: float = 1.0, outputs=OUTPU
         mech.input_kind, _grid.full_turn(phis, mech.input_kind), q, pts,
         v if "velocity" in outputs else None, a if "acceleration" in outputs else None,
         float(omega), rpm, p)
+
+
+def _checked(result, resid, mech: Mechanism, p):
+    """The solver's codes, re-checked: an assembled row whose residual at the returned q is not
+    finite is `nonfinite`, one whose residual exceeds twice the tolerance (rtol × length scale;
+    max(rtol, √eps) × scale at a `singular` row) is `max_steps` — whatever the solver's stopping
+    rule said."""
+    dtype = np.asarray(p).dtype
+    rtol = default_rtol(dtype)
+    scale = float(mech.length_scale(jnp.asarray(p)))
+    loose = max(rtol, float(np.sqrt(np.finfo(dtype).eps)))
+    limit = 2.0 * scale * np.where(result == RESULTS.singular, loose, rtol)
+    assembled = (result == RESULTS.converged) | (result == RESULTS.singular)
+    out = np.where(assembled & ~np.isfinite(resid), RESULTS.nonfinite, result)
+    out = np.where(assembled & np.isfinite(resid) & ~(resid <= limit), RESULTS.max_steps, out)
+    return out.astype(result.dtype)
 
 
 def write_csv(out, table: KinematicsTable) -> None:

@@ -14,13 +14,22 @@ centre, change point).
 
 - **first position**: Newton from the guess q0, with a step limit (0.5 rad for angles, 0.5 × the
   length scale for lengths) so that a rough guess does not jump to another branch;
+- **lead-in**: with the file's guesses, from `[input] start` to the first input, by the same
+  continuation; for a 2π-periodic input (`periodic_input`: a crank) reduced to at most half a
+  revolution, else at most `MAX_LEAD_IN` steps (`_lead_in_inputs`): bounded, never a hang;
 - **continuation**: position k starts from a Lagrange extrapolation of the last (up to three)
   converged solutions, which keeps the assembly branch of the guess through the revolution and
-  typically needs two or three Newton steps. After a failed position (e.g. past the reach of a
-  non-Grashof linkage) the next one restarts like a first position from the last converged q. The
-  sign of det of each diagonal block of Φ_q (each dyad's circuit) is tracked: a step that lands on
-  another circuit without a singular or failed position in between is redone in sub-steps, and
-  reported `max_steps` if that does not help — never as a converged position on another circuit;
+  typically needs two or three Newton steps. The sign of det of each diagonal block of Φ_q (each
+  dyad's circuit; for a dyad, the side σ of `_dyads`) is tracked: a step that lands on another
+  circuit without a singular or failed position in between is redone in sub-steps, and reported
+  `max_steps` if that does not help — never as a converged position on another circuit;
+- **re-assembly (the branch rule)**: at the first position, after a failed position (e.g. past the
+  reach of a non-Grashof linkage) and where a continuation step fails, the position is assembled
+  afresh *on the circuit kept* (that of the guess until a position converges, then of the last
+  converged one): from the closed form of the dyads where every block is one, else by
+  step-limited Newton from the last converged q and from the file's guess, with deflation of a
+  solution found on another circuit (`_reassemble`). So every window of inputs where the linkage
+  can be assembled is found, on the branch the closed form keeps;
 - **Newton step**: Φ_q from forward-mode AD (`jax.jacfwd`) with the sines and cosines of the
   angles computed once per iteration and stored (`_fusion.materialize`; XLA on CPU would otherwise
   recompute them in every fused kernel), solved by forward substitution over the diagonal blocks
@@ -28,6 +37,8 @@ centre, change point).
   `_linalg`), so that `vmap` over designs fuses. The part of Φ that does not depend on q is
   evaluated once per position. The pivot ratio is column-scaled (invariant under the units of the
   unknowns); below `singular_ratio` (default 10 √eps) an assembled position is `singular`;
+- **checked**: the residual at every returned q is evaluated afresh (with its own trigonometry,
+  `_check_residual`), independently of Newton's stopping rule;
 - **convergence** (`newton`): the loop stops at a √eps-level residual when the step is small
   enough that one final correction leaves an error below rtol / 100, applies that correction and
   reports the residual after it (evaluated once more, without trigonometry); at double roots
@@ -56,6 +67,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from ..files import expr as _expr
 from ..model import structure as _structure
 from ..model.mechanism import Mechanism
 from ..results import RESULTS, Solution, SolveStats
@@ -83,7 +95,7 @@ class NewtonOptions(NamedTuple):
       double root, e.g. an exact toggle). A position that ran out of steps returns its last
       evaluated iterate.
     - `max_steps_first`: iterations for the first position (from the file's guess), for every
-      position of `"independent"`, and after a position that failed (the continuation restarts).
+      position of `"independent"`, and for each try of a re-assembly after a position that failed.
     - `continuation`: False is the same as `method="independent"` (kept for compatibility).
     - `predictor_order`: 0 (previous solution), 1 (secant) or 2 (quadratic) extrapolation.
     - `singular_ratio`: below this column-scaled pivot ratio of Φ_q (≈ the sine of the angle
@@ -104,6 +116,7 @@ class NewtonOptions(NamedTuple):
 METHODS = ("auto", "closed_form", "continuation", "independent")
 EXTRA_STEPS = 32  # more Newton steps allowed while converging linearly (double roots)
 REFINE_TRIES = 24  # sub-steps tried when the continuation lands on another circuit
+MAX_LEAD_IN = 4096  # lead-in positions at most (a longer way takes longer steps)
 
 
 def default_rtol(dtype) -> float:
@@ -382,114 +395,328 @@ def _newton_kw(rtol, thr, trig_p):
     return {"rtol": rtol, "singular_ratio": thr, "trig_p": trig_p}
 
 
-def _first_positions(mech, opts, P, phi0, Q0, tol, rtol, thr, trig_p):
-    """Newton from the guesses at the first input, one per design (step-limited)."""
-    return jax.vmap(lambda p, q0, t, f, tp: newton(mech, q0, f, p, tol=t, max_steps=opts.max_steps_first,
-                                                   limit_step=True, **_newton_kw(rtol, thr, tp)))(
-        P, Q0, tol, phi0, trig_p)
+def _coefficient(node, name):
+    """The integer k when `node` is k·name + (terms free of name), else None."""
+    if not any(n.name == name for n in _expr.names_in(node)):
+        return 0
+    if isinstance(node, _expr.Name):
+        return 1
+    if isinstance(node, _expr.Neg):
+        k = _coefficient(node.arg, name)
+        return None if k is None else -k
+    if isinstance(node, _expr.Bin) and node.op in "+-":
+        a, b = _coefficient(node.left, name), _coefficient(node.right, name)
+        if a is None or b is None:
+            return None
+        return a + b if node.op == "+" else a - b
+    if isinstance(node, _expr.Bin) and node.op == "*":
+        for num, other in ((node.left, node.right), (node.right, node.left)):
+            if isinstance(num, _expr.Num) and float(num.value).is_integer():
+                k = _coefficient(other, name)
+                return None if k is None else int(num.value) * k
+    return None
 
 
-def _continuation_one(mech, opts, p, phis, first, tol, kw):
-    """Newton + continuation along phis[1:] for one design, from its solved first position.
+def _periodic_node(node, name) -> bool:
+    """Whether `node` is a 2π-periodic function of `name` (free of it, or built from sin/cos/tan of
+    integer multiples of it)."""
+    if not any(n.name == name for n in _expr.names_in(node)):
+        return True
+    if isinstance(node, _expr.Call):
+        if node.func in ("sin", "cos", "tan"):
+            return _coefficient(node.args[0], name) is not None or _periodic_node(node.args[0], name)
+        return all(_periodic_node(a, name) for a in node.args)
+    if isinstance(node, _expr.Neg):
+        return _periodic_node(node.arg, name)
+    if isinstance(node, _expr.Bin):
+        return _periodic_node(node.left, name) and _periodic_node(node.right, name)
+    return False
 
-    Position k starts from the extrapolation of the last converged positions. After a position
-    that failed (not converged, not singular) it restarts like a first position (step-limited
-    Newton from the last converged q, `max_steps_first`) instead of extrapolating across the gap.
-    The sign of det of each diagonal block of Φ_q (each dyad's circuit) is compared with the last
-    converged position: a change without a singular or failed position in between means the step
-    jumped to another circuit, and the position is re-solved in sub-steps from the last converged
-    position (half the step, halved again after every failure, each sub-step required to converge
-    on the same circuit; at most `REFINE_TRIES` Newton solves, else the position is reported
-    `max_steps`: refine the input step). The attempts are one `while_loop` around the single
-    Newton solve, whose trip count is 1 where nothing flipped: under `vmap` the sub-steps cost
-    nothing unless some lane needs them (`lax.cond` would evaluate both branches)."""
-    q_first, _, code_first, _, signs_first = first
-    hist_q = (q_first, q_first, q_first)
-    hist_phi = (phis[0], phis[0], phis[0])
-    n_good = (code_first == RESULTS.converged).astype(jnp.int32)
+
+def periodic_input(mech: Mechanism) -> bool:
+    """Whether the loop equations are 2π-periodic in the input: an angle input that appears only as
+    k·input + c (k an integer) in the angle of a polar vector, or inside sin/cos/tan of such (a
+    revolute crank). A length input (a slider) never is."""
+    if mech.input_kind != "angle":
+        return False
+    name = mech.input_name
+    for _, terms in mech.loops:
+        for t in terms:
+            for node in t.nodes():
+                if t.polar and node is t.angle and _coefficient(node, name) is not None:
+                    continue
+                if not _periodic_node(node, name):
+                    return False
+    return True
+
+
+def reduce_angles(mech: Mechanism, q, bound: float):
+    """`q` with every angle unknown larger than `bound` in magnitude reduced to (−π, π] (exactly:
+    `remainder` is exact in floating point). Adding whole turns to an angle of magnitude A costs
+    ≈ eps·A of accuracy, so a guess far beyond `bound` could not be reproduced to the tolerance."""
+    two_pi = 2 * np.pi
+    ang = np.array([k == "angle" for k in mech.unknown_kinds])
+    if not ang.any():
+        return q
+    r = jnp.remainder(q, two_pi)
+    r = jnp.where(r > np.pi, r - two_pi, r)
+    return jnp.where(jnp.asarray(ang) & (jnp.abs(q) > bound), r, q)
+
+
+class _Track(NamedTuple):
+    """The continuation state of one design: the last (up to three) converged positions, newest
+    first (`hq`, `hph`, `ng` of them valid), the circuit to keep (`sign_ref`: sign of det of each
+    diagonal block of Φ_q; 0 = not known yet, any circuit), the code of the last position, and the
+    guess of the file (`q_file`, a candidate of every re-assembly)."""
+
+    hq: tuple
+    hph: tuple
+    ng: jax.Array
+    sign_ref: jax.Array
+    last: jax.Array
+    q_file: jax.Array
+
+
+def _circuit(mech: Mechanism, q, phi, p):
+    """Sign of det of each diagonal block of Φ_q at (q, φ): the circuit (assembly branch) of q."""
+    jac = jax.jacfwd(mech.residual)(q, phi, p)
+    return _linear_solve(mech, signs=True)(jac, jnp.zeros_like(q))[2]
+
+
+def _track_start(mech: Mechanism, q0, phi, p) -> _Track:
+    """The state before the first position: nothing converged, the guess `q0` (holding at `phi`)
+    selects the circuit: the sign of det of each block of Φ_q at the guess, or, when every block is
+    a dyad, at the closed form on the branches nearest to the guess (`_dyads.solve_nearest`, as the
+    closed-form path chooses them); 0 (any circuit) where that is singular."""
+    dyads = _dyads.classify(mech)
+    q_sel = q0 if dyads is None else _dyads.solve_nearest(mech, dyads, q0, phi, p)[0]
+    sg = _circuit(mech, q_sel, phi, p)
+    sg = jnp.where(jnp.isfinite(sg), sg, 0.0)
+    return _Track((q0, q0, q0), (phi, phi, phi), jnp.zeros((), jnp.int32), sg,
+                  jnp.asarray(RESULTS.cannot_assemble, jnp.int8), q0)
+
+
+def _same_circuit(sg, sign_ref):
+    return jnp.all((sg == sign_ref) | (sign_ref == 0))
+
+
+def _deflated_newton(mech: Mechanism, q, phi, p, roots, active, unit, scale, max_steps):
+    """Newton on the deflated residual M(q) = Φ(q) Π_i (1 / |(q − r_i) / unit|² + 1) over the
+    `active` roots r_i (Farrell, Birkisson & Funke's deflation: M has the zeros of Φ except the
+    r_i, so Newton from a guess near a known root finds another one), step-limited (0.5 rad, 0.5 ×
+    the length scale). Zero iterations when no root is active. Returns q (not polished)."""
+    dtype = jnp.result_type(q)
+    n_active = jnp.sum(active.astype(jnp.int32))
+
+    def m(x):
+        d2 = jnp.sum(((x[None, :] - roots) / unit) ** 2, axis=1)
+        fac = jnp.prod(jnp.where(active, 1.0 / jnp.maximum(d2, 1e-300) + 1.0, 1.0))
+        return mech.residual(x, phi, p) * fac
+
+    def body(st):
+        k, x, _ = st
+        val = m(x)
+        jac = jax.jacfwd(m)(x)
+        dx, _ = solve_small(jac, val)
+        dqa = jnp.max(jnp.abs(dx) / unit)
+        ok = jnp.all(jnp.isfinite(dx))
+        dx = jnp.where(ok, dx * jnp.minimum(1.0, 0.5 / jnp.maximum(dqa, 1e-30)), 0.0)
+        rn = jnp.max(jnp.abs(mech.residual(x - dx, phi, p)))
+        return k + 1, x - dx, ~ok | (rn <= 1e-6 * scale)
+
+    init = (jnp.zeros((), jnp.int32), q, n_active == 0)
+    out = jax.lax.while_loop(lambda st: (~st[2]) & (st[0] < max_steps), body, init)
+    return out[1].astype(dtype)
+
+
+def _reassemble(mech, opts, p, phi, st: _Track, tol, kw, active):
+    """A position after one that did not assemble: a fresh assembly instead of an extrapolation
+    across the gap, on the circuit `st.sign_ref` (each block's sign of det Φ_q: for a dyad, the
+    side of its known vector that its first link lies on, the branch σ of `_dyads`).
+
+    Candidates: the closed form of the dyads on the branches of the last converged position (when
+    every block is a dyad), the last converged q and the file's guess; each by step-limited Newton.
+    A candidate that converges on another circuit is deflated (`_deflated_newton`) and the search
+    goes on from the candidates with the roots found so far removed, up to twice the number of
+    candidates in all. Returns `(q, rnorm, result, steps, signs)`; `max_steps` where only another
+    circuit was found (the branch is kept, never switched). No iteration where not `active`."""
+    dtype = jnp.result_type(st.hq[0])
+    scale = mech.length_scale(p)
+    unit = _units(mech, scale, dtype)
+    cands = [st.hq[0], st.q_file]
+    dyads = _dyads.classify(mech)
+    if dyads is not None:
+        _, _, _, sigma = _dyads.solve_nearest(mech, dyads, st.hq[0], st.hph[0], p)
+        q_cf, _, _, _ = _dyads.solve(mech, dyads, sigma, st.hq[0], phi, p)
+        cands = [q_cf]  # exact: the other candidates add nothing
+    C = jnp.stack(cands)
+    nc = len(cands)
+    T = 2 * nc
+    n = C.shape[1]
+
+    def cond(s):
+        t, done, nroots = s[0], s[1], s[4]
+        return (~done) & ((t < nc) | ((nroots > 0) & (t < T)))
+
+    def body(s):
+        t, _, out, roots, nroots, ksum = s
+        live = jnp.arange(T) < nroots
+        i = t % nc
+        guess = C[i]
+        plain = nroots == 0
+        # a plain try from the same guess as the first one would only repeat it
+        skip = plain & (i > 0) & jnp.all(guess == C[0])
+        qd = _deflated_newton(mech, guess, phi, p, roots, live, unit, scale, opts.max_steps_first)
+        q, rn, code, k, sg = newton(mech, qd, phi, p, tol=jnp.where(skip, jnp.nan, tol), limit_step=plain,
+                                    max_steps=jnp.where(plain, opts.max_steps_first, opts.max_steps), **kw)
+        ksum = ksum + k
+        conv = code == RESULTS.converged
+        ok = (code == RESULTS.singular) | (conv & _same_circuit(sg, st.sign_ref))
+        other = conv & ~ok
+        # what to report if nothing better is found: a position on another circuit (`max_steps`)
+        # over a failure
+        better = ~skip & (ok | (other & (out[2] != RESULTS.max_steps)) | (t == 0))
+        rep = (q, rn, jnp.where(other, jnp.asarray(RESULTS.max_steps, jnp.int8), code), ksum, sg)
+        out = jax.tree_util.tree_map(lambda a, b: jnp.where(better, a, b), rep, out)
+        out = out[:3] + (ksum,) + out[4:]
+        roots = jnp.where((jnp.arange(T)[:, None] == nroots) & other, q[None, :], roots)
+        nroots = nroots + other.astype(jnp.int32)
+        return t + 1, ok, out, roots, nroots, ksum
+
     zero = jnp.zeros((), jnp.int32)
-
-    def step(carry, phi):
-        hist_q, hist_phi, n_good, sign_ref, last = carry
-        restart = (last != RESULTS.converged) & (last != RESULTS.singular)
-        check = last == RESULTS.converged
-
-        def cond(st):
-            return (~st[6]) & (st[5] <= REFINE_TRIES)
-
-        def body(st):
-            hq, hph, ng, phi_cur, h, tries, done, out, ksum = st
-            first_try = tries == 0
-            last_sub = jnp.abs(phi - phi_cur) <= 1.000001 * jnp.abs(h)
-            phi_try = jnp.where(first_try | last_sub, phi, phi_cur + h)
-            rs = first_try & restart
-            guess = jnp.where(rs, hq[0], _extrapolate(hq, hph, ng, phi_try, opts.predictor_order))
-            res = newton(mech, guess, phi_try, p, tol=tol, limit_step=rs,
-                         max_steps=jnp.where(rs, opts.max_steps_first, opts.max_steps), **kw)
-            q, rn, code, k, sg = res
-            ksum = ksum + k
-            conv = code == RESULTS.converged
-            same = jnp.all(sg == sign_ref)
-            # first try: done unless it converged on another circuit; sub-steps: accepted when
-            # converged on the circuit, done when the last one is
-            flipped = first_try & conv & check & ~same
-            ok = ~first_try & conv & same
-            fin = (first_try & ~flipped) | (ok & last_sub)
-            # (where the sub-steps fail: the first try's position, on the other circuit, `max_steps`)
-            code = jnp.where(flipped, jnp.asarray(RESULTS.max_steps, code.dtype), code)
-            out = jax.tree_util.tree_map(lambda a, b: jnp.where(fin | flipped, a, b), (q, rn, code, ksum, sg), out)
-            out = out[:3] + (ksum,) + out[4:]
-            h = jnp.where(first_try, 0.5 * (phi - hph[0]), jnp.where(ok, h, 0.5 * h))
-            return (_push(hq, q, ok), _push(hph, phi_try, ok), ng + ok.astype(jnp.int32),
-                    jnp.where(first_try, hph[0], jnp.where(ok, phi_try, phi_cur)), h, tries + 1, fin, out, ksum)
-
-        dtype = jnp.result_type(phi)
-        out0 = (hist_q[0], jnp.asarray(jnp.inf, dtype), jnp.asarray(RESULTS.max_steps, jnp.int8), zero, sign_ref)
-        init = (hist_q, hist_phi, n_good, hist_phi[0], jnp.zeros((), dtype), zero, jnp.zeros((), bool), out0, zero)
-        q, rn, code, k, sg = jax.lax.while_loop(cond, body, init)[7]
-        good = code == RESULTS.converged
-        carry = (_push(hist_q, q, good), _push(hist_phi, phi, good), n_good + good.astype(jnp.int32),
-                 jnp.where(good, sg, sign_ref), code)
-        return carry, (q, rn, code, k)
-
-    init = (hist_q, hist_phi, n_good, signs_first, code_first)
-    return jax.lax.scan(step, init, phis[1:])[1]
+    out0 = (st.hq[0], jnp.asarray(jnp.inf, dtype), jnp.asarray(RESULTS.cannot_assemble, jnp.int8), zero,
+            st.sign_ref)
+    init = (zero, ~jnp.asarray(active), out0, jnp.zeros((T, n), dtype), zero, zero)
+    return jax.lax.while_loop(cond, body, init)[2]
 
 
-def _lead_in(mech: Mechanism, opts: NewtonOptions, p, phi_a, phi_b, q0, tol, kw):
-    """The configuration at `phi_b` of one design, from the guess `q0` that holds at `phi_a`: Newton
-    along `phi_a + k h`, k = 0 … n−1 (h = (phi_b − phi_a)/n, |h| ≤ 5° for an angle input, ≤ 5 % of
-    the length scale for a length input), each from the secant extrapolation of the last two
-    converged positions (step-limited from `q0` at k = 0 and after a failed position). Returns the
-    last converged q (q0 if none): the guess for `phi_b`. A `while_loop` with a traced trip count,
-    so the same under `jit` as eagerly; zero trips when phi_b = phi_a."""
-    dtype = jnp.result_type(q0)
-    if mech.input_kind == "length":
+def _advance(mech, opts, p, tol, kw, st: _Track, phi):
+    """One position of the continuation: `(state, (q, rnorm, result, steps))`.
+
+    After a converged or singular position: Newton from the Lagrange extrapolation of the last
+    converged positions. The sign of det of each diagonal block of Φ_q (each dyad's circuit) is
+    compared with the last converged position: a change without a singular or failed position in
+    between means the step jumped to another circuit, and the position is re-solved in sub-steps
+    from the last converged position (half the step, halved again after every failure, each
+    sub-step required to converge on the same circuit; at most `REFINE_TRIES` Newton solves, else
+    the position is reported `max_steps`: refine the input step). The attempts are one
+    `while_loop` around the single Newton solve, whose trip count is 1 where nothing flipped: under
+    `vmap` the sub-steps cost nothing unless some lane needs them (`lax.cond` would evaluate both
+    branches).
+
+    After a position that did not assemble (and at the first position), or where this
+    continuation step failed (next to a toggle the predictor may be far off): a re-assembly on the
+    circuit kept (`_reassemble`), so that every assemblable window of the input is found on the
+    branch of the guess, as the closed form finds it. The history restarts there."""
+    hist_q, hist_phi, n_good, sign_ref, last = st.hq, st.hph, st.ng, st.sign_ref, st.last
+    restart = (last != RESULTS.converged) & (last != RESULTS.singular)
+    check = last == RESULTS.converged
+    zero = jnp.zeros((), jnp.int32)
+    dtype = jnp.result_type(phi)
+
+    def cond(s):
+        return (~s[6]) & (s[5] <= REFINE_TRIES)
+
+    def body(s):
+        hq, hph, ng, phi_cur, h, tries, done, out, ksum = s
+        first_try = tries == 0
+        last_sub = jnp.abs(phi - phi_cur) <= 1.000001 * jnp.abs(h)
+        phi_try = jnp.where(first_try | last_sub, phi, phi_cur + h)
+        guess = _extrapolate(hq, hph, ng, phi_try, opts.predictor_order)
+        q, rn, code, k, sg = newton(mech, guess, phi_try, p, tol=tol, limit_step=False,
+                                    max_steps=opts.max_steps, **kw)
+        ksum = ksum + k
+        conv = code == RESULTS.converged
+        same = _same_circuit(sg, sign_ref)
+        # first try: done unless it converged on another circuit; sub-steps: accepted when
+        # converged on the circuit, done when the last one is
+        flipped = first_try & conv & check & ~same
+        ok = ~first_try & conv & same
+        fin = (first_try & ~flipped) | (ok & last_sub)
+        # (where the sub-steps fail: the first try's position, on the other circuit, `max_steps`)
+        code = jnp.where(flipped, jnp.asarray(RESULTS.max_steps, code.dtype), code)
+        out = jax.tree_util.tree_map(lambda a, b: jnp.where(fin | flipped, a, b), (q, rn, code, ksum, sg), out)
+        out = out[:3] + (ksum,) + out[4:]
+        h = jnp.where(first_try, 0.5 * (phi - hph[0]), jnp.where(ok, h, 0.5 * h))
+        return (_push(hq, q, ok), _push(hph, phi_try, ok), ng + ok.astype(jnp.int32),
+                jnp.where(first_try, hph[0], jnp.where(ok, phi_try, phi_cur)), h, tries + 1, fin, out, ksum)
+
+    out0 = (hist_q[0], jnp.asarray(jnp.inf, dtype), jnp.asarray(RESULTS.max_steps, jnp.int8), zero, sign_ref)
+    init = (hist_q, hist_phi, n_good, hist_phi[0], jnp.zeros((), dtype), zero, restart, out0, zero)
+    cont = jax.lax.while_loop(cond, body, init)[7]
+    # where the continuation failed (next to a toggle the predictor can be far off) or after a
+    # failed position: re-assemble
+    failed = ~restart & (cont[2] != RESULTS.converged) & (cont[2] != RESULTS.singular)
+    re = _reassemble(mech, opts, p, phi, st, tol, kw, restart | failed)
+    use = restart | (failed & ((re[2] == RESULTS.converged) | (re[2] == RESULTS.singular)))
+    q, rn, code, k, sg = jax.tree_util.tree_map(lambda a, b: jnp.where(use, a, b), re, cont)
+    k = jnp.where(failed, re[3] + cont[3], k)
+    good = code == RESULTS.converged
+    # a re-assembled position starts a new history (no extrapolation across the gap)
+    hq = tuple(jnp.where(use & good, q, h) for h in hist_q)
+    hph = tuple(jnp.where(use & good, phi, h) for h in hist_phi)
+    ng = jnp.where(use & good, 0, n_good)
+    new = _Track(_push(hq, q, good), _push(hph, phi, good), ng + good.astype(jnp.int32),
+                 jnp.where(good, sg, sign_ref), code, st.q_file)
+    return new, (q, rn, code, k)
+
+
+def _lead_in_inputs(mech: Mechanism, p, phi_ref, phi0):
+    """The inputs of the lead-in from `phi_ref` (where the guesses hold) to `phi0`: `(start, h, n)`,
+    positions start + k h, k = 0 … n−1. For an input the loops are 2π-periodic in
+    (`periodic_input`), the way is reduced to at most half a revolution: `start` ≡ `phi_ref` (mod
+    2π) lies within π of `phi0`. |h| ≤ 5° for an angle, ≤ 5 % of the length scale for a length, and
+    n ≤ `MAX_LEAD_IN` (a longer way takes longer steps, which may fail: never a hang). A
+    non-finite way has no steps."""
+    dtype = jnp.result_type(phi0)
+    gap = phi0 - phi_ref
+    if periodic_input(mech):
+        two_pi = 2 * np.pi
+        r = jnp.remainder(gap, two_pi)  # exact
+        gap = jnp.where(r > np.pi, r - two_pi, r)
+        max_step = jnp.asarray(np.deg2rad(5.0), dtype)
+    elif mech.input_kind == "length":
         max_step = 0.05 * mech.length_scale(p)
     else:
         max_step = jnp.asarray(np.deg2rad(5.0), dtype)
-    gap = phi_b - phi_a
     steps = jnp.ceil(jnp.abs(gap) / max_step)
-    n = jnp.where(jnp.isfinite(steps), jnp.minimum(steps, 2**30), 0).astype(jnp.int32)
-    h = gap / jnp.maximum(n, 1).astype(dtype)
+    n = jnp.where(jnp.isfinite(steps), jnp.minimum(steps, MAX_LEAD_IN), 0).astype(jnp.int32)
+    h = jnp.where(n > 0, gap / jnp.maximum(n, 1).astype(dtype), 0.0)
+    return phi0 - gap, h, n
 
-    def body(st):
-        k, q1, q2, f1, f2, ng, failed = st
-        phi = phi_a + k.astype(dtype) * h
-        restart = (k == 0) | failed
-        d = f1 - f2
-        lin = q1 + (q1 - q2) * jnp.where(jnp.abs(d) > 0, (phi - f1) / jnp.where(jnp.abs(d) > 0, d, 1.0), 0.0)
-        guess = jnp.where(restart, jnp.where(ng > 0, q1, q0), jnp.where(ng >= 2, lin, q1))
-        q, _, code, _, _ = newton(mech, guess, phi, p, tol=tol, limit_step=restart,
-                                  max_steps=jnp.where(restart, opts.max_steps_first, opts.max_steps), **kw)
-        good = (code == RESULTS.converged) | (code == RESULTS.singular)
-        return (k + 1, jnp.where(good, q, q1), jnp.where(good, q1, q2), jnp.where(good, phi, f1),
-                jnp.where(good, f1, f2), ng + good.astype(jnp.int32), ~good)
 
-    zero = jnp.zeros((), jnp.int32)
-    init = (zero, q0, q0, phi_a, phi_a, zero, jnp.zeros((), bool))
-    out = jax.lax.while_loop(lambda st: st[0] < n, body, init)
-    return out[1]
+def _continuation_one(mech, opts, p, phis, q0, phi_ref, tol, kw):
+    """Newton with continuation along `phis` for one design from its guess `q0` (holding at
+    `phi_ref`, or at phis[0] when `phi_ref` is None): the lead-in (`_lead_in_inputs`) and then
+    every position, each by `_advance`. Returns `(q, rnorm, result, steps)` of the positions."""
+    if phi_ref is None:
+        st = _track_start(mech, q0, phis[0], p)
+    else:
+        start, h, n = _lead_in_inputs(mech, p, phi_ref, phis[0])
+        st = _track_start(mech, q0, start, p)
+        dtype = jnp.result_type(phis)
+
+        def lead(s):
+            k, track = s
+            return k + 1, _advance(mech, opts, p, tol, kw, track, start + k.astype(dtype) * h)[0]
+
+        st = jax.lax.while_loop(lambda s: s[0] < n, lead, (jnp.zeros((), jnp.int32), st))[1]
+    return jax.lax.scan(lambda s, phi: _advance(mech, opts, p, tol, kw, s, phi), st, phis)[1]
+
+
+def _lead_in(mech: Mechanism, opts: NewtonOptions, p, phi_a, phi_b, q0, tol, kw):
+    """The configuration at `phi_b` of one design from the guess `q0` holding at `phi_a` (for
+    `"independent"`): the continuation of the lead-in (`_lead_in_inputs`). Returns the last
+    converged q (q0 if none)."""
+    start, h, n = _lead_in_inputs(mech, p, phi_a, phi_b)
+    dtype = jnp.result_type(q0)
+
+    def lead(s):
+        k, track = s
+        return k + 1, _advance(mech, opts, p, tol, kw, track, start + k.astype(dtype) * h)[0]
+
+    st = jax.lax.while_loop(lambda s: s[0] < n, lead, (jnp.zeros((), jnp.int32), _track_start(mech, q0, start, p)))[1]
+    return st.hq[0]
 
 
 def _solve_batch_impl(mech: Mechanism, opts: NewtonOptions, points: bool, P, phis, Q0, phi_ref):
@@ -499,34 +726,50 @@ def _solve_batch_impl(mech: Mechanism, opts: NewtonOptions, points: bool, P, phi
     dtype = jnp.result_type(Q0)
     B = P.shape[0]
     shared = phis.ndim == 1
-    N = phis.shape[-1]
     ax = None if shared else 0  # vmap axis of phis over the designs
     rtol = opts.rtol if opts.rtol is not None else default_rtol(dtype)
     tol = rtol * jax.vmap(mech.length_scale)(P)
     thr = singular_threshold(opts, dtype)
     method = method_for(mech, opts)
     phi0 = jnp.broadcast_to(phis[0], (B,)) if shared else phis[:, 0]
+    # a guess angle so large that adding whole turns to it loses the tolerance is reduced first
+    Q0 = reduce_angles(mech, Q0, rtol / (4 * float(np.finfo(dtype).eps)))
+    ref_finite = jnp.ones((B,), bool) if phi_ref is None else jnp.isfinite(phi_ref)
     if method == "closed_form":
         # every (design, input) pair is independent, on the branches (circuits) of the guess at the
         # reference input. The trigonometry of the inputs (N values) and of the angle parameters
         # (B) is computed once, not inside every fused kernel.
-        ref = phi0 if phi_ref is None else phi_ref
+        ref = phi0 if phi_ref is None else jnp.where(ref_finite, phi_ref, 0.0)
         trig_in, trig_p = materialize((_dyads.input_trig(mech, phis), _dyads.parameter_trig(mech, P)))
+        tol = jnp.where(ref_finite, tol, jnp.nan)
         return jax.vmap(
             lambda p, ph, q0, t, ti, tp, r: _closed_form_path(mech, p, ph, q0, t, ti, tp, thr, r, points),
             in_axes=(0, ax, 0, 0, ax, 0, 0))(P, phis, Q0, tol, trig_in, trig_p, ref)
     # Newton: a design whose tolerance is not finite (a NaN or infinite length, even one that only
-    # a point uses) or whose guess is not finite (it selects no branch) is `nonfinite` at every
-    # position, without iterating (a NaN tolerance makes `newton` stop at once)
-    bad = ~jnp.isfinite(tol) | ~jnp.all(jnp.isfinite(Q0), axis=1)
+    # a point uses), whose guess is not finite (it selects no branch) or whose guess holds at a
+    # non-finite input is `nonfinite` at every position, without iterating (a NaN tolerance makes
+    # `newton` stop at once)
+    bad = ~jnp.isfinite(tol) | ~jnp.all(jnp.isfinite(Q0), axis=1) | ~ref_finite
     tol = jnp.where(bad, jnp.nan, tol)
+    Q0 = jnp.where(bad[:, None], 0.0, Q0)
+    phi_ref = None if phi_ref is None else jnp.where(ref_finite, phi_ref, phi0)
     trig_p = materialize(_dyads.parameter_trig(mech, P))
-    if phi_ref is not None:  # continue from where the guesses hold to the first input
-        Q0 = jax.vmap(lambda p, a, b, q0, t, tp: _lead_in(mech, opts, p, a, b, q0, t, _newton_kw(rtol, thr, tp)))(
-            P, phi_ref, phi0, Q0, tol, trig_p)
-    first = _first_positions(mech, opts, P, phi0, Q0, tol, rtol, thr, trig_p)
-    q1, r1, c1, k1, _ = first
-    out = _newton_path(mech, opts, P, phis, Q0, tol, rtol, thr, trig_p, first, N, method)
+    kw_of = lambda tp: _newton_kw(rtol, thr, tp)  # noqa: E731
+    if method == "independent":
+        if phi_ref is not None:  # continue from where the guesses hold to the first input
+            Q0 = jax.vmap(lambda p, a, b, q0, t, tp: _lead_in(mech, opts, p, a, b, q0, t, kw_of(tp)))(
+                P, phi_ref, phi0, Q0, tol, trig_p)
+        out = jax.vmap(lambda p, ph, q0, t, tp: jax.vmap(
+            lambda f: newton(mech, q0, f, p, tol=t, max_steps=opts.max_steps_first, limit_step=True,
+                             **kw_of(tp))[:4])(ph),
+            in_axes=(0, ax, 0, 0, 0))(P, phis, Q0, tol, trig_p)
+    elif phi_ref is None:
+        out = jax.vmap(lambda p, ph, q0, t, tp: _continuation_one(mech, opts, p, ph, q0, None, t, kw_of(tp)),
+                       in_axes=(0, ax, 0, 0, 0))(P, phis, Q0, tol, trig_p)
+    else:
+        out = jax.vmap(lambda p, ph, q0, r, t, tp: _continuation_one(mech, opts, p, ph, q0, r, t, kw_of(tp)),
+                       in_axes=(0, ax, 0, 0, 0, 0))(P, phis, Q0, phi_ref, tol, trig_p)
+    out = _check_residual(mech, P, phis, out, tol, rtol, dtype)
     if not points:
         return out + (None,)
     # the points, with the sines and cosines of the angle parameters known
@@ -535,25 +778,21 @@ def _solve_batch_impl(mech: Mechanism, opts: NewtonOptions, points: bool, P, phi
     return out + (pts,)
 
 
-def _newton_path(mech, opts, P, phis, Q0, tol, rtol, thr, trig_p, first, N, method):
-    """The positions after the first by Newton (continuation or independent)."""
+def _check_residual(mech, P, phis, out, tol, rtol, dtype):
+    """The residual at the returned q, evaluated afresh (with its own sines and cosines),
+    independently of Newton's stopping rule: an assembled position whose loops do not close there
+    to twice its tolerance (rtol × scale; max(rtol, √eps) × scale for `singular`) is `max_steps`
+    (`nonfinite` if not finite), with that residual."""
+    q, rn, code, k = out
     ax = None if phis.ndim == 1 else 0
-    q1, r1, c1, k1, _ = first
-
-    def join(first, rest):
-        return jax.tree_util.tree_map(lambda a, b: jnp.concatenate([a[:, None], b], axis=1), first, rest)
-
-    if N == 1:
-        return q1[:, None], r1[:, None], c1[:, None], k1[:, None]
-    if method == "independent":
-        rest = jax.vmap(lambda p, ph, q0, t, tp: jax.vmap(
-            lambda f: newton(mech, q0, f, p, tol=t, max_steps=opts.max_steps_first, limit_step=True,
-                             **_newton_kw(rtol, thr, tp))[:4])(ph[1:]),
-            in_axes=(0, ax, 0, 0, 0))(P, phis, Q0, tol, trig_p)
-        return join((q1, r1, c1, k1), rest)
-    rest = jax.vmap(lambda p, ph, f, t, tp: _continuation_one(mech, opts, p, ph, f, t, _newton_kw(rtol, thr, tp)),
-                    in_axes=(0, ax, 0, 0, 0))(P, phis, first, tol, trig_p)
-    return join((q1, r1, c1, k1), rest)
+    r = jax.vmap(jax.vmap(lambda qq, ph, p: jnp.max(jnp.abs(mech.residual(qq, ph, p))), in_axes=(0, 0, None)),
+                 in_axes=(0, ax, 0))(q, phis, P)
+    loose = max(1.0, float(np.sqrt(np.finfo(dtype).eps)) / rtol)
+    conv, sing = code == RESULTS.converged, code == RESULTS.singular
+    limit = 2.0 * tol[:, None] * jnp.where(sing, loose, 1.0)
+    bad = (conv | sing) & ~(r <= limit)
+    code = jnp.where(bad, jnp.where(jnp.isfinite(r), RESULTS.max_steps, RESULTS.nonfinite).astype(code.dtype), code)
+    return q, jnp.where(bad, r, rn), code, k
 
 
 @functools.partial(jax.custom_jvp, nondiff_argnums=(0, 1, 2))
