@@ -1,11 +1,27 @@
-"""Test configuration: float64 on (the library itself follows the dtype of its inputs)."""
+"""Test configuration: float64 on (the library itself follows the dtype of its inputs), and one
+persistent compilation cache for the whole run.
 
+Many tests load the same scenes afresh (a new `Mechanism` structure compiles anew in memory) and
+many run the command line in subprocesses: with JAX's persistent compilation cache
+(jaxlink/cache.py) in a directory made for this run — shared by the pytest-xdist workers and their
+subprocesses through `JAXLINK_CACHE_DIR`, removed at the end — identical programs compile once.
+A run that sets `JAXLINK_CACHE_DIR` itself keeps it (an empty value: no cache)."""
+
+import atexit
 import os
+import shutil
+import tempfile
 
 import jax
 
-# The command line turns on JAX's persistent compilation cache (jaxlink/cache.py); tests call it
-# in-process, so keep them hermetic: no cache unless the run asks for one.
-os.environ.setdefault("JAXLINK_CACHE_DIR", "")
+if "JAXLINK_CACHE_DIR" not in os.environ:
+    _run_cache = tempfile.mkdtemp(prefix="jaxlink-test-xla-")
+    os.environ["JAXLINK_CACHE_DIR"] = _run_cache
+    _owner = os.getpid()
+    atexit.register(lambda: shutil.rmtree(_run_cache, ignore_errors=True) if os.getpid() == _owner else None)
 
 jax.config.update("jax_enable_x64", True)
+
+from jaxlink.cache import enable_compilation_cache  # noqa: E402
+
+enable_compilation_cache()

@@ -68,13 +68,19 @@ def test_points_nan_where_not_assembled():
 
 
 def test_non_finite_points_are_not_converged():
-    """A point whose expression has no real value (asin(2)) makes its positions `nonfinite`."""
+    """A point whose expression has no real value at some positions (the square root of a
+    negative sine: finite at the guess, where the file is checked) makes them `nonfinite`."""
     old = 'P = ["a @ phi2", "cx @ phi3", "cy @ phi3 + 90"]'
     assert old in FOURBAR
-    m = jl.loads(FOURBAR.replace(old, 'P = ["a @ phi2", "cx @ asin(2 * a / a)"]'))
-    sol = jl.solve(m, np.deg2rad(np.arange(0.0, 360.0, 30.0)))
-    assert np.all(np.asarray(sol.result) == jl.RESULTS.nonfinite)
-    assert not np.any(np.asarray(sol.converged))
+    m = jl.loads(FOURBAR.replace(old, 'P = ["a @ phi2", "sqrt(sin(phi2)) * cx @ phi3"]'))
+    phis = np.deg2rad(np.arange(0.0, 360.0, 30.0))
+    sol = jl.solve(m, phis)
+    negative = np.sin(phis) < 0
+    assert negative.sum() == 5
+    assert np.all(np.asarray(sol.result)[negative] == jl.RESULTS.nonfinite)
+    assert not np.any(np.asarray(sol.converged)[negative])
+    assert np.all(np.asarray(sol.converged)[~negative])
+    assert np.all(np.isnan(np.asarray(sol.points)[negative])) and np.all(np.isfinite(np.asarray(sol.points)[~negative]))
     # the loops themselves closed: q is the closed form's
     ref = jl.solve(jl.load("four-bar"), np.deg2rad(np.arange(0.0, 360.0, 30.0)))
     np.testing.assert_allclose(np.asarray(sol.q), np.asarray(ref.q), rtol=0, atol=1e-14)

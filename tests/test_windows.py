@@ -100,9 +100,10 @@ def test_four_bar_windows_same_positions(sets):
     x = {"a": 20.0, "b": 60.0, "c": 45.0, "d": 55.0, **sets}
     geometric, clear = reachable(x["a"], x["b"], x["c"], x["d"], phis)
     compare(closed, cont, geometric, clear)
-    # the same file forced through the continuation: the closed form of the dyads re-assembles
-    forced = jl.solve(dyadic, phis, p, options=jl.NewtonOptions(method="continuation"))
-    compare(closed, forced, geometric, clear)
+    if "a" not in sets:  # (once: a third compilation) the same file forced through the
+        # continuation: the closed form of the dyads re-assembles
+        forced = jl.solve(dyadic, phis, p, options=jl.NewtonOptions(method="continuation"))
+        compare(closed, forced, geometric, clear)
 
 
 def test_chebyshev_like_windows_same_positions_and_points():
@@ -127,7 +128,8 @@ def test_lead_in_reduced_to_one_revolution():
     two = jl.loads(TWO_VECTORS)
     phis = np.deg2rad(np.arange(40.0, 100.0, 5.0))
     ref = jl.solve(two, phis)
-    for start in (400.0, 1e9):  # 1e9°: 2e8 lead-in steps unreduced (hours); compilation dominates
+    # 5e5° (the file format's largest start is 1e4 rad ≈ 5.7e5°): 1e5 lead-in steps unreduced
+    for start in (5e5,):
         t = time.perf_counter()
         sol = jl.solve(jl.loads(with_start(TWO_VECTORS, start)), phis)
         assert time.perf_counter() - t < 300
@@ -183,7 +185,11 @@ main = {loop}
 
 @pytest.mark.parametrize("text", [FOUR_BAR, TWO_VECTORS])
 def test_huge_guess_is_reduced_and_checked(text):
-    mech = jl.loads(text.replace("phi3 = 30.0", "phi3 = 1e300"))
+    # a file refuses such a guess (tests/test_input_domains.py); the Python API can still give one
+    mech = jl.loads(text)
+    guess = np.array(mech.guess)
+    guess[mech.unknown_names.index("phi3")] = 1e300
+    mech = mech.replace(guess=guess)
     phis = np.deg2rad(np.arange(0.0, 360.0, 30.0))
     sol = jl.solve(mech, phis)
     p = jnp.asarray(mech.parameters)
