@@ -210,3 +210,21 @@ def test_optimize_out_to_a_named_pipe_writes_to_the_pipe(tmp_path):
     assert rc == 0, err
     assert stat.S_ISFIFO(os.stat(fifo).st_mode)  # still a pipe, not replaced by a file
     assert got and '"complete": true' in got[-1]
+
+
+def test_search_time_and_checkpoint_interval_have_domains():
+    """`[optimize] time`, `--time` and `run(time=, checkpoint_s=)` are refused outside their domains."""
+    import jaxlink as jl
+    from jaxlink.cli import main
+    from jaxlink.optimize import problem_from, run
+
+    mech = jl.load("sewing-feed-opt")
+    for bad in (-1, 0, float("nan"), float("inf"), "x"):
+        with pytest.raises(jl.MechanismError, match=r"optimize\.time"):
+            problem_from(mech, {"time": bad})
+    problem = problem_from(mech)
+    with pytest.raises(jl.MechanismError, match="time"):
+        run(problem, "montecarlo", budget=8, time=float("nan"))
+    with pytest.raises(jl.MechanismError, match="checkpoint_s"):
+        run(problem, "montecarlo", budget=8, checkpoint_s=-1)
+    assert main(["optimize", "sewing-feed-opt", "--method", "montecarlo", "--time", "nan"]) == 2

@@ -108,10 +108,9 @@ def cmd_optimize(args) -> int:
     problem = problem_from(mech)
     budget = args.budget if args.budget is not None else problem.option("budget")
     seed = args.seed if args.seed is not None else problem.option("seed", 0)
-    time_s = args.time if args.time is not None else problem.option("time")
-    if time_s is not None and (isinstance(time_s, bool) or not isinstance(time_s, (int, float))
-                               or not math.isfinite(time_s) or not 0 < time_s <= 1e7):
-        raise MechanismError(f"--time {time_s!r}: must be a number of seconds, more than 0 and at most 1e7")
+    if args.time is not None and not (math.isfinite(args.time) and 0 < args.time <= 1e7):
+        raise MechanismError(f"--time {args.time!r}: must be a number of seconds, more than 0 and at most 1e7")
+    time_s = args.time if args.time is not None else problem.option("time")  # the key: checked by problem_from
     chunk = args.chunk if args.chunk is not None else problem.option("chunk", None)
     progress = sys.stderr.isatty() if args.progress == "auto" else args.progress == "on"
     knobs = {}

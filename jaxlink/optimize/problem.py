@@ -42,7 +42,7 @@ NUMBER_DOMAINS = {
     "al_rho": (0.0, 1e12, False), "stroke": (0.0, 1e12, False), "stroke_tol": (0.0, 1e12, True),
     "dwell_weight": (0.0, 1e6, True), "abs_tol": (0.0, 1e12, False), "mu_min": (0.0, 90.0, True),
     "rod_max": (0.0, 90.0, True), "toggle_min": (0.0, 180.0, True), "amax_max": (0.0, 1e12, False),
-    "penalty": (0.0, 1e12, True), "rpm": (-1e7, 1e7, True),
+    "penalty": (0.0, 1e12, True), "rpm": (-1e7, 1e7, True), "time": (0.0, 1e7, False),
 }
 #: share of the available memory one batch of the evaluator may take (the rest: JAX, the searches)
 MEMORY_SHARE = 0.5

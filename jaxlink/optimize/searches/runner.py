@@ -55,7 +55,11 @@ def run(problem_or_evaluator: Problem | Evaluator, method: str, *, budget: int |
     else:
         ev = Evaluator(problem_or_evaluator, chunk=chunk or problem_or_evaluator.option("chunk", None))
     if time is None:
-        time = ev.problem.option("time")
+        time = ev.problem.option("time")  # checked by problem_from
+    elif isinstance(time, bool) or not isinstance(time, (int, float)) or not 0 < time <= 1e7:
+        raise MechanismError(f"time = {time!r}: must be a number of seconds, more than 0 and at most 1e7")
+    if isinstance(checkpoint_s, bool) or not isinstance(checkpoint_s, (int, float)) or not 0 <= checkpoint_s < 1e9:
+        raise MechanismError(f"checkpoint_s = {checkpoint_s!r}: must be a number of seconds, 0 or more")
     search = searcher(ev, method, budget=budget, seed=seed, time=time, **knobs)
     if budget is None and not getattr(search, "auto", False):
         budget = int(search.budget)  # type: ignore[attr-defined]  # the method's default
