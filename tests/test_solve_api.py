@@ -84,3 +84,27 @@ def test_non_finite_points_are_not_converged():
     # the loops themselves closed: q is the closed form's
     ref = jl.solve(jl.load("four-bar"), np.deg2rad(np.arange(0.0, 360.0, 30.0)))
     np.testing.assert_allclose(np.asarray(sol.q), np.asarray(ref.q), rtol=0, atol=1e-14)
+
+
+def test_the_same_structure_loaded_twice_compiles_once():
+    """Structures are equal by content (not identity): a file loaded again or renamed reuses the
+    compiled solve; a changed loop or another `[input] start` (a constant of the lead-in) does not."""
+    a = jl.loads(FOURBAR, file="a.toml")
+    b = jl.loads(FOURBAR.replace('name = "four-bar"', 'name = "renamed"'), file="b.toml")
+    c = jl.loads(FOURBAR.replace('"b @ phi3"', '"b @ phi3 + 0"'))
+    d = jl.loads(FOURBAR.replace('name = "phi2"', 'name = "phi2"\nstart = 5.0'))
+    assert a.structure is not b.structure and a.structure == b.structure
+    assert hash(a.structure) == hash(b.structure)
+    assert a.structure != c.structure and a.structure != d.structure
+    phis = np.deg2rad(np.arange(0.0, 360.0, 7.0))  # a shape no other test solves
+    from jaxlink.solvers.assemble import _solve_jit
+
+    n0 = _solve_jit._cache_size()
+    sa = jl.solve(a, phis)
+    n1 = _solve_jit._cache_size()
+    sb = jl.solve(b, phis)
+    assert n1 == n0 + 1 and _solve_jit._cache_size() == n1
+    assert np.all(np.asarray(sa.converged)) and np.all(np.asarray(sb.converged))
+    np.testing.assert_allclose(np.asarray(sa.q), np.asarray(sb.q), rtol=0, atol=1e-9)
+    jl.solve(c, phis)
+    assert _solve_jit._cache_size() == n1 + 1

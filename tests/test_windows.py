@@ -67,6 +67,10 @@ CHEB_DYADIC = CHEBYSHEV.replace("LOOP", '["a @ phi2", "b @ phi3", "-c @ phi4", "
 CHEB_TWO = CHEBYSHEV.replace("LOOP", '["a @ phi2", "0.4 * b @ phi3", "0.6 * b @ phi3", "-c @ phi4", "-d @ 0"]')
 
 ASSEMBLED = (RESULTS.converged, RESULTS.singular)
+# one grid for every solve of these files, and one worker for the whole module (`--dist
+# loadgroup`): structures are equal by content, so the compiled solves are shared between tests
+PHIS = np.deg2rad(np.arange(0.0, 360.0, 1.0))
+pytestmark = pytest.mark.xdist_group("windows")
 
 
 def assembled(sol):
@@ -94,7 +98,7 @@ def test_four_bar_windows_same_positions(sets):
     dyadic, two = jl.loads(FOUR_BAR), jl.loads(TWO_VECTORS)
     assert jl.solve(two, np.zeros(1)).stats.steps[0] > 0  # Newton (not the closed form) on this file
     p = dyadic.with_parameters(**sets)
-    phis = np.deg2rad(np.arange(0.0, 360.0, 1.0))
+    phis = PHIS
     closed = jl.solve(dyadic, phis, p)
     cont = jl.solve(two, phis, p)
     x = {"a": 20.0, "b": 60.0, "c": 45.0, "d": 55.0, **sets}
@@ -108,7 +112,7 @@ def test_four_bar_windows_same_positions(sets):
 
 def test_chebyshev_like_windows_same_positions_and_points():
     dyadic, two = jl.loads(CHEB_DYADIC), jl.loads(CHEB_TWO)
-    phis = np.deg2rad(np.arange(0.0, 360.0, 1.0))
+    phis = PHIS
     closed, cont = jl.solve(dyadic, phis), jl.solve(two, phis)
     geometric, clear = reachable(1.0, 2.5, 1.2, 2.0, phis)
     compare(closed, cont, geometric, clear)
@@ -126,7 +130,7 @@ def with_start(text, start):
 
 def test_lead_in_reduced_to_one_revolution():
     two = jl.loads(TWO_VECTORS)
-    phis = np.deg2rad(np.arange(40.0, 100.0, 5.0))
+    phis = np.roll(PHIS, -40)  # from 40°
     ref = jl.solve(two, phis)
     # 5e5° (the file format's largest start is 1e4 rad ≈ 5.7e5°): 1e5 lead-in steps unreduced
     for start in (5e5,):
@@ -148,7 +152,7 @@ def test_nonfinite_or_huge_start_is_a_result_not_a_hang():
         for start in (float("nan"), float("inf")):
             bad = jl.Mechanism(parameters=mech.parameters, guess=mech.guess,
                                structure=dataclasses.replace(mech.structure, input_start=start))
-            sol = jl.solve(bad, np.deg2rad([0.0, 10.0]))
+            sol = jl.solve(bad, PHIS)
             assert np.all(np.asarray(sol.result) == RESULTS.nonfinite)
     # a length input (a slider driving a crank) whose guesses hold 1000 km away: the lead-in takes
     # at most MAX_LEAD_IN steps and then returns result codes
@@ -190,10 +194,10 @@ def test_huge_guess_is_reduced_and_checked(text):
     guess = np.array(mech.guess)
     guess[mech.unknown_names.index("phi3")] = 1e300
     mech = mech.replace(guess=guess)
-    phis = np.deg2rad(np.arange(0.0, 360.0, 30.0))
+    phis = PHIS
     sol = jl.solve(mech, phis)
     p = jnp.asarray(mech.parameters)
-    r = np.array([float(jnp.max(jnp.abs(mech.residual(q, f, p)))) for q, f in zip(sol.q, phis)])
+    r = np.asarray(jax.vmap(lambda q, f: jnp.max(jnp.abs(mech.residual(q, f, p))))(sol.q, jnp.asarray(phis)))
     tol = 1000 * np.finfo(float).eps * float(mech.length_scale(p))
     conv = np.asarray(sol.converged)
     assert conv.any() and np.all(r[conv] <= 2 * tol)  # the residual at the returned q, afresh

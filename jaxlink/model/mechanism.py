@@ -2,9 +2,10 @@
 
 A `Mechanism` is a JAX pytree: its leaves are the numbers a search varies — `parameters` (SI,
 ordered as `parameter_names`) and `guess` (SI, ordered as `unknown_names`) — and everything else
-(names, loops, points, units: the `Structure`) is static, hashed by identity. So a mechanism can be
-passed through `jax.jit`, `vmap` and `grad` like any array argument; a change of numbers reuses the
-compiled functions and a change of structure compiles new ones. The solvers also take the
+(names, loops, points, units: the `Structure`) is static, hashed by its content (`Structure.key`). So a
+mechanism can be passed through `jax.jit`, `vmap` and `grad` like any array argument; a change of
+numbers reuses the compiled functions, a change of structure compiles new ones, and the same file
+loaded twice (or under another name) reuses them. The solvers also take the
 parameters as an explicit array `p`, so `vmap` over designs and `grad` with respect to dimensions
 reach them without rebuilding the mechanism.
 
@@ -32,8 +33,8 @@ from ..files.expr import ANGLE, LENGTH, Term
 
 @dataclasses.dataclass(frozen=True, eq=False)
 class Structure:
-    """The static part of a mechanism (hashed by identity): names, units, loops, points, tables,
-    and the functions of the loops. Fields are SI; see the module docstring for the residual.
+    """The static part of a mechanism (hashed by its content, `key`): names, units, loops, points,
+    tables, and the functions of the loops. Fields are SI; see the module docstring for the residual.
 
     **Fields:**
 
@@ -64,6 +65,40 @@ class Structure:
     tables: Mapping[str, Any]
     kinds: Mapping[str, str]
     bodies: Any = None  # jaxlink.model.bodies.Model of [bodies]/[joints]/[loads]/[environment], or None
+
+    # ------------------------------------------------------------------ identity
+    # What the compiled functions depend on: everything but the labels (`name`, `description`,
+    # `file`). Two structures with the same key are interchangeable under `jax.jit`, so loading a
+    # file again reuses its compilations (`input_start` is part of the key: the lead-in is traced
+    # from it as a constant, also inside the caller's own `jit`).
+    _LABELS = ("name", "description", "file")
+
+    @property
+    def key(self) -> str:
+        """A text that equal structures share (the repr of every field but the labels)."""
+        try:
+            return self.__dict__["_key"]
+        except KeyError:
+            with np.printoptions(threshold=np.inf):
+                key = repr(tuple((f.name, getattr(self, f.name)) for f in dataclasses.fields(self)
+                                 if f.name not in self._LABELS))
+            object.__setattr__(self, "_key", key)
+            object.__setattr__(self, "_hash", hash(key))
+            return key
+
+    def __eq__(self, other):
+        if self is other:
+            return True
+        if not isinstance(other, Structure):
+            return NotImplemented
+        return hash(self) == hash(other) and self.key == other.key
+
+    def __hash__(self):
+        try:
+            return self.__dict__["_hash"]
+        except KeyError:
+            self.key  # noqa: B018 (computes and stores the hash)
+            return self.__dict__["_hash"]
 
     # ------------------------------------------------------------------ sizes
     @property
