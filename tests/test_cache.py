@@ -1,6 +1,7 @@
 """The persistent compilation cache of the command line (jaxlink/cache.py): a second identical
-command loads its compiled code from `JAXLINK_CACHE_DIR` instead of compiling it again, and an empty
-value turns the cache off. Subprocesses: JAX's cache settings are global to a process."""
+command loads its compiled code from `JAXLINK_CACHE_DIR` instead of compiling it again, and its
+stored trace instead of tracing the table's computation again; an empty value turns the cache off.
+Subprocesses: JAX's cache settings are global to a process."""
 
 import os
 import subprocess
@@ -15,10 +16,20 @@ COUNTED = """
 import collections, sys
 import jax.monitoring
 from jaxlink.cli import main
+import jaxlink.report.kinematics as k
 seen = collections.Counter()
 jax.monitoring.register_event_listener(lambda name, **kw: seen.update([name]))
+arrays = k._arrays
+def counted(mech, order):
+    f = arrays(mech, order)
+    def g(*a):
+        seen["traced"] += 1
+        return f(*a)
+    return g
+k._arrays = counted
 status = main(sys.argv[1:])
-print("HITS", seen["/jax/compilation_cache/cache_hits"], "MISSES", seen["/jax/compilation_cache/cache_misses"])
+print("HITS", seen["/jax/compilation_cache/cache_hits"], "MISSES", seen["/jax/compilation_cache/cache_misses"],
+      "TRACED", seen["traced"])
 sys.exit(status)
 """
 
@@ -31,17 +42,25 @@ def _run(cache, tmp_path, name):
     assert r.returncode == 0, r.stderr
     words = r.stdout.split()
     counts = int(words[words.index("HITS") + 1]), int(words[words.index("MISSES") + 1])
-    return out.read_text(), counts
+    return out.read_text(), counts, int(words[words.index("TRACED") + 1])
 
 
 def test_second_command_loads_compiled_code_from_the_cache(tmp_path):
     cache = tmp_path / "xla"
-    first, (hits1, misses1) = _run(cache, tmp_path, "a.csv")
+    first, (hits1, misses1), traced1 = _run(cache, tmp_path, "a.csv")
     assert any(cache.iterdir()), "the first command wrote nothing to the cache"
     assert misses1 > 0  # (a hit or two: the same computation compiled twice in one process)
-    second, (hits2, misses2) = _run(cache, tmp_path, "b.csv")
+    assert traced1 == 1 and len(list(cache.glob("trace-*"))) == 1
+    second, (hits2, misses2), traced2 = _run(cache, tmp_path, "b.csv")
     assert second == first  # same table, bit for bit, from the cached executables
-    assert (hits2, misses2) == (hits1 + misses1, 0)  # every executable loaded, none compiled again
+    assert misses2 == 0 and hits2 > 0  # every executable loaded, none compiled again
+    assert traced2 == 0  # the table's computation came from the stored trace
+    # a damaged stored trace is traced again and replaced, with the same table
+    for path in cache.glob("trace-*"):
+        path.write_bytes(b"damaged")
+    third, _, traced3 = _run(cache, tmp_path, "c.csv")
+    assert third == first and traced3 == 1
+    assert all(p.read_bytes() != b"damaged" for p in cache.glob("trace-*"))
 
 
 def test_empty_value_turns_the_cache_off(tmp_path):

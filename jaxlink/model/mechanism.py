@@ -80,7 +80,7 @@ class Structure:
             return self.__dict__["_key"]
         except KeyError:
             with np.printoptions(threshold=np.inf):
-                key = repr(tuple((f.name, getattr(self, f.name)) for f in dataclasses.fields(self)
+                key = repr(tuple((f.name, _canonical(f.name, getattr(self, f.name))) for f in dataclasses.fields(self)
                                  if f.name not in self._LABELS))
             object.__setattr__(self, "_key", key)
             object.__setattr__(self, "_hash", hash(key))
@@ -280,6 +280,12 @@ class Mechanism:
         for k, v in values_in_file_units.items():
             p[self.parameter_index(k)] = self.to_si(k, v)
         return p
+
+
+def _canonical(name: str, value):
+    """A field's value for the key: `kinds` (a lookup built from a set, whose order changes from
+    one process to the next) as sorted items; everything else as it is (order matters there)."""
+    return tuple(sorted(value.items())) if name == "kinds" else value
 
 
 def _flatten(m: Mechanism):

@@ -25,6 +25,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..analysis.transfer import transfer
+from ..cache import traced
 from ..model.mechanism import Mechanism
 from ..results import RESULTS
 from ..solvers.assemble import default_rtol, solve
@@ -93,23 +94,19 @@ def kinematics_table(mech: Mechanism, phis, *, omega: float = 1.0, outputs=OUTPU
             raise ValueError(f"unknown output {o!r}; choose from {', '.join(OUTPUTS)}")
     order = 2 if {"acceleration", "rates"} & set(outputs) else (1 if "velocity" in outputs else 0)
     p = np.asarray(mech.parameters if p is None else p, dtype=dtype)
-    phis_a = jnp.asarray(phis, dtype=dtype)
-    sol = solve(mech, phis_a, p=jnp.asarray(p))
-    result = np.asarray(sol.result).copy()
-    # the residual at the returned q, for every row (the solver's own is measured where it stopped)
-    resid = np.asarray(jax.jit(jax.vmap(lambda qq, ph: jnp.max(jnp.abs(mech.residual(qq, ph, jnp.asarray(p))))))(
-        sol.q, phis_a), dtype=float)
-    result = _checked(result, resid, mech, p)
-    q = np.asarray(sol.q)  # in the dtype of the solve (the drawing measures its rounding)
+    phis_a = np.asarray(phis, dtype=dtype)
+    q, points, result, resid, mu_, nu_, dpts, ddpts, scale = _traced_arrays(mech, phis_a, p, order)
+    result = _checked(np.asarray(result).copy(), np.asarray(resid, dtype=float), float(scale), p)
+    resid = np.asarray(resid, dtype=float)
+    q = np.asarray(q)  # in the dtype of the solve (the drawing measures its rounding)
     v = a = mu = nu = None
     if order:
-        tr = transfer(mech, phis_a, sol.q, p=jnp.asarray(p), order=order)
         with np.errstate(all="ignore"):
-            mu = np.asarray(tr.mu, dtype=float) * omega
-            v = np.asarray(tr.dpoints, dtype=float) * omega
+            mu = np.asarray(mu_, dtype=float) * omega
+            v = np.asarray(dpts, dtype=float) * omega
             if order == 2:
-                nu = np.asarray(tr.nu, dtype=float) * omega**2
-                a = np.asarray(tr.ddpoints, dtype=float) * omega**2
+                nu = np.asarray(nu_, dtype=float) * omega**2
+                a = np.asarray(ddpts, dtype=float) * omega**2
         # finiteness is part of convergence: rates, velocities or accelerations that are not finite
         # (a NaN speed, lengths so small that Φ_q underflows) make the position `nonfinite`
         finite = np.ones(len(result), bool)
@@ -119,7 +116,7 @@ def kinematics_table(mech: Mechanism, phis, *, omega: float = 1.0, outputs=OUTPU
         result = np.where((result == RESULTS.converged) & ~finite, RESULTS.nonfinite, result).astype(result.dtype)
     conv = result == RESULTS.converged
     assembled = conv | (result == RESULTS.singular)
-    pts = np.where(assembled[:, None, None], np.asarray(sol.points, dtype=float), np.nan)
+    pts = np.where(assembled[:, None, None], np.asarray(points, dtype=float), np.nan)
     if order:
         assert mu is not None and v is not None
         mu = np.where(conv[:, None], mu, np.nan)
@@ -162,14 +159,40 @@ def kinematics_table(mech: Mechanism, phis, *, omega: float = 1.0, outputs=OUTPU
         float(omega), rpm, p)
 
 
-def _checked(result, resid, mech: Mechanism, p):
+def _arrays(mech: Mechanism, order: int):
+    """The table's whole computation as one function of (phis, p): the solve with its points, the
+    residual at the returned q, the transfer functions up to `order` (empty when not asked), and
+    the length scale of the tolerance."""
+
+    def f(phis, p):
+        sol = solve(mech, phis, p=p)
+        # the residual at the returned q, for every row (the solver's own is measured where it stopped)
+        resid = jax.vmap(lambda qq, ph: jnp.max(jnp.abs(mech.residual(qq, ph, p))))(sol.q, phis)
+        empty = jnp.zeros((0,), p.dtype)
+        mu = nu = dpts = ddpts = empty
+        if order:
+            tr = transfer(mech, phis, sol.q, p=p, order=order)
+            mu, dpts = tr.mu, tr.dpoints
+            if order == 2:
+                nu, ddpts = tr.nu, tr.ddpoints
+        return sol.q, sol.points, sol.result, resid, mu, nu, dpts, ddpts, mech.length_scale(p)
+
+    return f
+
+
+def _traced_arrays(mech: Mechanism, phis, p, order: int):
+    """`_arrays` through jaxlink's stored traces (`jaxlink/cache.py`): a repeated command with the
+    same structure, sizes and dtype traces nothing."""
+    return traced("kinematics_table", _arrays(mech, order), (phis, p), f"{mech.structure.key}|order={order}")
+
+
+def _checked(result, resid, scale: float, p):
     """The solver's codes, re-checked: an assembled row whose residual at the returned q is not
     finite is `nonfinite`, one whose residual exceeds twice the tolerance (rtol × length scale;
     max(rtol, √eps) × scale at a `singular` row) is `max_steps` — whatever the solver's stopping
     rule said."""
     dtype = np.asarray(p).dtype
     rtol = default_rtol(dtype)
-    scale = float(mech.length_scale(jnp.asarray(p)))
     loose = max(rtol, float(np.sqrt(np.finfo(dtype).eps)))
     limit = 2.0 * scale * np.where(result == RESULTS.singular, loose, rtol)
     assembled = (result == RESULTS.converged) | (result == RESULTS.singular)
