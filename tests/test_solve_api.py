@@ -108,3 +108,32 @@ def test_the_same_structure_loaded_twice_compiles_once():
     np.testing.assert_allclose(np.asarray(sa.q), np.asarray(sb.q), rtol=0, atol=1e-9)
     jl.solve(c, phis)
     assert _solve_jit._cache_size() == n1 + 1
+
+
+@pytest.mark.parametrize("method", ["auto", "continuation"])
+def test_a_batch_over_the_memory_budget_is_chunked_and_identical(method):
+    """`max_bytes` smaller than the batch: chunks of designs (the last one padded), copied to the
+    host, bit-identical to the one-call solve — per-design inputs and guesses included."""
+    m = jl.load("four-bar")
+    opts = jl.NewtonOptions(method=method)
+    phis = np.deg2rad(np.arange(0.0, 360.0, 15.0))
+    B = 11
+    P = m.parameters * np.ones((B, 1))
+    P[:, m.parameter_index("b")] = np.linspace(0.030, 0.080, B)  # some cannot turn a revolution
+    one = jl.solve(m, phis, P, options=opts)
+    per = (2 + 3 + 2) * len(phis) * 128  # bytes of one design by solve's estimate
+    chunked = jl.solve(m, phis, P, options=opts, max_bytes=3 * per)  # chunks of 2 designs
+    assert isinstance(chunked.q, np.ndarray) and not isinstance(one.q, np.ndarray)
+    assert chunked.q.shape == (B, len(phis), 2)
+    for x, y in zip(jax.tree_util.tree_leaves(one), jax.tree_util.tree_leaves(chunked)):
+        np.testing.assert_array_equal(np.asarray(x), y)
+    assert 0 < np.asarray(one.converged).all(axis=1).sum() < B
+    # each design its own inputs and guesses
+    PH = phis[None, :] + np.linspace(0.0, 0.3, B)[:, None]
+    Q0 = np.asarray(one.q[:, 0])
+    a = jl.solve(m, PH, P, Q0, options=opts)
+    b = jl.solve(m, PH, P, Q0, options=opts, max_bytes=5 * per)
+    for x, y in zip(jax.tree_util.tree_leaves(a), jax.tree_util.tree_leaves(b)):
+        np.testing.assert_array_equal(np.asarray(x), y)
+    with pytest.raises(ValueError, match="max_bytes"):
+        jl.solve(m, phis, P, max_bytes=0)

@@ -60,6 +60,7 @@ ones included). Reverse mode (`jax.grad`) follows by transposition of that linea
 from __future__ import annotations
 
 import functools
+import os
 import warnings
 from typing import NamedTuple
 
@@ -902,7 +903,7 @@ def _solve_jit(mech, phis, p, q0, options, points):
 
 
 def solve(mech: Mechanism, phis, p=None, q0=None, *, options: NewtonOptions = NewtonOptions(),
-          points: bool = True) -> Solution:
+          points: bool = True, max_bytes: int | None = None) -> Solution:
     """Solve the positions of one design or a batch of designs along a sequence of inputs.
 
     **Arguments:**
@@ -916,16 +917,80 @@ def solve(mech: Mechanism, phis, p=None, q0=None, *, options: NewtonOptions = Ne
       at `[input] start`; the solve continues from there to `phis[0]` first (a lead-in).
     - `options`: `NewtonOptions` (static: another value compiles anew).
     - `points`: also compute the points of interest (`Solution.points`).
+    - `max_bytes`: the device memory a batch may use (default: a quarter of the device's memory,
+      of the available host memory on a CPU). A larger batch is solved in chunks of designs that
+      fit, each copied to the host as it is done: the result is then numpy arrays, identical to
+      the unchunked solve.
 
     **Returns:** a `Solution` (q, points, result, stats) with leading axes (N,) or (B, N).
 
     One jitted function (compiled once per shape, dtype and options); the same under an outer
-    `jax.jit`, `vmap` or `grad` (exact derivatives by implicit differentiation). The dtype is that
-    of `p` (float64 needs `jax.config.update("jax_enable_x64", True)`). A batch placed on several
-    devices (`jax.device_put(p, NamedSharding(...))`) is solved where it lies.
+    `jax.jit`, `vmap` or `grad` (exact derivatives by implicit differentiation; no chunking there:
+    the caller's trace decides). The dtype is that of `p` (float64 needs
+    `jax.config.update("jax_enable_x64", True)`). A batch placed on several devices
+    (`jax.device_put(p, NamedSharding(...))`) is solved where it lies.
     """
     _warn_if_float32(p)
-    return _solve_jit(mech, phis, p, q0, options, points)
+    chunk = _chunk_designs(mech, phis, p, points, max_bytes)
+    if chunk is None:
+        return _solve_jit(mech, phis, p, q0, options, points)
+    return _solve_chunked(mech, phis, p, q0, options, points, chunk)
+
+
+# device memory of one solved position, per value it returns (q, points, residual, code, steps):
+# the measured peak of a closed-form batch is ≈ 11 float64 values per returned value (the feed
+# six-bar: 88 bytes per position for 8 values); 16 leaves a margin
+_BYTES_PER_VALUE = 16 * 8
+
+
+def memory_budget() -> int:
+    """Bytes a solve may use: a quarter of the default device's memory limit, or on a CPU a
+    quarter of the available host memory (at least 64 MiB)."""
+    dev = jax.local_devices()[0]
+    try:
+        return int(dev.memory_stats()["bytes_limit"]) // 4
+    except Exception:  # noqa: BLE001 (no memory statistics: the CPU)
+        pass
+    try:
+        avail = os.sysconf("SC_AVPHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
+    except (ValueError, OSError, AttributeError):
+        avail = 8 << 30
+    return max(64 << 20, int(avail) // 4)
+
+
+def _chunk_designs(mech, phis, p, points: bool, max_bytes) -> int | None:
+    """Designs per chunk when the batch needs more than `max_bytes`, else None (one call)."""
+    if p is None or isinstance(p, jax.core.Tracer) or isinstance(phis, jax.core.Tracer) or np.ndim(p) != 2:
+        return None
+    if max_bytes is not None and not (int(max_bytes) > 0):
+        raise ValueError(f"max_bytes must be a positive number of bytes, not {max_bytes!r}")
+    B, N = np.shape(p)[0], np.shape(phis)[-1] if np.ndim(phis) else 1
+    values = len(mech.unknown_names) + 3 + (2 * len(mech.points) if points else 0)
+    per_design = N * values * _BYTES_PER_VALUE
+    budget = memory_budget() if max_bytes is None else int(max_bytes)
+    if B * per_design <= budget:
+        return None
+    chunk = 1
+    while 2 * chunk * per_design <= budget and 2 * chunk < B:
+        chunk *= 2
+    return chunk
+
+
+def _solve_chunked(mech, phis, p, q0, options, points, chunk: int) -> Solution:
+    """`_solve_jit` over chunks of `chunk` designs (the last one padded by repeating its first
+    design, so one compiled shape serves them all), each copied to the host when done."""
+    P = np.asarray(p)
+    B = P.shape[0]
+    per_design_phis = np.ndim(phis) == 2
+    per_design_q0 = q0 is not None and np.ndim(q0) == 2
+    parts = []
+    for lo in range(0, B, chunk):
+        idx = np.arange(lo, min(lo + chunk, B))
+        take = np.concatenate([idx, np.full(chunk - len(idx), idx[0])])
+        sol = _solve_jit(mech, np.asarray(phis)[take] if per_design_phis else phis, P[take],
+                         np.asarray(q0)[take] if per_design_q0 else q0, options, points)
+        parts.append(jax.tree_util.tree_map(lambda x, n=len(idx): np.asarray(x)[:n], jax.device_get(sol)))
+    return jax.tree_util.tree_map(lambda *xs: np.concatenate(xs, axis=0), *parts)
 
 
 def solve_path(mech: Mechanism, phis, p=None, q0=None, *, options: NewtonOptions = NewtonOptions(),
