@@ -111,7 +111,7 @@ class Gradient(PresampledStarts):
     starts `starts` of them (the best, skipping near-duplicates: within 0.01 of a better one in
     every normalized variable, same circuit) and keeps the rest in a queue. A start that has
     stopped (its step or gradient vanished) or stalled (its smoothed value did not drop by
-    10⁻³, relative, over the last 10 iterations) is replaced by the next design of the queue,
+    1 %, relative, over the last 10 iterations) is replaced by the next design of the queue,
     with a fresh L-BFGS memory — except the start holding the best design, which goes on until
     it stops or stalls by the strict test (10⁻⁶ over `patience` iterations): a local refinement
     of the best. The search ends when the queue is empty and no start improves: the best exact
@@ -120,7 +120,7 @@ class Gradient(PresampledStarts):
 
     **Arguments** (keyword, else `[optimize]`): `starts` (16), `presample` (8 × starts, at most
     a quarter of the budget), `iterations` (200), `memory` (10), `linesearch_steps` (10),
-    `chunk_iterations` (5, iterations per checkpoint), `pool` (4 × starts: designs kept from
+    `chunk_iterations` (5, iterations per checkpoint), `pool` (2 × starts: designs kept from
     the presample, started in turn).
 
     **Defaults from the problem** (`budget=None`: no budget given, neither as argument nor as
@@ -144,14 +144,14 @@ class Gradient(PresampledStarts):
         self.S = -(-s // ev.n_devices) * ev.n_devices
         self.presample = min(int(presample or pr.option("presample", 1024 * V if self.auto else 8 * self.S)),
                              max(self.S, self.budget // (4 * ev.n_circuits)))
-        self.pool_size = max(self.S, int(pool or 4 * self.S))
+        self.pool_size = max(self.S, int(pool or 2 * self.S))
         self.iterations = int(iterations or pr.option("iterations", 2000 if self.auto else 200))
         self.linesearch_steps = int(linesearch_steps)
         self.chunk_iterations = int(chunk_iterations)
         self.memory = int(memory)
         self.time = time if time is not None else pr.option("time")
         self.patience = patience if patience is not None else 40
-        self.lane_patience, self.lane_drop = 10, 1e-3
+        self.lane_patience, self.lane_drop = 10, 1e-2
         self.polish_iterations, self.polish_starts = 40, 8
         # with a least-squares polish to follow, the search stops on a looser test (the polish
         # converges the last digits faster than L-BFGS crawls to them)
