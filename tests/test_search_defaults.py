@@ -54,3 +54,41 @@ def test_a_search_without_budget_stops_by_itself_and_by_time(tmp_path):
     assert timed.complete and timed.extra.get("stopped") == "time"
     assert timed.evaluations < res.evaluations
     assert np.isfinite(res.value)
+
+
+def test_icp_places_a_moved_path_back_from_any_turn():
+    """The multi-start ICP finds the similarity that puts a moved path back on targets taken from
+    it, whatever the turn (a single ICP from the identity does not: the reason for the starts)."""
+    import jax.numpy as jnp
+
+    from jaxlink.optimize.align import icp_similarity
+
+    k = np.arange(360) * 2 * np.pi / 360
+    r = 1.0 + 0.5 * np.cos(k)  # a limaçon: no symmetry a wrong turn could match
+    curve = np.stack([r * np.cos(k), r * np.sin(k)], axis=1)
+    targets = curve[::30] * 2.0 + np.array([5.0, -3.0])
+    rng = np.random.default_rng(1)
+    moved = []
+    for _ in range(16):
+        s, th, t = np.exp(rng.uniform(-1, 1)), rng.uniform(-np.pi, np.pi), rng.uniform(-4, 4, 2)
+        R = np.array([[np.cos(th), -np.sin(th)], [np.sin(th), np.cos(th)]])
+        moved.append(s * curve @ R.T + t)
+    *_, sse = icp_similarity(jnp.asarray(np.array(moved)), jnp.asarray(targets))
+    # every target within 2 % of the targets' size of the path (a wrong turn or scale: ~30 %);
+    # the search's gradient steps converge the rest
+    size = np.hypot(*np.ptp(targets, axis=0))
+    assert np.all(np.asarray(sse) < len(targets) * (0.02 * size) ** 2)
+
+
+def test_a_search_compiles_a_fixed_set_of_functions(tmp_path):
+    """A second search on the same evaluator with another presample size (other chunk counts and
+    feasible counts) compiles nothing: every batch has a fixed shape."""
+    import jax.monitoring
+
+    ev = Evaluator(problem_from(plain(tmp_path), {"samples": 72, "report_samples": 720}), chunk=64)
+    run(ev, "gradient", seed=0, starts=4, presample=128, iterations=20)
+    compiled = []
+    jax.monitoring.register_event_duration_secs_listener(
+        lambda e, d, **kw: compiled.append(e) if e == "/jax/core/compile/backend_compile_duration" else None)
+    res = run(ev, "gradient", seed=1, starts=4, presample=200, iterations=20)
+    assert res.value is not None and compiled == []

@@ -161,6 +161,15 @@ class Evaluator:
         ok = feas & jnp.isfinite(v)
         return jnp.where(ok, v, jnp.inf)
 
+    def smooth_exact_single(self, u, c):
+        """(smoothed objective, exact objective) of one design from one path solve, each +inf
+        where infeasible: the gradient search differentiates the first and keeps the second."""
+        phis = jnp.asarray(self.problem.phis, u.dtype)
+        path, feas = self.path(u, c, phis, self.objective.order)
+        v = self.objective.smooth(path)
+        e = jax.lax.stop_gradient(self.objective.value(path))
+        return (jnp.where(feas & jnp.isfinite(v), v, jnp.inf), jnp.where(feas & jnp.isfinite(e), e, jnp.inf))
+
     def constrained_single(self, u, c):
         """For the constrained gradient solver: (f, constraint values (K,), exact value, feasible)
         of one design from one path solve (`Objective.constraints`)."""
@@ -255,7 +264,7 @@ class Evaluator:
         u = jnp.asarray(u, dtype=float)
         pr = self.problem
         order = max(self.objective.order, self.objective.report_order)
-        feas, value, metrics = self._report_fn(int(c), self.report_samples, order)(u)
+        feas, value, metrics = self._report_fn(self.report_samples, order)(u, jnp.asarray(int(c)))
         x = pr.to_file_units(np.asarray(u))
         out = {
             "parameters": {n: float(v) for n, v in zip(pr.names, x)},
@@ -270,14 +279,16 @@ class Evaluator:
             out["metrics"] = {}
         return out
 
-    def _report_fn(self, c: int, samples: int, order: int):
-        path_fn = self._path_fn(c, samples, order)
+    def _report_fn(self, samples: int, order: int):
+        """Jitted (u, circuit) → (feasible, value, metrics) at `samples` inputs; the circuit is
+        an argument (one compilation for every circuit)."""
+        phis = self.problem.phis[0] + 2 * np.pi * np.arange(samples) / samples
 
-        def one(uu):
-            path, feas = path_fn(uu)
+        def one(uu, c):
+            path, feas = self.path(uu, c, jnp.asarray(phis, uu.dtype), order)
             return feas, self.objective.value(path), self.objective.metrics(path)
 
-        return self.compiled(("report", c, samples, order), lambda: jax.jit(one))
+        return self.compiled(("report", samples, order), lambda: jax.jit(one))
 
     def _paths_batch(self):
         def one(u, c):
@@ -303,11 +314,11 @@ class Evaluator:
     def path_points(self, u, c: int = 0, samples: int | None = None) -> np.ndarray:
         """(N, 2) path of the point (file units) for plots."""
         n = samples or self.report_samples
-        path, _ = self._path_fn(int(c), n, 0)(jnp.asarray(u, dtype=float))
+        path, _ = self._path_fn(n, 0)(jnp.asarray(u, dtype=float), jnp.asarray(int(c)))
         return np.asarray(path.xy)
 
-    def _path_fn(self, c: int, samples: int, order: int):
+    def _path_fn(self, samples: int, order: int):
         phis = self.problem.phis[0] + 2 * np.pi * np.arange(samples) / samples
-        return self.compiled(("path", c, samples, order),
-                             lambda: jax.jit(lambda uu: self.path(uu, c, jnp.asarray(phis, uu.dtype), order)))
+        return self.compiled(("path", samples, order),
+                             lambda: jax.jit(lambda uu, c: self.path(uu, c, jnp.asarray(phis, uu.dtype), order)))
 

@@ -36,6 +36,7 @@ class Objective(NamedTuple):
     constraints: Callable | None = None
     equalities: int = 0
     rank: Callable | None = None
+    residuals: Callable | None = None  # path → r with value = Σ r² (least-squares polish)
 
 
 def number(problem, key: str, default: float | None = None, *, positive: bool = False) -> float:

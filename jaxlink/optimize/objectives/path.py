@@ -42,13 +42,30 @@ def segment_distances2(xy, targets):
     return jnp.sum(d * d, axis=-1)
 
 
+def nearest_offsets(xy, targets):
+    """(T, 2) offsets of every target from its nearest point of the closed polyline through `xy`
+    (N, 2): Σ |offset|² is the `points` objective's exact value (`segment_distances2`)."""
+    a = xy
+    ab = jnp.roll(xy, -1, axis=0) - a
+    ab2 = jnp.sum(ab * ab, axis=-1)
+    safe = ab2 > 0
+    ap = targets[:, None, :] - a[None, :, :]
+    t = jnp.sum(ap * ab[None], axis=-1) / jnp.where(safe, ab2, 1.0)[None]
+    t = jnp.clip(jnp.where(safe[None], t, 0.0), 0.0, 1.0)
+    d = ap - t[..., None] * ab[None]  # (T, N, 2)
+    k = jnp.argmin(jnp.sum(d * d, axis=-1), axis=1)
+    return jnp.take_along_axis(d, k[:, None, None], axis=1)[:, 0]
+
+
 def points_objective(problem) -> Objective:
     """Untimed path error: SSE = Σ_t min_{s} |T_t − P(s)|², the squared distance of each target
     point to the nearest point of the traced path.
 
     Exact value: the path is the closed polyline through the sampled positions (the distance to
     each segment by projection), so the error of the true curve is O(h²·curvature) — the report
-    re-solves with `report_samples` (default 7200) positions. Smooth value: the min over segments
+    re-solves with `report_samples` (default 7200) positions. Residuals (for the gradient
+    search's least-squares polish): the offsets of the targets from their nearest path points
+    (`nearest_offsets`), whose squares sum to the exact value. Smooth value: the min over segments
     replaced by a soft-min with temperature τ = (smoothing · D)², D the targets' bounding-box
     diagonal (smoothing default 1e-5): SSE_τ = Σ_t −τ log Σ_k exp(−d²_tk/τ) (shifted by the min,
     so it never overflows); SSE_τ → SSE as τ → 0 and SSE − T·τ·log N ≤ SSE_τ ≤ SSE.
@@ -78,7 +95,10 @@ def points_objective(problem) -> Objective:
         d2 = jnp.min(segment_distances2(path.xy, tg), axis=1)
         return {"sse": jnp.sum(d2), "rms": jnp.sqrt(jnp.mean(d2)), "max_distance": jnp.sqrt(jnp.max(d2))}
 
-    return Objective("points", 0, value, smooth, metrics)
+    def residuals(path):
+        return nearest_offsets(path.xy, tg).reshape(-1)
+
+    return Objective("points", 0, value, smooth, metrics, residuals=residuals)
 
 
 # ----------------------------------------------------------------------------- shape of a closed path
