@@ -20,6 +20,7 @@ the sign s_j and either a length L_j and an angle θ_j (polar) or components (X_
 from __future__ import annotations
 
 import dataclasses
+import sys
 from typing import Any, Mapping
 
 import jax
@@ -79,7 +80,7 @@ class Structure:
         try:
             return self.__dict__["_key"]
         except KeyError:
-            with np.printoptions(threshold=np.inf):
+            with np.printoptions(threshold=sys.maxsize):
                 key = repr(tuple((f.name, _canonical(f.name, getattr(self, f.name))) for f in dataclasses.fields(self)
                                  if f.name not in self._LABELS))
             object.__setattr__(self, "_key", key)

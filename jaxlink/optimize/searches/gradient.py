@@ -185,18 +185,20 @@ class Gradient(PresampledStarts):
         p = recorded(st.progress, U, b)
         ok = np.flatnonzero(b.feasible)
         block = max(1, ev.chunk // 2)
-        U2, v2, ok2 = [], [], []
+        U2s: list[np.ndarray] = []
+        v2s: list[np.ndarray] = []
+        ok2s: list[np.ndarray] = []
         for s in range(0, len(ok), block):
             rows = ok[s:s + block]
             uu, m = pad_rows(U[rows], block)
             cc, _ = pad_rows(np.asarray(b.circuit[rows]), block)
             out = aligned_batch(ev, self.placement)(*put((jnp.asarray(uu), jnp.asarray(cc)), ev.sharding))
-            U2.append(np.asarray(out[0], dtype=float)[:m])
-            v2.append(np.asarray(out[1])[:m])
-            ok2.append(np.asarray(out[2])[:m])
-        if not ok2:
+            U2s.append(np.asarray(out[0], dtype=float)[:m])
+            v2s.append(np.asarray(out[1])[:m])
+            ok2s.append(np.asarray(out[2])[:m])
+        if not ok2s:
             return st._replace(progress=p), U, b.value, b.circuit
-        U2, v2, ok2 = np.concatenate(U2), np.concatenate(v2), np.concatenate(ok2)
+        U2, v2, ok2 = np.concatenate(U2s), np.concatenate(v2s), np.concatenate(ok2s)
         ev.evaluations += 2 * len(ok)
         ev.infeasible += int(np.count_nonzero(~ok2))
         p = counted(p, len(ok))  # the path of each feasible design again, for its alignment
