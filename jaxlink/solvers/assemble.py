@@ -323,14 +323,17 @@ def method_for(mech: Mechanism, opts: "NewtonOptions") -> str:
     return opts.method
 
 
-def _closed_form_path(mech, p, phis, q0, tol, trig_in, trig_p, thr, phi_ref, points: bool = False):
+def _closed_form_path(mech, p, phis, q0, tol, trig_in, trig_p, thr, phi_ref, points: bool = False,
+                      trig_out: bool = False):
     """Every position of one design in closed form, on the branches nearest to the guess q0 at
     the input `phi_ref` where it holds (`_dyads.solve_nearest`): no Newton, no continuation.
 
     A position is assembled when its loops close to `tol` (the residual of the closed form,
     exact to rounding: a dyad at its exact toggle, h² negative by rounding, is assembled at
     h = 0); it is `singular` when some dyad's links are collinear to within `thr` (the sine of
-    the angle between them: dead centre, toggle, change point)."""
+    the angle between them: dead centre, toggle, change point). With `trig_out`, also the
+    (cos, sin) of the solved angles, (N, n_angles) each, as the closed form has them (no new
+    trigonometry; (1, 0) where a position has no finite solution)."""
     dyads = _dyads.classify(mech)
     t_ref = _dyads.input_trig(mech, phi_ref)
     _, _, _, sigma = _dyads.solve_nearest(mech, dyads, q0, phi_ref, p, {**t_ref, **trig_p})
@@ -352,13 +355,22 @@ def _closed_form_path(mech, p, phis, q0, tol, trig_in, trig_p, thr, phi_ref, poi
         parts = [q, rn[None], code.astype(q.dtype)[None]]
         if points:
             parts.append(jnp.ravel(mech.point_positions(q, phi, p, trig)))
+        if trig_out:
+            for j in (0, 1):
+                t = jnp.stack([trig[n][j] for n in ang]) if ang else jnp.zeros((0,), q.dtype)
+                parts.append(jnp.where(jnp.isfinite(t), t, float(1 - j)))
         return jnp.concatenate(parts)
 
+    ang = [n for n, k in zip(mech.unknown_names, mech.unknown_kinds) if k == "angle"]
     packed = jax.vmap(one)(phis, trig_in)
     n = len(mech.unknown_names)
-    pts = packed[:, n + 2:].reshape(packed.shape[0], -1, 2) if points else None
+    end = packed.shape[1] - (2 * len(ang) if trig_out else 0)
+    pts = packed[:, n + 2:end].reshape(packed.shape[0], -1, 2) if points else None
     zeros = jnp.zeros(packed.shape[:1], jnp.int32)
-    return packed[:, :n], packed[:, n], packed[:, n + 1].astype(jnp.int8), zeros, pts
+    out = packed[:, :n], packed[:, n], packed[:, n + 1].astype(jnp.int8), zeros, pts
+    if trig_out:
+        out += ((packed[:, end:end + len(ang)], packed[:, end + len(ang):]),)
+    return out
 
 
 def _extrapolate(hist_q, hist_phi, n_good, phi, order: int):
@@ -719,10 +731,12 @@ def _lead_in(mech: Mechanism, opts: NewtonOptions, p, phi_a, phi_b, q0, tol, kw)
     return st.hq[0]
 
 
-def _solve_batch_impl(mech: Mechanism, opts: NewtonOptions, points: bool, P, phis, Q0, phi_ref):
+def _solve_batch_impl(mech: Mechanism, opts: NewtonOptions, points: bool, P, phis, Q0, phi_ref,
+                      trig: bool = False):
     """P (B, P), phis (N,) shared by all designs or (B, N), Q0 (B, n) holding at the inputs
     `phi_ref` (B,) (None: at the first input) -> q (B, N, n), rnorm, result, steps (B, N), and the
-    points (B, N, n_points, 2) if `points` (else None)."""
+    points (B, N, n_points, 2) if `points` (else None). With `trig`, also the (cos, sin) the
+    derivative needs (`_Trig`), computed once and stored."""
     dtype = jnp.result_type(Q0)
     B = P.shape[0]
     shared = phis.ndim == 1
@@ -742,9 +756,10 @@ def _solve_batch_impl(mech: Mechanism, opts: NewtonOptions, points: bool, P, phi
         ref = phi0 if phi_ref is None else jnp.where(ref_finite, phi_ref, 0.0)
         trig_in, trig_p = materialize((_dyads.input_trig(mech, phis), _dyads.parameter_trig(mech, P)))
         tol = jnp.where(ref_finite, tol, jnp.nan)
-        return jax.vmap(
-            lambda p, ph, q0, t, ti, tp, r: _closed_form_path(mech, p, ph, q0, t, ti, tp, thr, r, points),
+        out = jax.vmap(
+            lambda p, ph, q0, t, ti, tp, r: _closed_form_path(mech, p, ph, q0, t, ti, tp, thr, r, points, trig),
             in_axes=(0, ax, 0, 0, ax, 0, 0))(P, phis, Q0, tol, trig_in, trig_p, ref)
+        return materialize(out[:5] + (_Trig(trig_in, trig_p, out[5]),)) if trig else out
     # Newton: a design whose tolerance is not finite (a NaN or infinite length, even one that only
     # a point uses), whose guess is not finite (it selects no branch) or whose guess holds at a
     # non-finite input is `nonfinite` at every position, without iterating (a NaN tolerance makes
@@ -770,12 +785,16 @@ def _solve_batch_impl(mech: Mechanism, opts: NewtonOptions, points: bool, P, phi
         out = jax.vmap(lambda p, ph, q0, r, t, tp: _continuation_one(mech, opts, p, ph, q0, r, t, kw_of(tp)),
                        in_axes=(0, ax, 0, 0, 0, 0))(P, phis, Q0, phi_ref, tol, trig_p)
     out = _check_residual(mech, P, phis, out, tol, rtol, dtype)
-    if not points:
-        return out + (None,)
-    # the points, with the sines and cosines of the angle parameters known
-    pts = jax.vmap(jax.vmap(lambda q, phi, p, tp: mech.point_positions(q, phi, p, tp), in_axes=(0, 0, None, None)),
-                   in_axes=(0, ax, 0, 0))(out[0], phis, P, trig_p)
-    return out + (pts,)
+    if points:
+        # the points, with the sines and cosines of the angle parameters known
+        pts = jax.vmap(jax.vmap(lambda q, phi, p, tp: mech.point_positions(q, phi, p, tp),
+                                in_axes=(0, 0, None, None)), in_axes=(0, ax, 0, 0))(out[0], phis, P, trig_p)
+    out = out + ((pts,) if points else (None,))
+    if not trig:
+        return out
+    qa = _angles_of(mech, out[0])
+    trig_in, trig_q = materialize((_dyads.input_trig(mech, phis), (jnp.cos(qa), jnp.sin(qa))))
+    return out + (_Trig(trig_in, trig_p, trig_q),)
 
 
 def _check_residual(mech, P, phis, out, tol, rtol, dtype):
@@ -795,6 +814,47 @@ def _check_residual(mech, P, phis, out, tol, rtol, dtype):
     return q, jnp.where(bad, r, rn), code, k
 
 
+class _Trig(NamedTuple):
+    """The (cos, sin) pairs the derivative of a batched solve needs, as the forward computed them:
+    of the input (`inputs`, keyed by its name, shaped as the inputs; empty for a length input), of
+    the angle parameters (`params`, keyed by name, (B,)) and of the solved angle unknowns
+    (`unknowns`, (B, N, n_angles) each, in the order of `mech.unknown_names`)."""
+
+    inputs: dict
+    params: dict
+    unknowns: tuple
+
+
+def _angles_of(mech: Mechanism, q):
+    """The angle unknowns of q (…, n) -> (…, n_angles)."""
+    idx = [i for i, k in enumerate(mech.unknown_kinds) if k == "angle"]
+    return jnp.stack([q[..., i] for i in idx], -1) if idx else jnp.zeros(q.shape[:-1] + (0,), q.dtype)
+
+
+def _known_trig_env(mech: Mechanism, q, phi, p, t_in, t_p, t_q):
+    """The names' (cos, sin) for `unit_vector`, given (no trigonometry evaluated) and
+    differentiable in q, φ, p through `_known_trig` (derivative (−sin, cos) d(angle))."""
+    trig = {n: _known_trig(phi, c, s) for n, (c, s) in t_in.items()}
+    trig.update({n: _known_trig(p[i], *t_p[n]) for i, n in enumerate(mech.parameter_names) if n in t_p})
+    ang = [i for i, k in enumerate(mech.unknown_kinds) if k == "angle"]
+    trig.update({mech.unknown_names[i]: _known_trig(q[i], t_q[0][j], t_q[1][j]) for j, i in enumerate(ang)})
+    return trig
+
+
+def _residual_known(mech: Mechanism, q, phi, p, trig):
+    """Φ(q; φ, p) (every term, as `mech.residual`) with the sines and cosines of `trig`."""
+    env = mech.env(q, phi, p)
+    dtype = jnp.result_type(q)
+    out = []
+    for _, terms in mech.loops:
+        sx, sy = 0.0, 0.0
+        for term in terms:
+            x, y = mech.term_vector(term, env, trig)
+            sx, sy = sx + x, sy + y
+        out.extend((sx, sy))
+    return jnp.stack([jnp.broadcast_to(jnp.asarray(v, dtype), ()) for v in out])
+
+
 @functools.partial(jax.custom_jvp, nondiff_argnums=(0, 1, 2))
 def _solve_batch(structure, opts: NewtonOptions, points: bool, P, phis, Q0, phi_ref):
     """The differentiable batched solve: (P (B,P), phis (N,) or (B,N), Q0 (B,n), phi_ref (B,) or
@@ -802,38 +862,77 @@ def _solve_batch(structure, opts: NewtonOptions, points: bool, P, phis, Q0, phi_
     return _solve_batch_impl(structure, opts, points, P, phis, Q0, phi_ref)
 
 
-@_solve_batch.defjvp
-def _solve_batch_jvp(structure, opts, points, primals, tangents):
-    """Implicit differentiation: dq = −Φ_q⁻¹ (Φ_p dp + Φ_φ dφ) at every converged position (zero
-    elsewhere); the guesses and the reference input select a branch and carry no derivative."""
-    P, phis, Q0, phi_ref = primals
-    dP, dphis = tangents[0], tangents[1]
-    mech = structure
-    out = _solve_batch(structure, opts, points, P, phis, Q0, phi_ref)
-    q, rn, code, k, _ = out
-    lin = _linear_solve(mech)
+@functools.partial(jax.custom_jvp, nondiff_argnums=(0, 1, 2))
+def _solve_batch_trig(structure, opts: NewtonOptions, points: bool, P, phis, Q0, phi_ref):
+    """`_solve_batch` and the (cos, sin) of its angles (`_Trig`): the primal of its derivative."""
+    return _solve_batch_impl(structure, opts, points, P, phis, Q0, phi_ref, trig=True)
 
-    def one(p, dp, qk, phik, dphik, ok):
-        rhs = jax.jvp(lambda pp, ph: mech.residual(qk, ph, pp), (p, phik), (dp, dphik))[1]
-        jac = jax.jacfwd(mech.residual)(qk, phik, p)
+
+def _implicit_tangents(mech: Mechanism, points: bool, primals, tangents, out):
+    """Implicit differentiation at every converged position (zero elsewhere):
+
+        Φ_q dq = −(Φ_p dp + Φ_φ dφ),      d(point) = P_q dq + P_p dp + P_φ dφ,
+
+    with Φ_q, the right-hand side and the points' derivatives evaluated from the (cos, sin) the
+    forward solve stored (`_Trig`: no trigonometry here, only products and sums), and Φ_q solved
+    by forward substitution over its diagonal blocks (Cramer on the 2×2 block of each dyad,
+    `_linear_solve`). The guesses and the reference input select a branch and carry no
+    derivative."""
+    P, phis, _, _ = primals
+    dP, dphis = tangents[0], tangents[1]
+    q, _, code, _, _, tr = out
+    lin = _linear_solve(mech)
+    ax = None if phis.ndim == 1 else 0
+
+    def one(p, dp, qk, phik, dphik, ok, t_in, t_p, t_q):
+        def res(qq, pp, ph):
+            return _residual_known(mech, qq, ph, pp, _known_trig_env(mech, qq, ph, pp, t_in, t_p, t_q))
+
+        jac = jax.jacfwd(res)(qk, p, phik)
+        rhs = jax.jvp(lambda pp, ph: res(qk, pp, ph), (p, phik), (dp, dphik))[1]
         # where not converged the sensitivity is undefined: solve a harmless identity system
         # instead (and zero the result), so that neither the JVP nor its transpose (grad)
         # produces NaN
         eye = jnp.eye(jac.shape[0], dtype=jac.dtype)
         dq, _ = lin(jnp.where(ok, jac, eye), jnp.where(ok, rhs, 0.0))
-        return jnp.where(ok, -dq, 0.0)
+        dq = jnp.where(ok, -dq, 0.0)
+        if not points:
+            return dq, None
 
-    per_pos = jax.vmap(one, in_axes=(None, None, 0, 0, 0, 0))
-    ax = None if phis.ndim == 1 else 0
-    dq = jax.vmap(per_pos, in_axes=(0, 0, 0, ax, ax, 0))(P, dP, q, phis, dphis, code == RESULTS.converged)
-    dpts = None
-    if points:
-        def dpoint(p, dp, qk, dqk, phik, dphik):
-            return jax.jvp(lambda qq, ph, pp: mech.point_positions(qq, ph, pp), (qk, phik, p), (dqk, dphik, dp))[1]
+        def pts(qq, pp, ph):
+            return mech.point_positions(qq, ph, pp, _known_trig_env(mech, qq, ph, pp, t_in, t_p, t_q))
+        return dq, jax.jvp(pts, (qk, p, phik), (dq, dp, dphik))[1]
 
-        dpts = jax.vmap(jax.vmap(dpoint, in_axes=(None, None, 0, 0, 0, 0)), in_axes=(0, 0, 0, 0, ax, ax))(
-            P, dP, q, dq, phis, dphis)
-    return out, (dq, jnp.zeros_like(rn), _float0(code), _float0(k), dpts)
+    per_pos = jax.vmap(one, in_axes=(None, None, 0, 0, 0, 0, 0, None, 0))
+    return jax.vmap(per_pos, in_axes=(0, 0, 0, ax, ax, 0, ax, 0, 0))(
+        P, dP, q, phis, dphis, code == RESULTS.converged, tr.inputs, tr.params, tr.unknowns)
+
+
+@_solve_batch.defjvp
+def _solve_batch_jvp(structure, opts, points, primals, tangents):
+    out = _solve_batch_trig(structure, opts, points, *primals)
+    dq, dpts = _implicit_tangents(structure, points, primals, tangents, out)
+    q, rn, code, k, _, _ = out
+    return out[:5], (dq, jnp.zeros_like(rn), _float0(code), _float0(k), dpts)
+
+
+@_solve_batch_trig.defjvp
+def _solve_batch_trig_jvp(structure, opts, points, primals, tangents):
+    out = _solve_batch_trig(structure, opts, points, *primals)
+    dq, dpts = _implicit_tangents(structure, points, primals, tangents, out)
+    q, rn, code, k, _, tr = out
+    mech = structure
+    dP, dphis = tangents[0], tangents[1]
+
+    def rot(cs, dx):
+        c, s = cs
+        return -s * dx, c * dx
+
+    ang = [i for i, kd in enumerate(mech.unknown_kinds) if kd == "angle"]
+    dtr = _Trig({n: rot(cs, dphis) for n, cs in tr.inputs.items()},
+                {n: rot(cs, dP[:, mech.parameter_names.index(n)]) for n, cs in tr.params.items()},
+                rot(tr.unknowns, _angles_of(mech, dq) if ang else jnp.zeros_like(tr.unknowns[0])))
+    return out, (dq, jnp.zeros_like(rn), _float0(code), _float0(k), dpts, dtr)
 
 
 def _float0(x):
