@@ -66,6 +66,7 @@ from typing import NamedTuple
 import jax
 import jax.numpy as jnp
 import numpy as np
+from jax.custom_derivatives import SymbolicZero
 
 from ..files import expr as _expr
 from ..model import structure as _structure
@@ -73,7 +74,7 @@ from ..model.mechanism import Mechanism
 from ..results import RESULTS, Solution, SolveStats
 from . import dyads as _dyads
 from .fusion import materialize
-from .linalg import solve_block_lower, solve_small
+from .linalg import solve_block_lower, solve_block_lower_scalars, solve_small
 
 
 class NewtonOptions(NamedTuple):
@@ -363,13 +364,20 @@ def _closed_form_path(mech, p, phis, q0, tol, trig_in, trig_p, thr, phi_ref, poi
 
     ang = [n for n, k in zip(mech.unknown_names, mech.unknown_kinds) if k == "angle"]
     packed = jax.vmap(one)(phis, trig_in)
+    return packed if trig_out else _unpack_closed_form(mech, packed, points, False)
+
+
+def _unpack_closed_form(mech, packed, points: bool, trig_out: bool):
+    """The outputs of `_closed_form_path` from its packed array (…, N, m): `(q, rnorm, result,
+    steps, points or None)`, and with `trig_out` the (cos, sin) of the solved angles."""
     n = len(mech.unknown_names)
-    end = packed.shape[1] - (2 * len(ang) if trig_out else 0)
-    pts = packed[:, n + 2:end].reshape(packed.shape[0], -1, 2) if points else None
-    zeros = jnp.zeros(packed.shape[:1], jnp.int32)
-    out = packed[:, :n], packed[:, n], packed[:, n + 1].astype(jnp.int8), zeros, pts
+    na = sum(k == "angle" for k in mech.unknown_kinds)
+    end = packed.shape[-1] - (2 * na if trig_out else 0)
+    lead = packed.shape[:-1]
+    pts = packed[..., n + 2:end].reshape(lead + (-1, 2)) if points else None
+    out = (packed[..., :n], packed[..., n], packed[..., n + 1].astype(jnp.int8), jnp.zeros(lead, jnp.int32), pts)
     if trig_out:
-        out += ((packed[:, end:end + len(ang)], packed[:, end + len(ang):]),)
+        out += ((packed[..., end:end + na], packed[..., end + na:]),)
     return out
 
 
@@ -759,7 +767,13 @@ def _solve_batch_impl(mech: Mechanism, opts: NewtonOptions, points: bool, P, phi
         out = jax.vmap(
             lambda p, ph, q0, t, ti, tp, r: _closed_form_path(mech, p, ph, q0, t, ti, tp, thr, r, points, trig),
             in_axes=(0, ax, 0, 0, ax, 0, 0))(P, phis, Q0, tol, trig_in, trig_p, ref)
-        return materialize(out[:5] + (_Trig(trig_in, trig_p, out[5]),)) if trig else out
+        if not trig:
+            return out
+        # for the derivative: every output of a position written by one kernel and stored
+        # (`materialize`), so that XLA neither splits the packed array into one kernel per output
+        # nor fuses the closed form into the kernels of the derivative (each would recompute it)
+        out = _unpack_closed_form(mech, materialize(out), points, True)
+        return out[:5] + (_Trig(trig_in, trig_p, out[5]),)
     # Newton: a design whose tolerance is not finite (a NaN or infinite length, even one that only
     # a point uses), whose guess is not finite (it selects no branch) or whose guess holds at a
     # non-finite input is `nonfinite` at every position, without iterating (a NaN tolerance makes
@@ -831,28 +845,32 @@ def _angles_of(mech: Mechanism, q):
     return jnp.stack([q[..., i] for i in idx], -1) if idx else jnp.zeros(q.shape[:-1] + (0,), q.dtype)
 
 
-def _known_trig_env(mech: Mechanism, q, phi, p, t_in, t_p, t_q):
-    """The names' (cos, sin) for `unit_vector`, given (no trigonometry evaluated) and
+def _env_known(mech: Mechanism, q, phi, p, t_in, t_p, t_q):
+    """`(env, trig)` for `term_vector`: the values of the names (the unknowns `q` and the
+    parameters `p` tuples of scalars) and their (cos, sin), given (no trigonometry evaluated) and
     differentiable in q, φ, p through `_known_trig` (derivative (−sin, cos) d(angle))."""
+    env = dict(zip(mech.parameter_names, p))
+    env.update(zip(mech.unknown_names, q))
+    env[mech.input_name] = phi
     trig = {n: _known_trig(phi, c, s) for n, (c, s) in t_in.items()}
-    trig.update({n: _known_trig(p[i], *t_p[n]) for i, n in enumerate(mech.parameter_names) if n in t_p})
-    ang = [i for i, k in enumerate(mech.unknown_kinds) if k == "angle"]
-    trig.update({mech.unknown_names[i]: _known_trig(q[i], t_q[0][j], t_q[1][j]) for j, i in enumerate(ang)})
-    return trig
+    trig.update({n: _known_trig(env[n], c, s) for n, (c, s) in t_p.items()})
+    ang = [n for n, k in zip(mech.unknown_names, mech.unknown_kinds) if k == "angle"]
+    trig.update({n: _known_trig(env[n], t_q[0][j], t_q[1][j]) for j, n in enumerate(ang)})
+    return env, trig
 
 
-def _residual_known(mech: Mechanism, q, phi, p, trig):
-    """Φ(q; φ, p) (every term, as `mech.residual`) with the sines and cosines of `trig`."""
-    env = mech.env(q, phi, p)
-    dtype = jnp.result_type(q)
-    out = []
-    for _, terms in mech.loops:
-        sx, sy = 0.0, 0.0
-        for term in terms:
-            x, y = mech.term_vector(term, env, trig)
-            sx, sy = sx + x, sy + y
-        out.extend((sx, sy))
-    return jnp.stack([jnp.broadcast_to(jnp.asarray(v, dtype), ()) for v in out])
+def _sum_terms(mech: Mechanism, terms, env, trig, dtype):
+    """(x, y) of a sum of terms (a loop, a point), as two scalars."""
+    sx, sy = 0.0, 0.0
+    for term in terms:
+        x, y = mech.term_vector(term, env, trig)
+        sx, sy = sx + x, sy + y
+    return tuple(jnp.broadcast_to(jnp.asarray(v, dtype), ()) for v in (sx, sy))
+
+
+def _residual_known(mech: Mechanism, env, trig, dtype):
+    """Φ (every term, as `mech.residual`) from `_env_known`, as a tuple of scalars."""
+    return tuple(v for _, terms in mech.loops for v in _sum_terms(mech, terms, env, trig, dtype))
 
 
 @functools.partial(jax.custom_jvp, nondiff_argnums=(0, 1, 2))
@@ -876,39 +894,69 @@ def _implicit_tangents(mech: Mechanism, points: bool, primals, tangents, out):
     with Φ_q, the right-hand side and the points' derivatives evaluated from the (cos, sin) the
     forward solve stored (`_Trig`: no trigonometry here, only products and sums), and Φ_q solved
     by forward substitution over its diagonal blocks (Cramer on the 2×2 block of each dyad,
-    `_linear_solve`). The guesses and the reference input select a branch and carry no
-    derivative."""
+    `_linalg.solve_block_lower_scalars`). Per position everything is a scalar (the unknowns, the
+    parameters, the columns of Φ_q): no array is assembled or indexed there, so that the transpose
+    (reverse mode) is as elementwise as the tangent. The guesses and the reference input select a
+    branch and carry no derivative."""
     P, phis, _, _ = primals
-    dP, dphis = tangents[0], tangents[1]
+    dP, dphis = (None if isinstance(t, SymbolicZero) else t for t in tangents[:2])
     q, _, code, _, _, tr = out
-    lin = _linear_solve(mech)
     ax = None if phis.ndim == 1 else 0
+    B, N, n = q.shape
+    dtype = q.dtype
+    order = _structure.blocks(mech)
+    blocks = tuple((tuple(r for li in loops for r in (2 * li, 2 * li + 1)), cols) for loops, cols in order)
+    if len(blocks) == 1 and len(blocks[0][1]) > 2:
+        blocks = ((tuple(range(2 * len(mech.loops))), tuple(range(n))),)
+    # the parameters as separate scalars; their tangents broadcast to every position here and
+    # unstacked there, so that the transpose stacks each position's parameter cotangents in one
+    # kernel and sums them over the positions in one reduction
+    Ps = tuple(P[:, i] for i in range(P.shape[1]))
+    dPN = None if dP is None else jnp.broadcast_to(dP[:, None, :], (B, N, P.shape[1]))
+    dphiN = None if dphis is None else jnp.broadcast_to(dphis, (B, N))
+    Qs = tuple(jnp.unstack(q, axis=-1))
 
     def one(p, dp, qk, phik, dphik, ok, t_in, t_p, t_q):
-        def res(qq, pp, ph):
-            return _residual_known(mech, qq, ph, pp, _known_trig_env(mech, qq, ph, pp, t_in, t_p, t_q))
+        dp = None if dp is None else tuple(jnp.unstack(dp))
 
-        jac = jax.jacfwd(res)(qk, p, phik)
-        rhs = jax.jvp(lambda pp, ph: res(qk, pp, ph), (p, phik), (dp, dphik))[1]
-        # where not converged the sensitivity is undefined: solve a harmless identity system
-        # instead (and zero the result), so that neither the JVP nor its transpose (grad)
+        def res(qq, pp, ph):
+            return _residual_known(mech, *_env_known(mech, qq, ph, pp, t_in, t_p, t_q), dtype)
+
+        # the columns of Φ_q, one forward derivative per unknown (only the entries that depend on it)
+        one_ = jnp.ones((), dtype)
+        cols = [jax.jvp(lambda x, j=j: res(qk[:j] + (x,) + qk[j + 1:], p, phik), (qk[j],), (one_,))[1]
+                for j in range(n)]
+        if dp is None and dphik is None:
+            rhs = tuple(jnp.zeros((), dtype) for _ in range(2 * len(mech.loops)))
+        elif dphik is None:
+            rhs = jax.jvp(lambda pp: res(qk, pp, phik), (p,), (dp,))[1]
+        elif dp is None:
+            rhs = jax.jvp(lambda ph: res(qk, p, ph), (phik,), (dphik,))[1]
+        else:
+            rhs = jax.jvp(lambda pp, ph: res(qk, pp, ph), (p, phik), (dp, dphik))[1]
+        # where not converged the sensitivity is undefined: the result is zeroed, and the diagonal
+        # blocks are made regular there (`ok`), so that neither the JVP nor its transpose (grad)
         # produces NaN
-        eye = jnp.eye(jac.shape[0], dtype=jac.dtype)
-        dq, _ = lin(jnp.where(ok, jac, eye), jnp.where(ok, rhs, 0.0))
-        dq = jnp.where(ok, -dq, 0.0)
+        dq = solve_block_lower_scalars(lambda r, c: cols[c][r], rhs, blocks, ok)
+        dq = tuple(jnp.where(ok, -v, 0.0) for v in dq)
         if not points:
-            return dq, None
+            return jnp.stack(dq), None
 
         def pts(qq, pp, ph):
-            return mech.point_positions(qq, ph, pp, _known_trig_env(mech, qq, ph, pp, t_in, t_p, t_q))
-        return dq, jax.jvp(pts, (qk, p, phik), (dq, dp, dphik))[1]
+            env, trig = _env_known(mech, qq, ph, pp, t_in, t_p, t_q)
+            return tuple(_sum_terms(mech, terms, env, trig, dtype) for _, terms in mech.points)
+        prim = (qk, p) + (() if dphik is None else (phik,))
+        dpp = dp if dp is not None else tuple(jnp.zeros((), dtype) for _ in p)
+        tang = (dq, dpp) + (() if dphik is None else (dphik,))
+        dxy = jax.jvp(lambda qq, pp, *ph: pts(qq, pp, ph[0] if ph else phik), prim, tang)[1]
+        dpts = jnp.stack([jnp.stack(v) for v in dxy]) if dxy else jnp.zeros((0, 2), dtype)
+        return jnp.stack(dq), dpts
 
-    per_pos = jax.vmap(one, in_axes=(None, None, 0, 0, 0, 0, 0, None, 0))
-    return jax.vmap(per_pos, in_axes=(0, 0, 0, ax, ax, 0, ax, 0, 0))(
-        P, dP, q, phis, dphis, code == RESULTS.converged, tr.inputs, tr.params, tr.unknowns)
+    per_pos = jax.vmap(one, in_axes=(None, 0, 0, 0, 0, 0, 0, None, 0))
+    return jax.vmap(per_pos, in_axes=(0, 0, 0, ax, 0, 0, ax, 0, 0))(
+        Ps, dPN, Qs, phis, dphiN, code == RESULTS.converged, tr.inputs, tr.params, tr.unknowns)
 
 
-@_solve_batch.defjvp
 def _solve_batch_jvp(structure, opts, points, primals, tangents):
     out = _solve_batch_trig(structure, opts, points, *primals)
     dq, dpts = _implicit_tangents(structure, points, primals, tangents, out)
@@ -916,13 +964,12 @@ def _solve_batch_jvp(structure, opts, points, primals, tangents):
     return out[:5], (dq, jnp.zeros_like(rn), _float0(code), _float0(k), dpts)
 
 
-@_solve_batch_trig.defjvp
 def _solve_batch_trig_jvp(structure, opts, points, primals, tangents):
     out = _solve_batch_trig(structure, opts, points, *primals)
     dq, dpts = _implicit_tangents(structure, points, primals, tangents, out)
     q, rn, code, k, _, tr = out
     mech = structure
-    dP, dphis = tangents[0], tangents[1]
+    dP, dphis = (jnp.zeros_like(x) if isinstance(t, SymbolicZero) else t for x, t in zip(primals[:2], tangents[:2]))
 
     def rot(cs, dx):
         c, s = cs
@@ -933,6 +980,10 @@ def _solve_batch_trig_jvp(structure, opts, points, primals, tangents):
                 {n: rot(cs, dP[:, mech.parameter_names.index(n)]) for n, cs in tr.params.items()},
                 rot(tr.unknowns, _angles_of(mech, dq) if ang else jnp.zeros_like(tr.unknowns[0])))
     return out, (dq, jnp.zeros_like(rn), _float0(code), _float0(k), dpts, dtr)
+
+
+_solve_batch.defjvp(_solve_batch_jvp, symbolic_zeros=True)
+_solve_batch_trig.defjvp(_solve_batch_trig_jvp, symbolic_zeros=True)
 
 
 def _float0(x):
