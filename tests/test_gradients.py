@@ -217,27 +217,27 @@ def test_rule_near_a_change_point(method):
 
 @pytest.mark.parametrize("method", ["auto", "continuation"])
 def test_unassemblable_positions_have_zero_gradient_and_no_nan(method):
-    """A non-Grashof four-bar (a = 40 mm) cannot be assembled over part of the turn: there every
-    sensitivity is exactly zero (reverse and forward mode, unknowns and points — the points being
-    NaN there and masked by the objective), and no NaN reaches the gradient."""
+    """A non-Grashof four-bar (a = 50 mm: s + l > p + q) cannot be assembled over part of the turn: there every
+    sensitivity is exactly zero (reverse and forward mode; the unknowns wherever the position is not
+    converged, the points — NaN there, masked by the objective — wherever it is not assembled), and
+    no NaN reaches the gradient."""
     mech = jl.load("four-bar")
-    p = jnp.asarray(mech.with_parameters(a=40.0))
+    p = jnp.asarray(mech.with_parameters(a=50.0))
     phis = jnp.asarray(np.deg2rad(np.arange(0.0, 360.0, 10.0)))
     opts = jl.NewtonOptions(method=method)
-    sol = jl.solve(mech, phis, p, options=opts)
-    bad = np.asarray(sol.result) != jl.RESULTS.converged
-    assert bad.any() and (~bad).any()
+    code = np.asarray(jl.solve(mech, phis, p, options=opts).result)
+    not_conv = code != jl.RESULTS.converged
+    not_assembled = not_conv & (code != jl.RESULTS.singular)
+    assert not_assembled.any() and (~not_conv).any()
 
-    def f(pp, mask):
+    def f(pp, mask_q, mask_pts):
         s = jl.solve_path(mech, phis, pp, options=opts, points=True)
         pts = jnp.where(jnp.isfinite(s.points), s.points, 0.0)
-        return jnp.sum(s.q * mask[:, None]) + jnp.sum(pts * mask[:, None, None])
+        return jnp.sum(s.q * mask_q[:, None]) + jnp.sum(pts * mask_pts[:, None, None])
 
-    only_bad = jnp.asarray(bad, float)
-    g = np.asarray(jax.grad(f)(p, only_bad))
-    gf = np.asarray(jax.jacfwd(f)(p, only_bad))
+    bad = (jnp.asarray(not_conv, float), jnp.asarray(not_assembled, float))
+    g = np.asarray(jax.grad(f)(p, *bad))
+    gf = np.asarray(jax.jacfwd(f)(p, *bad))
     assert np.all(g == 0.0) and np.all(gf == 0.0)
-    g = np.asarray(jax.grad(f)(p, 1.0 - only_bad))
+    g = np.asarray(jax.grad(f)(p, 1.0 - bad[0], 1.0 - bad[1]))
     assert np.all(np.isfinite(g)) and np.any(g != 0.0)
-    dq = jax.jacfwd(lambda pp: jl.solve_path(mech, phis, pp, options=opts).q)(p)
-    assert np.all(np.asarray(dq)[bad] == 0.0)
