@@ -3,6 +3,7 @@
 import jax
 import jax.numpy as jnp
 import numpy as np
+import pytest
 
 import jaxlink as jl
 
@@ -64,3 +65,179 @@ def test_non_converged_positions_get_zero_gradient_not_nan():
     f = lambda p: jnp.sum(jl.solve_path(mech, phis, p).q)  # noqa: E731
     g = jax.grad(f)(jnp.asarray(mech.with_parameters(a=40.0)))
     assert np.all(np.isfinite(np.asarray(g)))
+
+
+# ------------------------------------------------------------------ the implicit rule, case by case
+
+
+def _central(f, p, i, h):
+    """4th-order central difference of f along parameter i (truncation far below the tolerances)."""
+    e = np.zeros(len(p))
+    e[i] = h
+    p = np.asarray(p, dtype=float)
+    return (-f(p + 2 * e) + 8 * f(p + e) - 8 * f(p - e) + f(p - 2 * e)) / (12 * h)
+
+
+def _check_against_differences(mech, f, p, rtol, names=None):
+    p = np.asarray(p, dtype=float)
+    g = np.asarray(jax.jit(jax.grad(f))(jnp.asarray(p)))
+    gf = np.asarray(jax.jit(jax.jacfwd(f))(jnp.asarray(p)))
+    fj = jax.jit(f)
+    fd = np.array([_central(lambda x: float(fj(jnp.asarray(x))), p, i,
+                            1e-5 * (1.0 if k == "angle" else max(abs(p[i]), 1e-3)))
+                   for i, k in enumerate(mech.parameter_kinds)])
+    scale = np.abs(fd).max()
+    assert np.all(np.isfinite(g))
+    np.testing.assert_allclose(g, gf, rtol=1e-10, atol=1e-12 * scale)
+    np.testing.assert_allclose(g, fd, rtol=rtol, atol=rtol * scale)
+    return g
+
+
+def test_closed_form_rule_all_parameters_unknowns_and_points():
+    """The feed six-bar (all dyads: closed form): unknowns and the feed-dog point along 24 inputs,
+    differentiated in all 11 parameters (lengths and the angle gamma) — reverse mode against
+    forward mode and against central differences."""
+    mech = jl.load("sewing-feed")
+    phis = jnp.asarray(np.deg2rad(80.0 + 15.0 * np.arange(24)))
+    w = jnp.asarray(np.random.default_rng(1).normal(size=(24, 4)))
+
+    def f(p):
+        sol = jl.solve_path(mech, phis, p, points=True)
+        return jnp.sum(sol.q * w) + 1e3 * jnp.sum(sol.points[:, 0] ** 2)
+
+    _check_against_differences(mech, f, mech.parameters, 1e-7)
+
+
+@pytest.mark.parametrize("scene", ["sewing-feed", "four-bar"])
+def test_continuation_rule_against_central_differences(scene):
+    """The same rule after Newton with continuation (its sines and cosines computed from q)."""
+    mech = jl.load(scene)
+    phis = jnp.asarray(np.deg2rad(mech.input_start * 180 / np.pi + 10.0 * np.arange(36)))
+    opts = jl.NewtonOptions(method="continuation")
+
+    def f(p):
+        sol = jl.solve_path(mech, phis, p, options=opts, points=True)
+        return jnp.sum(jnp.sin(sol.q)) + 1e2 * jnp.sum(sol.points ** 2)
+
+    _check_against_differences(mech, f, mech.parameters, 1e-7)
+
+
+def _triad_scene():
+    """A class-III Assur group (triad) driven by a crank: binary links 1, 2, 3 and a ternary link 4;
+    neither loop has only two new unknowns, so Φ_q is one 4 × 4 block (no closed form). The frame
+    pivots are placed so that the loops close at the guesses."""
+    a, l1, l2, l3, s1, s2, alpha = 0.02, 0.07, 0.06, 0.065, 0.05, 0.045, np.deg2rad(50.0)
+    phi0, t1, t2, t3, t4 = np.deg2rad([30.0, 20.0, 100.0, 70.0, -10.0])
+    e = lambda t: np.array([np.cos(t), np.sin(t)])  # noqa: E731
+    tip = a * e(phi0) + l1 * e(t1)
+    g2 = tip + s1 * e(t4) - l2 * e(t2)
+    g3 = tip + s2 * e(t4 + alpha) - l3 * e(t3)
+    text = f"""
+[mechanism]
+name = "triad"
+length_unit = "m"
+angle_unit = "deg"
+
+[parameters]
+a = {a}
+l1 = {l1}
+l2 = {l2}
+l3 = {l3}
+s1 = {s1}
+s2 = {s2}
+alpha = {np.rad2deg(alpha)}
+g2x = {g2[0]}
+g2y = {g2[1]}
+g3x = {g3[0]}
+g3y = {g3[1]}
+
+[input]
+name = "phi"
+start = {np.rad2deg(phi0)}
+
+[unknowns]
+t1 = {np.rad2deg(t1)}
+t2 = {np.rad2deg(t2)}
+t3 = {np.rad2deg(t3)}
+t4 = {np.rad2deg(t4)}
+
+[loops]
+one = ["a @ phi", "l1 @ t1", "s1 @ t4", "-l2 @ t2", "-(g2x, g2y)"]
+two = ["a @ phi", "l1 @ t1", "s2 @ t4 + alpha", "-l3 @ t3", "-(g3x, g3y)"]
+
+[points]
+T = ["a @ phi", "l1 @ t1"]
+"""
+    return jl.loads(text)
+
+
+def test_rule_on_a_single_4x4_block_against_central_differences():
+    """A structure whose Φ_q is one 4 × 4 block (Gaussian elimination with pivoting in the rule)."""
+    mech = _triad_scene()
+    phis = jnp.asarray(np.deg2rad(26.0 + 1.0 * np.arange(12)))
+    sol = jl.solve(mech, phis)
+    assert np.all(np.asarray(sol.result) == jl.RESULTS.converged)
+
+    def f(p):
+        s = jl.solve_path(mech, phis, p, points=True)
+        return jnp.sum(jnp.cos(s.q)) + 1e3 * jnp.sum(s.points ** 2)
+
+    _check_against_differences(mech, f, mech.parameters, 1e-7)
+
+
+# s + l = p + q: 20 + 60 = 45 + 35 mm; at φ2 = 0 all four links are collinear (a change point)
+_GRASHOF_BOUNDARY = {"a": 0.020, "b": 0.060, "c": 0.045, "d": 0.035, "cx": 0.03, "cy": 0.015}
+
+
+@pytest.mark.parametrize("method", ["auto", "continuation"])
+def test_rule_near_a_change_point(method):
+    """Approaching a change point (Φ_q singular at φ2 = 0, to within 3°) the sensitivities grow
+    like 1 / sin of the transmission angle; they stay exact (against central differences), and in
+    the input they equal the transfer function μ."""
+    mech = jl.loads(open(jl.__path__[0] + "/scenes/four-bar.toml").read().replace('length_unit = "mm"',
+                                                                                 'length_unit = "m"'))
+    p0 = np.array([_GRASHOF_BOUNDARY[n] for n in mech.parameter_names])
+    phis = jnp.asarray(np.deg2rad(np.arange(-60.0, -2.9, 3.0)))
+    opts = jl.NewtonOptions(method=method)
+    # the branch that meets the other at φ2 = 0 (the start configuration by the closed form)
+    q0 = jl.solve(mech, phis[:1], jnp.asarray(p0)).q[0]
+    sol = jl.solve(mech, phis, jnp.asarray(p0), q0, options=opts)
+    assert np.all(np.asarray(sol.result) == jl.RESULTS.converged)
+
+    def f(p):
+        return jnp.sum(jl.solve_path(mech, phis, p, q0, options=opts).q[:, 1] * jnp.arange(1.0, 1.0 + len(phis)))
+
+    _check_against_differences(mech, f, p0, 1e-6)
+    q, dq = jax.jvp(lambda ph: jl.solve_path(mech, ph, jnp.asarray(p0), q0, options=opts).q, (phis,),
+                    (jnp.ones_like(phis),))
+    mu = jl.transfer(mech, phis, q, jnp.asarray(p0), order=1).mu
+    assert np.abs(np.asarray(mu)).max() > 3.0  # large: near the change point
+    np.testing.assert_allclose(np.asarray(dq), np.asarray(mu), rtol=1e-10, atol=1e-10)
+
+
+@pytest.mark.parametrize("method", ["auto", "continuation"])
+def test_unassemblable_positions_have_zero_gradient_and_no_nan(method):
+    """A non-Grashof four-bar (a = 50 mm: s + l > p + q) cannot be assembled over part of the turn: there every
+    sensitivity is exactly zero (reverse and forward mode; the unknowns wherever the position is not
+    converged, the points — NaN there, masked by the objective — wherever it is not assembled), and
+    no NaN reaches the gradient."""
+    mech = jl.load("four-bar")
+    p = jnp.asarray(mech.with_parameters(a=50.0))
+    phis = jnp.asarray(np.deg2rad(np.arange(0.0, 360.0, 10.0)))
+    opts = jl.NewtonOptions(method=method)
+    code = np.asarray(jl.solve(mech, phis, p, options=opts).result)
+    not_conv = code != jl.RESULTS.converged
+    not_assembled = not_conv & (code != jl.RESULTS.singular)
+    assert not_assembled.any() and (~not_conv).any()
+
+    def f(pp, mask_q, mask_pts):
+        s = jl.solve_path(mech, phis, pp, options=opts, points=True)
+        pts = jnp.where(jnp.isfinite(s.points), s.points, 0.0)
+        return jnp.sum(s.q * mask_q[:, None]) + jnp.sum(pts * mask_pts[:, None, None])
+
+    bad = (jnp.asarray(not_conv, float), jnp.asarray(not_assembled, float))
+    g = np.asarray(jax.grad(f)(p, *bad))
+    gf = np.asarray(jax.jacfwd(f)(p, *bad))
+    assert np.all(g == 0.0) and np.all(gf == 0.0)
+    g = np.asarray(jax.grad(f)(p, 1.0 - bad[0], 1.0 - bad[1]))
+    assert np.all(np.isfinite(g)) and np.any(g != 0.0)

@@ -54,7 +54,16 @@ parameters give no finite tolerance (a NaN or infinite length) or whose guess is
 **Exact gradients.** The whole path solve is a `jax.custom_jvp`: by the implicit function
 theorem, dq_k = −Φ_q⁻¹ (Φ_p dp + Φ_φ dφ_k) at the converged solution — one linear solve per
 position, independent of the Newton iterations (and zero at non-converged positions, `singular`
-ones included). Reverse mode (`jax.grad`) follows by transposition of that linear map.
+ones included). Reverse mode (`jax.grad`) follows by transposition of that linear map. The rule
+(`_implicit_tangents`) costs no trigonometry: the forward solve also returns, stored, the sines
+and cosines of the input, of the angle parameters and of the solved angles (`_Trig`; the closed
+form has those of the solved angles without evaluating any), Φ_q, Φ_p, Φ_φ and the points'
+derivatives are products and sums of them, and Φ_q is solved by forward substitution over its
+diagonal blocks (Cramer on each dyad's 2×2 block). Per position it works on scalars only, so that
+its transpose is as elementwise as the rule itself, and the forward's outputs are stored
+(`materialize`) so that XLA does not recompute the closed form inside the derivative's kernels:
+a gradient of a path objective in all parameters costs under two forward solves
+(benchmarks/gradient_cost.py).
 """
 
 from __future__ import annotations
@@ -67,6 +76,7 @@ from typing import NamedTuple
 import jax
 import jax.numpy as jnp
 import numpy as np
+from jax.custom_derivatives import SymbolicZero
 
 from ..files import expr as _expr
 from ..model import structure as _structure
@@ -74,7 +84,7 @@ from ..model.mechanism import Mechanism
 from ..results import RESULTS, Solution, SolveStats
 from . import dyads as _dyads
 from .fusion import materialize
-from .linalg import solve_block_lower, solve_small
+from .linalg import solve_block_lower, solve_block_lower_scalars, solve_small
 
 
 class NewtonOptions(NamedTuple):
@@ -324,14 +334,17 @@ def method_for(mech: Mechanism, opts: "NewtonOptions") -> str:
     return opts.method
 
 
-def _closed_form_path(mech, p, phis, q0, tol, trig_in, trig_p, thr, phi_ref, points: bool = False):
+def _closed_form_path(mech, p, phis, q0, tol, trig_in, trig_p, thr, phi_ref, points: bool = False,
+                      trig_out: bool = False):
     """Every position of one design in closed form, on the branches nearest to the guess q0 at
     the input `phi_ref` where it holds (`_dyads.solve_nearest`): no Newton, no continuation.
 
     A position is assembled when its loops close to `tol` (the residual of the closed form,
     exact to rounding: a dyad at its exact toggle, h² negative by rounding, is assembled at
     h = 0); it is `singular` when some dyad's links are collinear to within `thr` (the sine of
-    the angle between them: dead centre, toggle, change point)."""
+    the angle between them: dead centre, toggle, change point). With `trig_out`, also the
+    (cos, sin) of the solved angles, (N, n_angles) each, as the closed form has them (no new
+    trigonometry; (1, 0) where a position has no finite solution)."""
     dyads = _dyads.classify(mech)
     t_ref = _dyads.input_trig(mech, phi_ref)
     _, _, _, sigma = _dyads.solve_nearest(mech, dyads, q0, phi_ref, p, {**t_ref, **trig_p})
@@ -353,13 +366,29 @@ def _closed_form_path(mech, p, phis, q0, tol, trig_in, trig_p, thr, phi_ref, poi
         parts = [q, rn[None], code.astype(q.dtype)[None]]
         if points:
             parts.append(jnp.ravel(mech.point_positions(q, phi, p, trig)))
+        if trig_out:
+            for j in (0, 1):
+                t = jnp.stack([trig[n][j] for n in ang]) if ang else jnp.zeros((0,), q.dtype)
+                parts.append(jnp.where(jnp.isfinite(t), t, float(1 - j)))
         return jnp.concatenate(parts)
 
+    ang = [n for n, k in zip(mech.unknown_names, mech.unknown_kinds) if k == "angle"]
     packed = jax.vmap(one)(phis, trig_in)
+    return packed if trig_out else _unpack_closed_form(mech, packed, points, False)
+
+
+def _unpack_closed_form(mech, packed, points: bool, trig_out: bool):
+    """The outputs of `_closed_form_path` from its packed array (…, N, m): `(q, rnorm, result,
+    steps, points or None)`, and with `trig_out` the (cos, sin) of the solved angles."""
     n = len(mech.unknown_names)
-    pts = packed[:, n + 2:].reshape(packed.shape[0], -1, 2) if points else None
-    zeros = jnp.zeros(packed.shape[:1], jnp.int32)
-    return packed[:, :n], packed[:, n], packed[:, n + 1].astype(jnp.int8), zeros, pts
+    na = sum(k == "angle" for k in mech.unknown_kinds)
+    end = packed.shape[-1] - (2 * na if trig_out else 0)
+    lead = packed.shape[:-1]
+    pts = packed[..., n + 2:end].reshape(lead + (-1, 2)) if points else None
+    out = (packed[..., :n], packed[..., n], packed[..., n + 1].astype(jnp.int8), jnp.zeros(lead, jnp.int32), pts)
+    if trig_out:
+        out += ((packed[..., end:end + na], packed[..., end + na:]),)
+    return out
 
 
 def _extrapolate(hist_q, hist_phi, n_good, phi, order: int):
@@ -720,10 +749,12 @@ def _lead_in(mech: Mechanism, opts: NewtonOptions, p, phi_a, phi_b, q0, tol, kw)
     return st.hq[0]
 
 
-def _solve_batch_impl(mech: Mechanism, opts: NewtonOptions, points: bool, P, phis, Q0, phi_ref):
+def _solve_batch_impl(mech: Mechanism, opts: NewtonOptions, points: bool, P, phis, Q0, phi_ref,
+                      trig: bool = False):
     """P (B, P), phis (N,) shared by all designs or (B, N), Q0 (B, n) holding at the inputs
     `phi_ref` (B,) (None: at the first input) -> q (B, N, n), rnorm, result, steps (B, N), and the
-    points (B, N, n_points, 2) if `points` (else None)."""
+    points (B, N, n_points, 2) if `points` (else None). With `trig`, also the (cos, sin) the
+    derivative needs (`_Trig`), computed once and stored."""
     dtype = jnp.result_type(Q0)
     B = P.shape[0]
     shared = phis.ndim == 1
@@ -743,9 +774,16 @@ def _solve_batch_impl(mech: Mechanism, opts: NewtonOptions, points: bool, P, phi
         ref = phi0 if phi_ref is None else jnp.where(ref_finite, phi_ref, 0.0)
         trig_in, trig_p = materialize((_dyads.input_trig(mech, phis), _dyads.parameter_trig(mech, P)))
         tol = jnp.where(ref_finite, tol, jnp.nan)
-        return jax.vmap(
-            lambda p, ph, q0, t, ti, tp, r: _closed_form_path(mech, p, ph, q0, t, ti, tp, thr, r, points),
+        out = jax.vmap(
+            lambda p, ph, q0, t, ti, tp, r: _closed_form_path(mech, p, ph, q0, t, ti, tp, thr, r, points, trig),
             in_axes=(0, ax, 0, 0, ax, 0, 0))(P, phis, Q0, tol, trig_in, trig_p, ref)
+        if not trig:
+            return out
+        # for the derivative: every output of a position written by one kernel and stored
+        # (`materialize`), so that XLA neither splits the packed array into one kernel per output
+        # nor fuses the closed form into the kernels of the derivative (each would recompute it)
+        out = _unpack_closed_form(mech, materialize(out), points, True)
+        return out[:5] + (_Trig(trig_in, trig_p, out[5]),)
     # Newton: a design whose tolerance is not finite (a NaN or infinite length, even one that only
     # a point uses), whose guess is not finite (it selects no branch) or whose guess holds at a
     # non-finite input is `nonfinite` at every position, without iterating (a NaN tolerance makes
@@ -771,12 +809,16 @@ def _solve_batch_impl(mech: Mechanism, opts: NewtonOptions, points: bool, P, phi
         out = jax.vmap(lambda p, ph, q0, r, t, tp: _continuation_one(mech, opts, p, ph, q0, r, t, kw_of(tp)),
                        in_axes=(0, ax, 0, 0, 0, 0))(P, phis, Q0, phi_ref, tol, trig_p)
     out = _check_residual(mech, P, phis, out, tol, rtol, dtype)
-    if not points:
-        return out + (None,)
-    # the points, with the sines and cosines of the angle parameters known
-    pts = jax.vmap(jax.vmap(lambda q, phi, p, tp: mech.point_positions(q, phi, p, tp), in_axes=(0, 0, None, None)),
-                   in_axes=(0, ax, 0, 0))(out[0], phis, P, trig_p)
-    return out + (pts,)
+    if points:
+        # the points, with the sines and cosines of the angle parameters known
+        pts = jax.vmap(jax.vmap(lambda q, phi, p, tp: mech.point_positions(q, phi, p, tp),
+                                in_axes=(0, 0, None, None)), in_axes=(0, ax, 0, 0))(out[0], phis, P, trig_p)
+    out = out + ((pts,) if points else (None,))
+    if not trig:
+        return out
+    qa = _angles_of(mech, out[0])
+    trig_in, trig_q = materialize((_dyads.input_trig(mech, phis), (jnp.cos(qa), jnp.sin(qa))))
+    return out + (_Trig(trig_in, trig_p, trig_q),)
 
 
 def _check_residual(mech, P, phis, out, tol, rtol, dtype):
@@ -796,6 +838,51 @@ def _check_residual(mech, P, phis, out, tol, rtol, dtype):
     return q, jnp.where(bad, r, rn), code, k
 
 
+class _Trig(NamedTuple):
+    """The (cos, sin) pairs the derivative of a batched solve needs, as the forward computed them:
+    of the input (`inputs`, keyed by its name, shaped as the inputs; empty for a length input), of
+    the angle parameters (`params`, keyed by name, (B,)) and of the solved angle unknowns
+    (`unknowns`, (B, N, n_angles) each, in the order of `mech.unknown_names`)."""
+
+    inputs: dict
+    params: dict
+    unknowns: tuple
+
+
+def _angles_of(mech: Mechanism, q):
+    """The angle unknowns of q (…, n) -> (…, n_angles)."""
+    idx = [i for i, k in enumerate(mech.unknown_kinds) if k == "angle"]
+    return jnp.stack([q[..., i] for i in idx], -1) if idx else jnp.zeros(q.shape[:-1] + (0,), q.dtype)
+
+
+def _env_known(mech: Mechanism, q, phi, p, t_in, t_p, t_q):
+    """`(env, trig)` for `term_vector`: the values of the names (the unknowns `q` and the
+    parameters `p` tuples of scalars) and their (cos, sin), given (no trigonometry evaluated) and
+    differentiable in q, φ, p through `_known_trig` (derivative (−sin, cos) d(angle))."""
+    env = dict(zip(mech.parameter_names, p))
+    env.update(zip(mech.unknown_names, q))
+    env[mech.input_name] = phi
+    trig = {n: _known_trig(phi, c, s) for n, (c, s) in t_in.items()}
+    trig.update({n: _known_trig(env[n], c, s) for n, (c, s) in t_p.items()})
+    ang = [n for n, k in zip(mech.unknown_names, mech.unknown_kinds) if k == "angle"]
+    trig.update({n: _known_trig(env[n], t_q[0][j], t_q[1][j]) for j, n in enumerate(ang)})
+    return env, trig
+
+
+def _sum_terms(mech: Mechanism, terms, env, trig, dtype):
+    """(x, y) of a sum of terms (a loop, a point), as two scalars."""
+    sx, sy = 0.0, 0.0
+    for term in terms:
+        x, y = mech.term_vector(term, env, trig)
+        sx, sy = sx + x, sy + y
+    return tuple(jnp.broadcast_to(jnp.asarray(v, dtype), ()) for v in (sx, sy))
+
+
+def _residual_known(mech: Mechanism, env, trig, dtype):
+    """Φ (every term, as `mech.residual`) from `_env_known`, as a tuple of scalars."""
+    return tuple(v for _, terms in mech.loops for v in _sum_terms(mech, terms, env, trig, dtype))
+
+
 @functools.partial(jax.custom_jvp, nondiff_argnums=(0, 1, 2))
 def _solve_batch(structure, opts: NewtonOptions, points: bool, P, phis, Q0, phi_ref):
     """The differentiable batched solve: (P (B,P), phis (N,) or (B,N), Q0 (B,n), phi_ref (B,) or
@@ -803,38 +890,110 @@ def _solve_batch(structure, opts: NewtonOptions, points: bool, P, phis, Q0, phi_
     return _solve_batch_impl(structure, opts, points, P, phis, Q0, phi_ref)
 
 
-@_solve_batch.defjvp
-def _solve_batch_jvp(structure, opts, points, primals, tangents):
-    """Implicit differentiation: dq = −Φ_q⁻¹ (Φ_p dp + Φ_φ dφ) at every converged position (zero
-    elsewhere); the guesses and the reference input select a branch and carry no derivative."""
-    P, phis, Q0, phi_ref = primals
-    dP, dphis = tangents[0], tangents[1]
-    mech = structure
-    out = _solve_batch(structure, opts, points, P, phis, Q0, phi_ref)
-    q, rn, code, k, _ = out
-    lin = _linear_solve(mech)
+@functools.partial(jax.custom_jvp, nondiff_argnums=(0, 1, 2))
+def _solve_batch_trig(structure, opts: NewtonOptions, points: bool, P, phis, Q0, phi_ref):
+    """`_solve_batch` and the (cos, sin) of its angles (`_Trig`): the primal of its derivative."""
+    return _solve_batch_impl(structure, opts, points, P, phis, Q0, phi_ref, trig=True)
 
-    def one(p, dp, qk, phik, dphik, ok):
-        rhs = jax.jvp(lambda pp, ph: mech.residual(qk, ph, pp), (p, phik), (dp, dphik))[1]
-        jac = jax.jacfwd(mech.residual)(qk, phik, p)
-        # where not converged the sensitivity is undefined: solve a harmless identity system
-        # instead (and zero the result), so that neither the JVP nor its transpose (grad)
-        # produces NaN
-        eye = jnp.eye(jac.shape[0], dtype=jac.dtype)
-        dq, _ = lin(jnp.where(ok, jac, eye), jnp.where(ok, rhs, 0.0))
-        return jnp.where(ok, -dq, 0.0)
 
-    per_pos = jax.vmap(one, in_axes=(None, None, 0, 0, 0, 0))
+def _implicit_tangents(mech: Mechanism, points: bool, primals, tangents, out):
+    """Implicit differentiation at every converged position (zero elsewhere):
+
+        Φ_q dq = −(Φ_p dp + Φ_φ dφ),      d(point) = P_q dq + P_p dp + P_φ dφ,
+
+    with Φ_q, the right-hand side and the points' derivatives evaluated from the (cos, sin) the
+    forward solve stored (`_Trig`: no trigonometry here, only products and sums), and Φ_q solved
+    by forward substitution over its diagonal blocks (Cramer on the 2×2 block of each dyad,
+    `_linalg.solve_block_lower_scalars`). Per position everything is a scalar (the unknowns, the
+    parameters, the columns of Φ_q): no array is assembled or indexed there, so that the transpose
+    (reverse mode) is as elementwise as the tangent. The guesses and the reference input select a
+    branch and carry no derivative."""
+    P, phis, _, _ = primals
+    dP, dphis = (None if isinstance(t, SymbolicZero) else t for t in tangents[:2])
+    q, _, code, _, _, tr = out
     ax = None if phis.ndim == 1 else 0
-    dq = jax.vmap(per_pos, in_axes=(0, 0, 0, ax, ax, 0))(P, dP, q, phis, dphis, code == RESULTS.converged)
-    dpts = None
-    if points:
-        def dpoint(p, dp, qk, dqk, phik, dphik):
-            return jax.jvp(lambda qq, ph, pp: mech.point_positions(qq, ph, pp), (qk, phik, p), (dqk, dphik, dp))[1]
+    B, N, n = q.shape
+    dtype = q.dtype
+    order = _structure.blocks(mech)
+    blocks = tuple((tuple(r for li in loops for r in (2 * li, 2 * li + 1)), cols) for loops, cols in order)
+    if len(blocks) == 1 and len(blocks[0][1]) > 2:
+        blocks = ((tuple(range(2 * len(mech.loops))), tuple(range(n))),)
+    # the parameters as separate scalars; their tangents broadcast to every position here and
+    # unstacked there, so that the transpose stacks each position's parameter cotangents in one
+    # kernel and sums them over the positions in one reduction
+    Ps = tuple(P[:, i] for i in range(P.shape[1]))
+    dPN = None if dP is None else jnp.broadcast_to(dP[:, None, :], (B, N, P.shape[1]))
+    dphiN = None if dphis is None else jnp.broadcast_to(dphis, (B, N))
+    Qs = tuple(jnp.unstack(q, axis=-1))
 
-        dpts = jax.vmap(jax.vmap(dpoint, in_axes=(None, None, 0, 0, 0, 0)), in_axes=(0, 0, 0, 0, ax, ax))(
-            P, dP, q, dq, phis, dphis)
-    return out, (dq, jnp.zeros_like(rn), _float0(code), _float0(k), dpts)
+    def one(p, dp, qk, phik, dphik, ok, t_in, t_p, t_q):
+        dp = None if dp is None else tuple(jnp.unstack(dp))
+
+        def res(qq, pp, ph):
+            return _residual_known(mech, *_env_known(mech, qq, ph, pp, t_in, t_p, t_q), dtype)
+
+        # the columns of Φ_q, one forward derivative per unknown (only the entries that depend on it)
+        one_ = jnp.ones((), dtype)
+        cols = [jax.jvp(lambda x, j=j: res(qk[:j] + (x,) + qk[j + 1:], p, phik), (qk[j],), (one_,))[1]
+                for j in range(n)]
+        if dp is None and dphik is None:
+            rhs = tuple(jnp.zeros((), dtype) for _ in range(2 * len(mech.loops)))
+        elif dphik is None:
+            rhs = jax.jvp(lambda pp: res(qk, pp, phik), (p,), (dp,))[1]
+        elif dp is None:
+            rhs = jax.jvp(lambda ph: res(qk, p, ph), (phik,), (dphik,))[1]
+        else:
+            rhs = jax.jvp(lambda pp, ph: res(qk, pp, ph), (p, phik), (dp, dphik))[1]
+        # where not converged the sensitivity is undefined: the result is zeroed, and the diagonal
+        # blocks are made regular there (`ok`), so that neither the JVP nor its transpose (grad)
+        # produces NaN
+        dq = solve_block_lower_scalars(lambda r, c: cols[c][r], rhs, blocks, ok)
+        dq = tuple(jnp.where(ok, -v, 0.0) for v in dq)
+        if not points:
+            return jnp.stack(dq), None
+
+        def pts(qq, pp, ph):
+            env, trig = _env_known(mech, qq, ph, pp, t_in, t_p, t_q)
+            return tuple(_sum_terms(mech, terms, env, trig, dtype) for _, terms in mech.points)
+        prim = (qk, p) + (() if dphik is None else (phik,))
+        dpp = dp if dp is not None else tuple(jnp.zeros((), dtype) for _ in p)
+        tang = (dq, dpp) + (() if dphik is None else (dphik,))
+        dxy = jax.jvp(lambda qq, pp, *ph: pts(qq, pp, ph[0] if ph else phik), prim, tang)[1]
+        dpts = jnp.stack([jnp.stack(v) for v in dxy]) if dxy else jnp.zeros((0, 2), dtype)
+        return jnp.stack(dq), dpts
+
+    per_pos = jax.vmap(one, in_axes=(None, 0, 0, 0, 0, 0, 0, None, 0))
+    return jax.vmap(per_pos, in_axes=(0, 0, 0, ax, 0, 0, ax, 0, 0))(
+        Ps, dPN, Qs, phis, dphiN, code == RESULTS.converged, tr.inputs, tr.params, tr.unknowns)
+
+
+def _solve_batch_jvp(structure, opts, points, primals, tangents):
+    out = _solve_batch_trig(structure, opts, points, *primals)
+    dq, dpts = _implicit_tangents(structure, points, primals, tangents, out)
+    q, rn, code, k, _, _ = out
+    return out[:5], (dq, jnp.zeros_like(rn), _float0(code), _float0(k), dpts)
+
+
+def _solve_batch_trig_jvp(structure, opts, points, primals, tangents):
+    out = _solve_batch_trig(structure, opts, points, *primals)
+    dq, dpts = _implicit_tangents(structure, points, primals, tangents, out)
+    q, rn, code, k, _, tr = out
+    mech = structure
+    dP, dphis = (jnp.zeros_like(x) if isinstance(t, SymbolicZero) else t for x, t in zip(primals[:2], tangents[:2]))
+
+    def rot(cs, dx):
+        c, s = cs
+        return -s * dx, c * dx
+
+    ang = [i for i, kd in enumerate(mech.unknown_kinds) if kd == "angle"]
+    dtr = _Trig({n: rot(cs, dphis) for n, cs in tr.inputs.items()},
+                {n: rot(cs, dP[:, mech.parameter_names.index(n)]) for n, cs in tr.params.items()},
+                rot(tr.unknowns, _angles_of(mech, dq) if ang else jnp.zeros_like(tr.unknowns[0])))
+    return out, (dq, jnp.zeros_like(rn), _float0(code), _float0(k), dpts, dtr)
+
+
+_solve_batch.defjvp(_solve_batch_jvp, symbolic_zeros=True)
+_solve_batch_trig.defjvp(_solve_batch_trig_jvp, symbolic_zeros=True)
 
 
 def _float0(x):

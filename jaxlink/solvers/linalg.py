@@ -165,3 +165,39 @@ def solve_block_lower(a, b, blocks):
         signs.append(sg)
         done.extend(cols)
     return jnp.stack(x), ratio, jnp.stack(signs)
+
+
+def solve_block_lower_scalars(entry, b, blocks, ok=None):
+    """`solve_block_lower` on scalars: `entry(r, c)` gives a_rc (only the diagonal blocks and the
+    entries left of them are asked for), `b` is a sequence of scalars; returns the list of the
+    x_c. No array is assembled or indexed, so that under `vmap` and reverse-mode AD every
+    operation stays elementwise (the transpose of indexing an array is a pad of the whole vector
+    per use). Cramer's rule on 2×2 diagonal blocks, `solve_small` on larger ones. Where `ok`
+    (a boolean scalar) is False the diagonal blocks are replaced by regular ones (det 1 on 2×2
+    blocks, the identity on larger ones), so that no division by zero occurs: the caller discards
+    x there."""
+    n = sum(len(cols) for _, cols in blocks)
+    x = [None] * n
+    done: list = []
+    for rows, cols in blocks:
+        rhs = []
+        for r in rows:
+            s = b[r]
+            for j in done:
+                s = s - entry(r, j) * x[j]
+            rhs.append(s)
+        if len(cols) == 2 and len(rows) == 2:
+            (r0, r1), (c0, c1) = rows, cols
+            a00, a01, a10, a11 = entry(r0, c0), entry(r0, c1), entry(r1, c0), entry(r1, c1)
+            det = a00 * a11 - a01 * a10
+            inv = 1.0 / (det if ok is None else jnp.where(ok, det, 1.0))
+            x[c0], x[c1] = (a11 * rhs[0] - a01 * rhs[1]) * inv, (a00 * rhs[1] - a10 * rhs[0]) * inv
+        else:
+            eye = ok is not None
+            sub = jnp.stack([jnp.stack([jnp.where(ok, entry(r, c), float(i == k)) if eye else entry(r, c)
+                                        for k, c in enumerate(cols)]) for i, r in enumerate(rows)])
+            xs, _, _ = _solve_small(sub, jnp.stack(rhs), "columns")
+            for k, c in enumerate(cols):
+                x[c] = xs[k]
+        done.extend(cols)
+    return x
