@@ -385,7 +385,8 @@ def _unpack_closed_form(mech, packed, points: bool, trig_out: bool):
     end = packed.shape[-1] - (2 * na if trig_out else 0)
     lead = packed.shape[:-1]
     pts = packed[..., n + 2:end].reshape(lead + (-1, 2)) if points else None
-    out = (packed[..., :n], packed[..., n], packed[..., n + 1].astype(jnp.int8), jnp.zeros(lead, jnp.int32), pts)
+    out: tuple = (packed[..., :n], packed[..., n], packed[..., n + 1].astype(jnp.int8), jnp.zeros(lead, jnp.int32),
+                  pts)
     if trig_out:
         out += ((packed[..., end:end + na], packed[..., end + na:]),)
     return out
