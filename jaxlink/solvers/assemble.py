@@ -83,7 +83,7 @@ from ..model import structure as _structure
 from ..model.mechanism import Mechanism
 from ..results import RESULTS, Solution, SolveStats
 from . import dyads as _dyads
-from .fusion import materialize
+from .fusion import batched_like, materialize
 from .linalg import solve_block_lower, solve_block_lower_scalars, solve_small
 
 
@@ -293,6 +293,7 @@ def newton(mech: Mechanism, q0, phi, p, *, tol, rtol: float, max_steps, limit_st
     zeros_a = jnp.zeros((len(ang),), dtype)
     init = (q0, jnp.zeros_like(q0), jnp.zeros((), jnp.int32), start_bad, jnp.asarray(1.0, dtype),
             jnp.ones((nb,), dtype), inf, inf, inf, inf, jnp.zeros((), jnp.int32), false, false, zeros_a, zeros_a)
+    init = batched_like(init, q0, phi, p, tol, max_steps, limit_step)
     qe, step, k, _, piv, sg, _, _, _, _, stall, corr, stop, c, s = jax.lax.while_loop(cond, body, init)
     # the returned q: the last evaluated iterate, after the final correction where `corr`; the
     # residual there, once per position, outside the loop and without trigonometry: the sines and
@@ -555,7 +556,7 @@ def _deflated_newton(mech: Mechanism, q, phi, p, roots, active, unit, scale, max
         rn = jnp.max(jnp.abs(mech.residual(x - dx, phi, p)))
         return k + 1, x - dx, ~ok | (rn <= 1e-6 * scale)
 
-    init = (jnp.zeros((), jnp.int32), q, n_active == 0)
+    init = batched_like((jnp.zeros((), jnp.int32), q, n_active == 0), q, phi, p, roots, active, max_steps)
     out = jax.lax.while_loop(lambda st: (~st[2]) & (st[0] < max_steps), body, init)
     return out[1].astype(dtype)
 
@@ -617,7 +618,8 @@ def _reassemble(mech, opts, p, phi, st: _Track, tol, kw, active):
     zero = jnp.zeros((), jnp.int32)
     out0 = (st.hq[0], jnp.asarray(jnp.inf, dtype), jnp.asarray(RESULTS.cannot_assemble, jnp.int8), zero,
             st.sign_ref)
-    init = (zero, ~jnp.asarray(active), out0, jnp.zeros((T, n), dtype), zero, zero)
+    init = batched_like((zero, ~jnp.asarray(active), out0, jnp.zeros((T, n), dtype), zero, zero), st, phi, p, tol,
+                        active)
     return jax.lax.while_loop(cond, body, init)[2]
 
 
@@ -673,7 +675,8 @@ def _advance(mech, opts, p, tol, kw, st: _Track, phi):
                 jnp.where(first_try, hph[0], jnp.where(ok, phi_try, phi_cur)), h, tries + 1, fin, out, ksum)
 
     out0 = (hist_q[0], jnp.asarray(jnp.inf, dtype), jnp.asarray(RESULTS.max_steps, jnp.int8), zero, sign_ref)
-    init = (hist_q, hist_phi, n_good, hist_phi[0], jnp.zeros((), dtype), zero, restart, out0, zero)
+    init = batched_like((hist_q, hist_phi, n_good, hist_phi[0], jnp.zeros((), dtype), zero, restart, out0, zero),
+                        st, phi, p, tol)
     cont = jax.lax.while_loop(cond, body, init)[7]
     # where the continuation failed (next to a toggle the predictor can be far off) or after a
     # failed position: re-assemble
@@ -719,20 +722,32 @@ def _lead_in_inputs(mech: Mechanism, p, phi_ref, phi0):
 def _continuation_one(mech, opts, p, phis, q0, phi_ref, tol, kw):
     """Newton with continuation along `phis` for one design from its guess `q0` (holding at
     `phi_ref`, or at phis[0] when `phi_ref` is None): the lead-in (`_lead_in_inputs`) and then
-    every position, each by `_advance`. Returns `(q, rnorm, result, steps)` of the positions."""
+    every position, each by `_advance`. Returns `(q, rnorm, result, steps)` of the positions.
+
+    The lead-in and the positions are one loop over n + N inputs (the first n of the lead-in,
+    their results not kept), so that `_advance` — four nested loops — is traced and compiled
+    once: two copies doubled the time to compile a continuation solve."""
     if phi_ref is None:
-        st = _track_start(mech, q0, phis[0], p)
-    else:
-        start, h, n = _lead_in_inputs(mech, p, phi_ref, phis[0])
-        st = _track_start(mech, q0, start, p)
-        dtype = jnp.result_type(phis)
+        st = batched_like(_track_start(mech, q0, phis[0], p), q0, p, tol, phis)
+        return jax.lax.scan(lambda s, phi: _advance(mech, opts, p, tol, kw, s, phi), st, phis)[1]
+    start, h, n = _lead_in_inputs(mech, p, phi_ref, phis[0])
+    dtype = jnp.result_type(phis)
+    N = phis.shape[0]
+    st = _track_start(mech, q0, start, p)
+    bufs = (jnp.zeros((N,) + q0.shape, q0.dtype), jnp.zeros((N,), dtype), jnp.zeros((N,), jnp.int8),
+            jnp.zeros((N,), jnp.int32))
 
-        def lead(s):
-            k, track = s
-            return k + 1, _advance(mech, opts, p, tol, kw, track, start + k.astype(dtype) * h)[0]
+    def body(s):
+        k, track, bufs = s
+        lead = k < n
+        i = jnp.clip(k - n, 0, N - 1)
+        phi = jnp.where(lead, start + k.astype(dtype) * h, phis[i])
+        track, out = _advance(mech, opts, p, tol, kw, track, phi)
+        bufs = tuple(b.at[i].set(jnp.where(lead, b[i], o.astype(b.dtype))) for b, o in zip(bufs, out))
+        return k + 1, track, bufs
 
-        st = jax.lax.while_loop(lambda s: s[0] < n, lead, (jnp.zeros((), jnp.int32), st))[1]
-    return jax.lax.scan(lambda s, phi: _advance(mech, opts, p, tol, kw, s, phi), st, phis)[1]
+    init = batched_like((jnp.zeros((), jnp.int32), st, bufs), q0, p, tol, h, start, phis)
+    return jax.lax.while_loop(lambda s: s[0] < n + N, body, init)[2]
 
 
 def _lead_in(mech: Mechanism, opts: NewtonOptions, p, phi_a, phi_b, q0, tol, kw):
@@ -746,7 +761,8 @@ def _lead_in(mech: Mechanism, opts: NewtonOptions, p, phi_a, phi_b, q0, tol, kw)
         k, track = s
         return k + 1, _advance(mech, opts, p, tol, kw, track, start + k.astype(dtype) * h)[0]
 
-    st = jax.lax.while_loop(lambda s: s[0] < n, lead, (jnp.zeros((), jnp.int32), _track_start(mech, q0, start, p)))[1]
+    init = (jnp.zeros((), jnp.int32), _track_start(mech, q0, start, p))
+    st = jax.lax.while_loop(lambda s: s[0] < n, lead, batched_like(init, init, p, tol, h, start))[1]
     return st.hq[0]
 
 
