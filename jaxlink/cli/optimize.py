@@ -32,8 +32,9 @@ def register(sub) -> None:
                    help="mechanism evaluations allowed (default: [optimize] budget; else the gradient search "
                         "chooses its sizes from the problem and stops when no start improves, the others 10000)")
     p.add_argument("--time", type=float, default=None, metavar="SECONDS",
-                   help="stop the search after this wall time, compilation included (default: [optimize] time, "
-                        "else none)")
+                   help="stop the search after this wall time, compilation included (default: [optimize] time; "
+                        "else, without a budget, the gradient search stops when no start improves and after 75 s "
+                        "at the latest; the others have no limit)")
     p.add_argument("--seed", type=int, default=None, help="random seed (default: [optimize] seed, else 0)")
     p.add_argument("--out", metavar="OUT.json", help="write the result JSON here (and checkpoint beside it)")
     p.add_argument("--resume", action="store_true", help="continue the interrupted search of --out")
@@ -140,6 +141,11 @@ def cmd_optimize(args) -> int:
     print(f"evaluations {result.evaluations} ({result.designs} designs, "
           f"{100 * result.infeasible_fraction:.1f} % infeasible), {result.wall_s:.2f} s "
           f"({result.search_wall_s:.2f} s searching, {result.compile_s:.2f} s compiling)")
+    if result.extra.get("stopped") == "time":
+        limit = result.extra.get("time_limit_s", time_s)
+        print(f"stopped     at the time limit ({limit:g} s" + (", the default without --budget; --time SECONDS "
+                                                                "for longer" if "time_limit_s" in result.extra
+                                                                else "") + ")")
     if args.out:
         print(f"wrote {args.out}" + (f" and {result.best_file} (the best design: jaxlink kinematics "
                                      f"{result.best_file})" if result.best_file else ""))

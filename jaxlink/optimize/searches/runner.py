@@ -38,6 +38,8 @@ def run(problem_or_evaluator: Problem | Evaluator, method: str, *, budget: int |
     - `time`: seconds of wall time (compilation included) after which the search stops (its
       result is then `complete`, with `"stopped": "time"` in `extra`); the gradient search ends
       its presample after 30 % of it. A search stopped by time depends on the machine's speed.
+      None: `[optimize] time`; without it and without a budget the gradient search takes 75 s
+      at most (`extra["time_limit_s"]`).
     - `out`: the JSON document's path; the state is checkpointed beside it (`checkpoint_s`)
       (`OUT.state.npz`, `OUT.log.jsonl`, `OUT` rewritten with the best so far) and `OUT` ends
       with `SearchResult.to_json()`. `resume`: continue the interrupted search of `out`; it ends
@@ -150,6 +152,11 @@ def run(problem_or_evaluator: Problem | Evaluator, method: str, *, budget: int |
     finally:
         if bar is not None:
             bar.close()
+    limit = time if time is not None else getattr(search, "time", None)
+    if time is None and limit is not None:
+        extra["time_limit_s"] = float(limit)  # the method's default limit
+    if limit is not None and float(st.progress.wall_s) >= float(limit):
+        extra["stopped"] = "time"
     res = result(search.done(st) or timed_out)
     if files and writer:
         if res.parameters is not None and ev.mech.file and os.path.isfile(ev.mech.file):
