@@ -145,6 +145,12 @@ def main(argv=None):
     g = results["gradient"]
     print(f"gradient: objective {g['best']['objective']:.6e} vs best of uniform/Monte Carlo {best_sampling:.6e}; "
           f"{g['evaluations']} evaluations vs {args.budget} ({args.budget / g['evaluations']:.1f}x fewer)")
+    # when each method first came within 1 % of the best objective of all (its JSON trace)
+    target = 1.01 * min(r["best"]["objective"] for r in results.values())
+    for k, r in results.items():
+        hit = next((t for t in r["trace"] if t["objective"] <= target), None)
+        print(f"  {k:<20} within 1 % of the best: " + (
+            f"after {hit['evaluations']} evaluations, {hit['seconds']:.3f} s" if hit else "never"))
 
     # ---------------------------------------------------------------- 3. beyond the seed
     beyond = None
@@ -178,7 +184,7 @@ def main(argv=None):
     if args.json:
         out = {"methods": {k: {"objective": r["best"]["objective"], "evaluations": r["evaluations"],
                                "wall_s": r["wall_s"], "parameters": r["best"]["parameters"],
-                               "metrics": r["best"]["metrics"]} for k, r in results.items()},
+                               "metrics": r["best"]["metrics"], "trace": r["trace"]} for k, r in results.items()},
                "seed_uniform": su, "seed_montecarlo": mc}
         out["methods"]["uniform"] = out["methods"]["uniform_coordinate"] if (
             results["uniform_coordinate"]["best"]["objective"] < results["uniform_grid"]["best"]["objective"]
@@ -198,7 +204,26 @@ def main(argv=None):
         matplotlib.use("Agg")
         import matplotlib.pyplot as plt
 
-        fig, ax = plt.subplots(figsize=(7, 5))
+        fig, (ax, ax_e, ax_t) = plt.subplots(1, 3, figsize=(17, 5))
+        # best-so-far against evaluations and against wall time (the search's JSON trace)
+        for k, r in results.items():
+            tr = r["trace"]
+            if not tr:
+                continue
+            ev_, sec, obj = (np.array([t[key] for t in tr] + [t_end]) for key, t_end in (
+                ("evaluations", r["evaluations"]), ("seconds", r["search_wall_s"]),
+                ("objective", r["best"]["objective"])))
+            ax_e.step(ev_, obj, where="post", label=k)
+            ax_t.step(np.maximum(sec, 1e-4), obj, where="post", label=k)
+        for a_, xl in ((ax_e, "evaluations"), (ax_t, "search wall time, without compilation (s)")):
+            a_.set_xscale("log")
+            a_.set_yscale("log")
+            a_.set_xlabel(xl)
+            a_.set_ylabel("best objective J so far")
+            a_.grid(True, which="both", alpha=0.3)
+            a_.legend(fontsize=7)
+        ax_e.set_title("Best so far against evaluations")
+        ax_t.set_title("Best so far against time")
         xy = ev.path_points(pr.to_unit([2.1, 0.9, 2.0]), samples=360)
         ax.plot(*np.vstack([xy, xy[:1]]).T, "k--", label="seed 2.1 / 0.9 / 2°")
         for k, r in results.items():

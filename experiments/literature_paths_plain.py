@@ -81,6 +81,7 @@ def main(argv=None):
     print(f"dense SSE <= 1.05 x reference, every position converged, on {good} of {len(rows)} cases; "
           f"slowest {max(v['wall_s'] for v in rows.values()):.1f} s (incl. compilation)")
     if args.json:
+        pathlib.Path(args.json).parent.mkdir(parents=True, exist_ok=True)
         with open(args.json, "w") as fh:
             json.dump({"cases": rows}, fh, indent=2)
         print(f"wrote {args.json}")
