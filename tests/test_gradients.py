@@ -78,17 +78,21 @@ def _central(f, p, i, h):
     return (-f(p + 2 * e) + 8 * f(p + e) - 8 * f(p - e) + f(p - 2 * e)) / (12 * h)
 
 
-def _check_against_differences(mech, f, p, rtol, names=None):
+def _check_against_differences(mech, f, p, rtol, forward: bool = False):
+    """Reverse mode against central differences (and, with `forward`, against forward mode). The
+    differences take their values from the same compiled value-and-gradient function (one
+    compilation fewer than a separate `jax.jit(f)`; each test compiles a continuation solve)."""
     p = np.asarray(p, dtype=float)
-    g = np.asarray(jax.jit(jax.grad(f))(jnp.asarray(p)))
-    gf = np.asarray(jax.jit(jax.jacfwd(f))(jnp.asarray(p)))
-    fj = jax.jit(f)
-    fd = np.array([_central(lambda x: float(fj(jnp.asarray(x))), p, i,
+    vg = jax.jit(jax.value_and_grad(f))
+    g = np.asarray(vg(jnp.asarray(p))[1])
+    fd = np.array([_central(lambda x: float(vg(jnp.asarray(x))[0]), p, i,
                             1e-5 * (1.0 if k == "angle" else max(abs(p[i]), 1e-3)))
                    for i, k in enumerate(mech.parameter_kinds)])
     scale = np.abs(fd).max()
     assert np.all(np.isfinite(g))
-    np.testing.assert_allclose(g, gf, rtol=1e-10, atol=1e-12 * scale)
+    if forward:
+        gf = np.asarray(jax.jit(jax.jacfwd(f))(jnp.asarray(p)))
+        np.testing.assert_allclose(g, gf, rtol=1e-10, atol=1e-12 * scale)
     np.testing.assert_allclose(g, fd, rtol=rtol, atol=rtol * scale)
     return g
 
@@ -96,7 +100,8 @@ def _check_against_differences(mech, f, p, rtol, names=None):
 def test_closed_form_rule_all_parameters_unknowns_and_points():
     """The feed six-bar (all dyads: closed form): unknowns and the feed-dog point along 24 inputs,
     differentiated in all 11 parameters (lengths and the angle gamma) — reverse mode against
-    forward mode and against central differences."""
+    forward mode and against central differences. (The continuation tests below check reverse
+    mode against central differences only: reverse mode is the transpose of the same JVP rule.)"""
     mech = jl.load("sewing-feed")
     phis = jnp.asarray(np.deg2rad(80.0 + 15.0 * np.arange(24)))
     w = jnp.asarray(np.random.default_rng(1).normal(size=(24, 4)))
@@ -105,7 +110,7 @@ def test_closed_form_rule_all_parameters_unknowns_and_points():
         sol = jl.solve_path(mech, phis, p, points=True)
         return jnp.sum(sol.q * w) + 1e3 * jnp.sum(sol.points[:, 0] ** 2)
 
-    _check_against_differences(mech, f, mech.parameters, 1e-7)
+    _check_against_differences(mech, f, mech.parameters, 1e-7, forward=True)
 
 
 @pytest.mark.parametrize("scene", ["sewing-feed", "four-bar"])
@@ -182,7 +187,7 @@ def test_rule_on_a_single_4x4_block_against_central_differences():
         s = jl.solve_path(mech, phis, p, points=True)
         return jnp.sum(jnp.cos(s.q)) + 1e3 * jnp.sum(s.points ** 2)
 
-    _check_against_differences(mech, f, mech.parameters, 1e-7)
+    _check_against_differences(mech, f, mech.parameters, 1e-7, forward=True)
 
 
 # s + l = p + q: 20 + 60 = 45 + 35 mm; at φ2 = 0 all four links are collinear (a change point)
