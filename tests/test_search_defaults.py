@@ -50,6 +50,8 @@ def test_a_search_without_budget_stops_by_itself_and_by_time(tmp_path):
     assert res.evaluations < 128 * 2 * 3 + 1000 * 4 * 2 * 5
     assert res.trace and all(a["objective"] > b["objective"] for a, b in zip(res.trace, res.trace[1:]))
     assert res.search_wall_s >= 0 and res.compile_s >= 0
+    # without a budget or a time, a default time limit (it stopped before reaching it)
+    assert res.extra.get("time_limit_s") == 75.0 and "stopped" not in res.extra
     timed = run(ev, "gradient", seed=0, time=1e-3, starts=4, presample=128)
     assert timed.complete and timed.extra.get("stopped") == "time"
     assert timed.evaluations < res.evaluations

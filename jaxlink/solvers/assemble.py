@@ -573,10 +573,6 @@ def _reassemble(mech, opts, p, phi, st: _Track, tol, kw, active):
     so far removed, up to twice the number of candidates in all. Returns `(q, rnorm, result,
     steps, signs)`; `max_steps` where only another circuit was found (the branch is kept, never
     switched). No iteration where not `active`."""
-    dtype = jnp.result_type(st.hq[0])
-    scale = mech.length_scale(p)
-    unit = _units(mech, scale, dtype)
-    cands = [st.hq[0], st.q_file]
     dyads = _dyads.classify(mech)
     if dyads is not None:
         # every block a dyad: the closed form on the branches of the last converged position is
@@ -589,6 +585,10 @@ def _reassemble(mech, opts, p, phi, st: _Track, tol, kw, active):
         conv = code == RESULTS.converged
         other = conv & ~_same_circuit(sg, st.sign_ref)
         return q, rn, jnp.where(other, jnp.asarray(RESULTS.max_steps, jnp.int8), code), k, sg
+    dtype = jnp.result_type(st.hq[0])
+    scale = mech.length_scale(p)
+    unit = _units(mech, scale, dtype)
+    cands = [st.hq[0], st.q_file]
     C = jnp.stack(cands)
     nc = len(cands)
     T = 2 * nc

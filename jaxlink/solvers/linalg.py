@@ -119,15 +119,50 @@ def _pick_vec(v, idx, k, n):
     return out
 
 
-def solve_2x2(a00, a01, a10, a11, b0, b1):
+def solve_2x2(a00, a01, a10, a11, b0, b1, ok=None):
     """Cramer's rule for one 2×2 system; returns (x0, x1, ratio, sign of det) with the
-    column-scaled pivot ratio |det| / (‖col 0‖∞ ‖col 1‖∞) (see `solve_small`, `scaling="columns"`)."""
+    column-scaled pivot ratio |det| / (‖col 0‖∞ ‖col 1‖∞) (see `solve_small`, `scaling="columns"`).
+    Where `ok` (a boolean scalar) is False, det is taken as 1 (no division by zero; the caller
+    discards x there)."""
     det = a00 * a11 - a01 * a10
     c0 = jnp.maximum(jnp.abs(a00), jnp.abs(a10))
     c1 = jnp.maximum(jnp.abs(a01), jnp.abs(a11))
-    inv = 1.0 / det
+    inv = 1.0 / (det if ok is None else jnp.where(ok, det, 1.0))
     ratio = jnp.abs(det) / jnp.maximum(c0 * c1, jnp.finfo(jnp.result_type(det)).tiny)
     return (a11 * b0 - a01 * b1) * inv, (a00 * b1 - a10 * b0) * inv, ratio, jnp.sign(det)
+
+
+def _forward_substitution(entry, b, blocks, ok=None):
+    """Forward substitution over the diagonal blocks `blocks` of a block lower-triangular matrix
+    given entry by entry (`entry(r, c)`; only the diagonal blocks and the entries left of them are
+    asked for): Cramer's rule on 2×2 blocks, `solve_small` on larger ones (the identity where `ok`
+    is False). Returns (list of the x_c, pivot ratio per block, sign of det per block)."""
+    n = sum(len(cols) for _, cols in blocks)
+    x = [None] * n
+    ratios, signs = [], []
+    done: list = []
+    for rows, cols in blocks:
+        rhs = []
+        for r in rows:
+            s = b[r]
+            for j in done:
+                s = s - entry(r, j) * x[j]
+            rhs.append(s)
+        if len(cols) == 2 and len(rows) == 2:
+            (r0, r1), (c0, c1) = rows, cols
+            x[c0], x[c1], rr, sg = solve_2x2(entry(r0, c0), entry(r0, c1), entry(r1, c0), entry(r1, c1),
+                                             rhs[0], rhs[1], ok)
+        else:
+            eye = ok is not None
+            sub = jnp.stack([jnp.stack([jnp.where(ok, entry(r, c), float(i == k)) if eye else entry(r, c)
+                                        for k, c in enumerate(cols)]) for i, r in enumerate(rows)])
+            xs, rr, sg = _solve_small(sub, jnp.stack(rhs), "columns")
+            for k, c in enumerate(cols):
+                x[c] = xs[k]
+        ratios.append(rr)
+        signs.append(sg)
+        done.extend(cols)
+    return x, ratios, signs
 
 
 def solve_block_lower(a, b, blocks):
@@ -140,30 +175,10 @@ def solve_block_lower(a, b, blocks):
     `scaling="columns"`) and the smallest over the diagonal blocks; the sign of det of every
     diagonal block, shape (n_blocks,) (for a dyad, which of its two assembly branches — circuits —
     the matrix belongs to)."""
-    n = a.shape[-1]
-    x = [None] * n
-    ratio = None
-    signs = []
-    done: list = []
-    for rows, cols in blocks:
-        rhs = []
-        for r in rows:
-            s = b[r]
-            for j in done:
-                s = s - a[r, j] * x[j]
-            rhs.append(s)
-        if len(cols) == 2 and len(rows) == 2:
-            (r0, r1), (c0, c1) = rows, cols
-            x0, x1, rr, sg = solve_2x2(a[r0, c0], a[r0, c1], a[r1, c0], a[r1, c1], rhs[0], rhs[1])
-            x[c0], x[c1] = x0, x1
-        else:
-            sub = jnp.stack([jnp.stack([a[r, c] for c in cols]) for r in rows])
-            xs, rr, sg = _solve_small(sub, jnp.stack(rhs), "columns")
-            for k, c in enumerate(cols):
-                x[c] = xs[k]
-        ratio = rr if ratio is None else jnp.minimum(ratio, rr)
-        signs.append(sg)
-        done.extend(cols)
+    x, ratios, signs = _forward_substitution(lambda r, c: a[r, c], b, blocks)
+    ratio = ratios[0]
+    for rr in ratios[1:]:
+        ratio = jnp.minimum(ratio, rr)
     return jnp.stack(x), ratio, jnp.stack(signs)
 
 
@@ -175,29 +190,5 @@ def solve_block_lower_scalars(entry, b, blocks, ok=None):
     per use). Cramer's rule on 2×2 diagonal blocks, `solve_small` on larger ones. Where `ok`
     (a boolean scalar) is False the diagonal blocks are replaced by regular ones (det 1 on 2×2
     blocks, the identity on larger ones), so that no division by zero occurs: the caller discards
-    x there."""
-    n = sum(len(cols) for _, cols in blocks)
-    x = [None] * n
-    done: list = []
-    for rows, cols in blocks:
-        rhs = []
-        for r in rows:
-            s = b[r]
-            for j in done:
-                s = s - entry(r, j) * x[j]
-            rhs.append(s)
-        if len(cols) == 2 and len(rows) == 2:
-            (r0, r1), (c0, c1) = rows, cols
-            a00, a01, a10, a11 = entry(r0, c0), entry(r0, c1), entry(r1, c0), entry(r1, c1)
-            det = a00 * a11 - a01 * a10
-            inv = 1.0 / (det if ok is None else jnp.where(ok, det, 1.0))
-            x[c0], x[c1] = (a11 * rhs[0] - a01 * rhs[1]) * inv, (a00 * rhs[1] - a10 * rhs[0]) * inv
-        else:
-            eye = ok is not None
-            sub = jnp.stack([jnp.stack([jnp.where(ok, entry(r, c), float(i == k)) if eye else entry(r, c)
-                                        for k, c in enumerate(cols)]) for i, r in enumerate(rows)])
-            xs, _, _ = _solve_small(sub, jnp.stack(rhs), "columns")
-            for k, c in enumerate(cols):
-                x[c] = xs[k]
-        done.extend(cols)
-    return x
+    x there. (The pivot ratios and signs are not computed: unused, XLA drops them.)"""
+    return _forward_substitution(entry, b, blocks, ok)[0]

@@ -27,49 +27,46 @@ def register_objectives(register) -> None:
 # ----------------------------------------------------------------------------- points
 
 
+def _offsets(ap, ab):
+    """Offsets of points from segments: `ap` (…, 2) from each segment's start to the point, `ab`
+    (…, 2) the segment; the point minus its projection clipped to the segment (a zero-length
+    segment: its start)."""
+    ab2 = jnp.sum(ab * ab, axis=-1)
+    safe = ab2 > 0
+    t = jnp.sum(ap * ab, axis=-1) / jnp.where(safe, ab2, 1.0)
+    t = jnp.clip(jnp.where(safe, t, 0.0), 0.0, 1.0)
+    return ap - t[..., None] * ab
+
+
+def _all_offsets(xy, targets):
+    """(T, N, 2) offsets of every target (T, 2) from every segment of the closed polyline through
+    `xy` (N, 2); segment k runs from xy[k] to xy[k+1] (and N-1 to 0)."""
+    ab = jnp.roll(xy, -1, axis=0) - xy
+    return _offsets(targets[:, None, :] - xy[None, :, :], ab[None])
+
+
 def segment_distances2(xy, targets):
     """Squared distance of every target (T, 2) to every segment of the closed polyline through
     `xy` (N, 2): shape (T, N); segment k runs from xy[k] to xy[k+1] (and N-1 to 0)."""
-    a = xy
-    b = jnp.roll(xy, -1, axis=0)
-    ab = b - a  # (N, 2)
-    ab2 = jnp.sum(ab * ab, axis=-1)
-    safe = ab2 > 0
-    ap = targets[:, None, :] - a[None, :, :]  # (T, N, 2)
-    t = jnp.sum(ap * ab[None], axis=-1) / jnp.where(safe, ab2, 1.0)[None]
-    t = jnp.clip(jnp.where(safe[None], t, 0.0), 0.0, 1.0)
-    d = ap - t[..., None] * ab[None]
+    d = _all_offsets(xy, targets)
     return jnp.sum(d * d, axis=-1)
 
 
-WINDOW = 3  # segments on each side of the nearest one in the smoothed `points` objective
+WINDOW = 3  # segments on each side of the nearest path point in the smoothed `points` objective
 
 
 def _window_distances2(xy, targets, idx):
     """Squared distance of every target (T, 2) to the segments `idx` (T, K) of the closed
     polyline through `xy` (N, 2) (segment k from xy[k] to xy[k+1 mod N]): shape (T, K)."""
     a = xy[idx]  # (T, K, 2)
-    ab = xy[(idx + 1) % xy.shape[0]] - a
-    ab2 = jnp.sum(ab * ab, axis=-1)
-    safe = ab2 > 0
-    ap = targets[:, None, :] - a
-    t = jnp.sum(ap * ab, axis=-1) / jnp.where(safe, ab2, 1.0)
-    t = jnp.clip(jnp.where(safe, t, 0.0), 0.0, 1.0)
-    d = ap - t[..., None] * ab
+    d = _offsets(targets[:, None, :] - a, xy[(idx + 1) % xy.shape[0]] - a)
     return jnp.sum(d * d, axis=-1)
 
 
 def nearest_offsets(xy, targets):
     """(T, 2) offsets of every target from its nearest point of the closed polyline through `xy`
     (N, 2): Σ |offset|² is the `points` objective's exact value (`segment_distances2`)."""
-    a = xy
-    ab = jnp.roll(xy, -1, axis=0) - a
-    ab2 = jnp.sum(ab * ab, axis=-1)
-    safe = ab2 > 0
-    ap = targets[:, None, :] - a[None, :, :]
-    t = jnp.sum(ap * ab[None], axis=-1) / jnp.where(safe, ab2, 1.0)[None]
-    t = jnp.clip(jnp.where(safe[None], t, 0.0), 0.0, 1.0)
-    d = ap - t[..., None] * ab[None]  # (T, N, 2)
+    d = _all_offsets(xy, targets)  # (T, N, 2)
     k = jnp.argmin(jnp.sum(d * d, axis=-1), axis=1)
     return jnp.take_along_axis(d, k[:, None, None], axis=1)[:, 0]
 
