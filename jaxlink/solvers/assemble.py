@@ -361,36 +361,33 @@ def _closed_form_path(mech, p, phis, q0, tol, trig_in, trig_p, thr, phi_ref, poi
                          jnp.where(~ref_ok | ~jnp.isfinite(rn), RESULTS.nonfinite,
                                    jnp.where(ok, RESULTS.max_steps, RESULTS.cannot_assemble)))
         q = jnp.where(jnp.all(jnp.isfinite(q)), q, q_ref)
+        if trig_out:
+            # for the derivative: one value per leaf, so that each is stored as its own (B, N)
+            # array and every kernel of the derivative reads only the values it uses
+            pts = mech.point_positions(q, phi, p, trig) if points else None
+            cs = tuple(tuple(jnp.where(jnp.isfinite(trig[n][j]), trig[n][j], float(1 - j)) for n in ang)
+                       for j in (0, 1))
+            return code.astype(jnp.int8), rn, tuple(jnp.unstack(q)), pts, cs
         # every output of a position packed into one array: one fused kernel writes them all (XLA on
         # CPU would otherwise compute the solve once per output); the points from the sines and
         # cosines the solve already has (no new trigonometry)
         parts = [q, rn[None], code.astype(q.dtype)[None]]
         if points:
             parts.append(jnp.ravel(mech.point_positions(q, phi, p, trig)))
-        if trig_out:
-            for j in (0, 1):
-                t = jnp.stack([trig[n][j] for n in ang]) if ang else jnp.zeros((0,), q.dtype)
-                parts.append(jnp.where(jnp.isfinite(t), t, float(1 - j)))
         return jnp.concatenate(parts)
 
     ang = [n for n, k in zip(mech.unknown_names, mech.unknown_kinds) if k == "angle"]
     packed = jax.vmap(one)(phis, trig_in)
-    return packed if trig_out else _unpack_closed_form(mech, packed, points, False)
+    return packed if trig_out else _unpack_closed_form(mech, packed, points)
 
 
-def _unpack_closed_form(mech, packed, points: bool, trig_out: bool):
+def _unpack_closed_form(mech, packed, points: bool):
     """The outputs of `_closed_form_path` from its packed array (…, N, m): `(q, rnorm, result,
-    steps, points or None)`, and with `trig_out` the (cos, sin) of the solved angles."""
+    steps, points or None)`."""
     n = len(mech.unknown_names)
-    na = sum(k == "angle" for k in mech.unknown_kinds)
-    end = packed.shape[-1] - (2 * na if trig_out else 0)
     lead = packed.shape[:-1]
-    pts = packed[..., n + 2:end].reshape(lead + (-1, 2)) if points else None
-    out: tuple = (packed[..., :n], packed[..., n], packed[..., n + 1].astype(jnp.int8), jnp.zeros(lead, jnp.int32),
-                  pts)
-    if trig_out:
-        out += ((packed[..., end:end + na], packed[..., end + na:]),)
-    return out
+    pts = packed[..., n + 2:].reshape(lead + (-1, 2)) if points else None
+    return (packed[..., :n], packed[..., n], packed[..., n + 1].astype(jnp.int8), jnp.zeros(lead, jnp.int32), pts)
 
 
 def _extrapolate(hist_q, hist_phi, n_good, phi, order: int):
@@ -804,11 +801,12 @@ def _solve_batch_impl(mech: Mechanism, opts: NewtonOptions, points: bool, P, phi
             in_axes=(0, ax, 0, 0, ax, 0, 0))(P, phis, Q0, tol, trig_in, trig_p, ref)
         if not trig:
             return out
-        # for the derivative: every output of a position written by one kernel and stored
-        # (`materialize`), so that XLA neither splits the packed array into one kernel per output
-        # nor fuses the closed form into the kernels of the derivative (each would recompute it)
-        out = _unpack_closed_form(mech, materialize(out), points, True)
-        return out[:5] + (_Trig(trig_in, trig_p, out[5]),)
+        # for the derivative: every output stored (`materialize`) as one (B, N) array per value,
+        # so that no kernel of the derivative recomputes the closed form and each reads only the
+        # values it uses, contiguous (a packed (B, N, m) array is read whole by every kernel)
+        code, rn, cols, pts, cs = materialize(out)
+        q = jnp.stack(cols, -1)
+        return (q, rn, code, jnp.zeros(code.shape, jnp.int32), pts, _Trig(trig_in, trig_p, cs))
     # Newton: a design whose tolerance is not finite (a NaN or infinite length, even one that only
     # a point uses), whose guess is not finite (it selects no branch) or whose guess holds at a
     # non-finite input is `nonfinite` at every position, without iterating (a NaN tolerance makes
@@ -841,8 +839,9 @@ def _solve_batch_impl(mech: Mechanism, opts: NewtonOptions, points: bool, P, phi
     out = out + ((pts,) if points else (None,))
     if not trig:
         return out
-    qa = _angles_of(mech, out[0])
-    trig_in, trig_q = materialize((_dyads.input_trig(mech, phis), (jnp.cos(qa), jnp.sin(qa))))
+    qa = jnp.unstack(_angles_of(mech, out[0]), axis=-1)
+    trig_in, trig_q = materialize((_dyads.input_trig(mech, phis), (tuple(jnp.cos(a) for a in qa),
+                                                                   tuple(jnp.sin(a) for a in qa))))
     return out + (_Trig(trig_in, trig_p, trig_q),)
 
 
@@ -947,12 +946,11 @@ def _implicit_tangents(mech: Mechanism, points: bool, primals, tangents, out):
     # unstacked there, so that the transpose stacks each position's parameter cotangents in one
     # kernel and sums them over the positions in one reduction
     Ps = tuple(P[:, i] for i in range(P.shape[1]))
-    dPN = None if dP is None else jnp.broadcast_to(dP[:, None, :], (B, N, P.shape[1]))
+    dPN = None if dP is None else tuple(jnp.broadcast_to(dP[:, i, None], (B, N)) for i in range(P.shape[1]))
     dphiN = None if dphis is None else jnp.broadcast_to(dphis, (B, N))
     Qs = tuple(jnp.unstack(q, axis=-1))
 
     def one(p, dp, qk, phik, dphik, ok, t_in, t_p, t_q):
-        dp = None if dp is None else tuple(jnp.unstack(dp))
 
         def res(qq, pp, ph):
             return _residual_known(mech, *_env_known(mech, qq, ph, pp, t_in, t_p, t_q), dtype)
@@ -1013,7 +1011,8 @@ def _solve_batch_trig_jvp(structure, opts, points, primals, tangents):
     ang = [i for i, kd in enumerate(mech.unknown_kinds) if kd == "angle"]
     dtr = _Trig({n: rot(cs, dphis) for n, cs in tr.inputs.items()},
                 {n: rot(cs, dP[:, mech.parameter_names.index(n)]) for n, cs in tr.params.items()},
-                rot(tr.unknowns, _angles_of(mech, dq) if ang else jnp.zeros_like(tr.unknowns[0])))
+                tuple(zip(*(rot((c, s), dq[..., i]) for c, s, i in zip(*tr.unknowns, ang)))) if ang
+                else ((), ()))
     return out, (dq, jnp.zeros_like(rn), _float0(code), _float0(k), dpts, dtr)
 
 
