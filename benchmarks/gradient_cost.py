@@ -1,12 +1,14 @@
 """Cost of an exact gradient against a forward solve, in the same run.
 
 Path objective of the feed six-bar (spread of the feed-dog path, 72 angles) as a function of all
-11 parameters, for B designs at once (vmap): forward value; `jax.grad` by jaxlink's implicit
-differentiation (`solve_path`, custom JVP); central finite differences (2 × 11 forward solves) as
-the baseline. Reports seconds, the ratio gradient/forward and the gradient's agreement with the
-finite differences (and with forward mode, `jax.jacfwd`). Above 512 designs the finite differences
-(and forward mode) are evaluated on the first 512 designs only (`fd_designs`; `fd_over_forward` is
-then per design: their seconds per design over the forward's). Run:
+11 parameters, for B designs at once (vmap), written the two ways a user writes it: with the
+points from the solve (`solve_path(..., points=True)`, the README's call) and with the points from
+`transfer(..., order=0)` on the solved q. For each: forward value; `jax.grad` by jaxlink's implicit
+differentiation (custom JVP); and, for the first, central finite differences (2 × 11 forward
+solves) as the baseline. Reports seconds, the ratio gradient/forward and the gradient's agreement
+with the finite differences (and with forward mode, `jax.jacfwd`). Above 512 designs the finite
+differences (and forward mode) are evaluated on the first 512 designs only (`fd_designs`;
+`fd_over_forward` is then per design: their seconds per design over the forward's). Run:
 
     python benchmarks/gradient_cost.py [--quick] [--designs B] [--json OUT]
 """
@@ -55,13 +57,19 @@ def main(argv=None) -> dict:
     rng = np.random.default_rng(0)
     P = jnp.asarray(mech.parameters[None] * (1 + 0.005 * rng.uniform(-1, 1, (B, len(mech.parameters)))))
 
-    def spread(p):
+    def spread(p):  # the points from the solve (one call)
+        xy = jl.solve_path(mech, phis, p, points=True).points[:, 0]
+        return jnp.sum((xy - xy.mean(0)) ** 2)
+
+    def spread_transfer(p):  # the points from q by a second call
         s = jl.solve_path(mech, phis, p)
         xy = jl.transfer(mech, phis, s.q, p, order=0).points[:, 0]
         return jnp.sum((xy - xy.mean(0)) ** 2)
 
     fwd = jax.jit(jax.vmap(spread))
     grad = jax.jit(jax.vmap(jax.grad(spread)))
+    fwd_t = jax.jit(jax.vmap(spread_transfer))
+    grad_t = jax.jit(jax.vmap(jax.grad(spread_transfer)))
     h = 1e-7
     eye = jnp.eye(P.shape[1])
 
@@ -76,7 +84,8 @@ def main(argv=None) -> dict:
         return ((vals[:n] - vals[n:]) / (2 * h * scale.T)).T  # (B, n)
 
     out = {}
-    runs = (("forward", fwd, P), ("grad_implicit", grad, P), ("finite_differences", fd, P[:B_fd]))
+    runs = (("forward", fwd, P), ("grad_implicit", grad, P), ("forward_transfer", fwd_t, P),
+            ("grad_transfer", grad_t, P), ("finite_differences", fd, P[:B_fd]))
     for name, f, x in runs:
         t = time.perf_counter()
         out[f"_{name}"] = jax.block_until_ready(f(x))
@@ -89,8 +98,11 @@ def main(argv=None) -> dict:
             out[name]["seconds"] = min(out[name]["seconds"], tb)
     for name, _, _ in runs:
         out[name]["compile_s"] -= out[name]["seconds"]
-    g, gfd = np.asarray(out.pop("_grad_implicit"))[:B_fd], np.asarray(out.pop("_finite_differences"))
-    out.pop("_forward")
+    out_g = np.asarray(out.pop("_grad_implicit"))
+    g, gfd = out_g[:B_fd], np.asarray(out.pop("_finite_differences"))
+    g_t = np.asarray(out.pop("_grad_transfer"))
+    for k in ("_forward", "_forward_transfer"):
+        out.pop(k)
     gfwd = np.asarray(jax.jit(jax.vmap(jax.jacfwd(spread)))(P[:B_fd]))
     rel = float(np.max(np.abs(g - gfd)) / np.max(np.abs(g)))
     rel_fwd = float(np.max(np.abs(g - gfwd)) / np.max(np.abs(g)))
@@ -99,6 +111,10 @@ def main(argv=None) -> dict:
            "forward_s": out["forward"]["seconds"], "grad_s": out["grad_implicit"]["seconds"],
            "fd_s": out["finite_differences"]["seconds"],
            "grad_over_forward": out["grad_implicit"]["seconds"] / out["forward"]["seconds"],
+           "transfer_forward_s": out["forward_transfer"]["seconds"], "transfer_grad_s": out["grad_transfer"]["seconds"],
+           "transfer_grad_over_forward": out["grad_transfer"]["seconds"] / out["forward_transfer"]["seconds"],
+           "transfer_vs_solve_points_max_rel_diff": float(np.max(np.abs(g_t - np.asarray(out_g)))
+                                                          / np.max(np.abs(out_g))),
            "fd_over_forward": fd_per_design / (out["forward"]["seconds"] / B),
            "grad_vs_fd_max_rel_diff": rel, "grad_vs_forward_mode_max_rel_diff": rel_fwd,
            "compile_s": {k: v["compile_s"] for k, v in out.items()}}
@@ -106,10 +122,13 @@ def main(argv=None) -> dict:
     print(f"{'':22s} {'seconds':>10s} {'x forward':>10s}")
     print(f"{'forward':22s} {res['forward_s']:10.4g} {1.0:10.2f}")
     print(f"{'grad (implicit)':22s} {res['grad_s']:10.4g} {res['grad_over_forward']:10.2f}")
+    print(f"{'forward, transfer':22s} {res['transfer_forward_s']:10.4g} {1.0:10.2f}   (points by transfer(order=0))")
+    print(f"{'grad, transfer':22s} {res['transfer_grad_s']:10.4g} {res['transfer_grad_over_forward']:10.2f}")
     fd_label = "central FD (22 solves)" if B_fd == B else f"central FD, {B_fd} designs"
     print(f"{fd_label:22s} {res['fd_s']:10.4g} {res['fd_over_forward']:10.2f}"
           + ("" if B_fd == B else "  (per design)"))
-    print(f"grad vs FD ({B_fd} designs): max rel diff {rel:.2e}; vs forward mode {rel_fwd:.2e}")
+    print(f"grad vs FD ({B_fd} designs): max rel diff {rel:.2e}; vs forward mode {rel_fwd:.2e}; "
+          f"transfer vs solve points {res['transfer_vs_solve_points_max_rel_diff']:.1e}")
     if args.json:
         os.makedirs(os.path.dirname(os.path.abspath(args.json)), exist_ok=True)
         with open(args.json, "w") as fh:

@@ -196,7 +196,10 @@ def main(argv=None):
     if gc:
         L += ["## Gradient cost (`gradient_cost.json`)", "",
               f"{gc['designs']} designs × 72 angles, 11 parameters: gradient (implicit) = "
-              f"{gc['grad_over_forward']:.2f}× a forward solve; central differences {gc['fd_over_forward']:.1f}×; "
+              f"{gc['grad_over_forward']:.2f}× a forward solve with the points from the solve"
+              + (f", {gc['transfer_grad_over_forward']:.2f}× with the points by `transfer`"
+                 if "transfer_grad_over_forward" in gc else "")
+              + f"; central differences {gc['fd_over_forward']:.1f}×; "
               f"max relative difference {gc['grad_vs_fd_max_rel_diff']:.1e}.", ""]
     if op:
         L += ["## Optimizer evaluations per second (`optimizer_rate.json`, case mkh1)", ""]
