@@ -3,10 +3,17 @@
 Path objective of the feed six-bar (spread of the feed-dog path, 72 angles) as a function of all
 11 parameters, for B designs at once (vmap), written the two ways a user writes it: with the
 points from the solve (`solve_path(..., points=True)`, the README's call) and with the points from
-`transfer(..., order=0)` on the solved q. For each: forward value; `jax.grad` by jaxlink's implicit
-differentiation (custom JVP); and, for the first, central finite differences (2 × 11 forward
-solves) as the baseline. Reports seconds, the ratio gradient/forward and the gradient's agreement
-with the finite differences (and with forward mode, `jax.jacfwd`). Above 512 designs the finite
+`transfer(..., order=0)` on the solved q. Timed in one interleaved run:
+
+- `forward`: the objective's value. XLA computes only what it reads (one point's x and y, no
+  angle), so this is less than a solve;
+- `solve`: the forward solve itself, every output `solve` returns (q, every point, result codes);
+- `grad`: `jax.grad` of the objective by jaxlink's implicit differentiation (custom JVP);
+- the same two for the points by `transfer`;
+- central finite differences (2 × 11 forward solves) as the baseline.
+
+Reports seconds, the ratios gradient/forward and gradient/solve, and the gradient's agreement with
+the finite differences (and with forward mode, `jax.jacfwd`). Above 512 designs the finite
 differences (and forward mode) are evaluated on the first 512 designs only (`fd_designs`;
 `fd_over_forward` is then per design: their seconds per design over the forward's). Run:
 
@@ -66,6 +73,8 @@ def main(argv=None) -> dict:
         xy = jl.transfer(mech, phis, s.q, p, order=0).points[:, 0]
         return jnp.sum((xy - xy.mean(0)) ** 2)
 
+    # the forward solve itself: every output a user gets from it (q, the points, the result codes)
+    solve = jax.jit(jax.vmap(lambda p: jl.solve_path(mech, phis, p, points=True)))
     fwd = jax.jit(jax.vmap(spread))
     grad = jax.jit(jax.vmap(jax.grad(spread)))
     fwd_t = jax.jit(jax.vmap(spread_transfer))
@@ -84,7 +93,7 @@ def main(argv=None) -> dict:
         return ((vals[:n] - vals[n:]) / (2 * h * scale.T)).T  # (B, n)
 
     out = {}
-    runs = (("forward", fwd, P), ("grad_implicit", grad, P), ("forward_transfer", fwd_t, P),
+    runs = (("solve", solve, P), ("forward", fwd, P), ("grad_implicit", grad, P), ("forward_transfer", fwd_t, P),
             ("grad_transfer", grad_t, P), ("finite_differences", fd, P[:B_fd]))
     for name, f, x in runs:
         t = time.perf_counter()
@@ -101,7 +110,7 @@ def main(argv=None) -> dict:
     out_g = np.asarray(out.pop("_grad_implicit"))
     g, gfd = out_g[:B_fd], np.asarray(out.pop("_finite_differences"))
     g_t = np.asarray(out.pop("_grad_transfer"))
-    for k in ("_forward", "_forward_transfer"):
+    for k in ("_solve", "_forward", "_forward_transfer"):
         out.pop(k)
     gfwd = np.asarray(jax.jit(jax.vmap(jax.jacfwd(spread)))(P[:B_fd]))
     rel = float(np.max(np.abs(g - gfd)) / np.max(np.abs(g)))
@@ -111,6 +120,8 @@ def main(argv=None) -> dict:
            "forward_s": out["forward"]["seconds"], "grad_s": out["grad_implicit"]["seconds"],
            "fd_s": out["finite_differences"]["seconds"],
            "grad_over_forward": out["grad_implicit"]["seconds"] / out["forward"]["seconds"],
+           "solve_s": out["solve"]["seconds"],
+           "grad_over_solve": out["grad_implicit"]["seconds"] / out["solve"]["seconds"],
            "transfer_forward_s": out["forward_transfer"]["seconds"], "transfer_grad_s": out["grad_transfer"]["seconds"],
            "transfer_grad_over_forward": out["grad_transfer"]["seconds"] / out["forward_transfer"]["seconds"],
            "transfer_vs_solve_points_max_rel_diff": float(np.max(np.abs(g_t - np.asarray(out_g)))
@@ -120,8 +131,11 @@ def main(argv=None) -> dict:
            "compile_s": {k: v["compile_s"] for k, v in out.items()}}
     print(f"gradient cost, feed six-bar path spread, {B} designs x 72 angles, 11 parameters")
     print(f"{'':22s} {'seconds':>10s} {'x forward':>10s}")
-    print(f"{'forward':22s} {res['forward_s']:10.4g} {1.0:10.2f}")
-    print(f"{'grad (implicit)':22s} {res['grad_s']:10.4g} {res['grad_over_forward']:10.2f}")
+    print(f"{'forward':22s} {res['forward_s']:10.4g} {1.0:10.2f}   (the objective: one point's x, y)")
+    print(f"{'grad (implicit)':22s} {res['grad_s']:10.4g} {res['grad_over_forward']:10.2f}"
+          f"   ({res['grad_over_solve']:.2f}x the forward solve)")
+    print(f"{'forward solve':22s} {res['solve_s']:10.4g} {res['solve_s'] / res['forward_s']:10.2f}"
+          "   (q, every point, result codes)")
     print(f"{'forward, transfer':22s} {res['transfer_forward_s']:10.4g} {1.0:10.2f}   (points by transfer(order=0))")
     print(f"{'grad, transfer':22s} {res['transfer_grad_s']:10.4g} {res['transfer_grad_over_forward']:10.2f}")
     fd_label = "central FD (22 solves)" if B_fd == B else f"central FD, {B_fd} designs"

@@ -196,7 +196,8 @@ def main(argv=None):
     if gc:
         L += ["## Gradient cost (`gradient_cost.json`)", "",
               f"{gc['designs']} designs × 72 angles, 11 parameters: gradient (implicit) = "
-              f"{gc['grad_over_forward']:.2f}× a forward solve with the points from the solve"
+              f"{gc['grad_over_forward']:.2f}× the objective's value with the points from the solve"
+              + (f" ({gc['grad_over_solve']:.2f}× the forward solve)" if "grad_over_solve" in gc else "")
               + (f", {gc['transfer_grad_over_forward']:.2f}× with the points by `transfer`"
                  if "transfer_grad_over_forward" in gc else "")
               + f"; central differences {gc['fd_over_forward']:.1f}×; "
