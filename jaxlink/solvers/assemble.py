@@ -61,9 +61,9 @@ form has those of the solved angles without evaluating any), Φ_q, Φ_p, Φ_φ a
 derivatives are products and sums of them, and Φ_q is solved by forward substitution over its
 diagonal blocks (Cramer on each dyad's 2×2 block). Per position it works on scalars only, so that
 its transpose is as elementwise as the rule itself, and the forward's outputs are stored
-(`materialize`) so that XLA does not recompute the closed form inside the derivative's kernels:
-a gradient of a path objective in all parameters costs under two forward solves
-(benchmarks/gradient_cost.py).
+(`materialize`), one (B, N) array per value, so that XLA does not recompute the closed form inside
+the derivative's kernels and each of them reads only the values it uses: a gradient of a path
+objective in all parameters costs about one forward solve (benchmarks/gradient_cost.py).
 """
 
 from __future__ import annotations
@@ -942,9 +942,10 @@ def _implicit_tangents(mech: Mechanism, points: bool, primals, tangents, out):
     blocks = tuple((tuple(r for li in loops for r in (2 * li, 2 * li + 1)), cols) for loops, cols in order)
     if len(blocks) == 1 and len(blocks[0][1]) > 2:
         blocks = ((tuple(range(2 * len(mech.loops))), tuple(range(n))),)
-    # the parameters as separate scalars; their tangents broadcast to every position here and
-    # unstacked there, so that the transpose stacks each position's parameter cotangents in one
-    # kernel and sums them over the positions in one reduction
+    # the parameters as separate scalars, each tangent broadcast to the positions on its own: the
+    # transpose is then one reduction over the positions per parameter, fused with the kernel that
+    # computes it (a (B, N, P) broadcast would make it write a stack of every position's
+    # cotangents and sum that: 0.5 -> 0.23 s of a gradient at 1e5 designs)
     Ps = tuple(P[:, i] for i in range(P.shape[1]))
     dPN = None if dP is None else tuple(jnp.broadcast_to(dP[:, i, None], (B, N)) for i in range(P.shape[1]))
     dphiN = None if dphis is None else jnp.broadcast_to(dphis, (B, N))
