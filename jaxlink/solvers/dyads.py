@@ -31,6 +31,7 @@ import jax.numpy as jnp
 from ..files import expr as _expr
 from ..model.mechanism import Mechanism
 from ..model.structure import blocks
+from .angles import atan2
 
 
 @dataclasses.dataclass(frozen=True)
@@ -160,7 +161,7 @@ def _angle_from(ux, uy, L, inv_L, cs):
     cc, sc = cs
     ct, st = ex * cc + ey * sc, ey * cc - ex * sc  # rotate by −c
     miss = jnp.abs((ux * ux + uy * uy) - L * L) * (0.5 * jnp.abs(inv_L))
-    return jnp.arctan2(st, ct), (ct, st), miss
+    return atan2(st, ct), (ct, st), miss
 
 
 def _wrap_near(theta, ref):
