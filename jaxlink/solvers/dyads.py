@@ -150,18 +150,19 @@ def _radius_and_offset(mech, term, offset, env, trig):
     return term.sign * L, mech.unit_vector(offset, env, trig)
 
 
-def _angle_from(ux, uy, L, inv_L, cs):
+def _angle_from(ux, uy, L, inv_L, cs, arith: bool = False):
     """θ with L e(θ + c) = u, and (cos θ, sin θ), from u, L, 1/L and (cos c, sin c) — one atan2.
 
     The closed form constructs u with |u| = |L| (to rounding), so e(θ + c) = u / L needs no
     square root; atan2 is scale-free, so θ is exact whatever |u|. Also returns what the term
     L e(θ + c) misses of u, ||u| − |L|| = ||u|² − L²| / (|u| + |L|) ≈ ||u|² − L²| / (2|L|)
-    (its share of the loop residual), again without a square root."""
+    (its share of the loop residual), again without a square root. `arith`: the atan2 of
+    `angles.py` (vectorized arithmetic, within 2 ulp), else the C library's."""
     ex, ey = ux * inv_L, uy * inv_L  # e(θ + c)
     cc, sc = cs
     ct, st = ex * cc + ey * sc, ey * cc - ex * sc  # rotate by −c
     miss = jnp.abs((ux * ux + uy * uy) - L * L) * (0.5 * jnp.abs(inv_L))
-    return atan2(st, ct), (ct, st), miss
+    return (atan2 if arith else jnp.arctan2)(st, ct), (ct, st), miss
 
 
 def _wrap_near(theta, ref):
@@ -211,8 +212,11 @@ def solve(mech: Mechanism, dyads, sigma, q_ref, phi, p, trig=None):
 
 def solve_with_trig(mech: Mechanism, dyads, sigma, q_ref, phi, p, trig=None):
     """`solve`, and the (cos, sin) of every angle it used, keyed by name (the input, the angle
-    parameters given in `trig`, the solved angles): `(q, assemblable, residual, sine, trig)`."""
-    q, ok, resid, _, sine, trig_all = _solve(mech, dyads, sigma, q_ref, phi, p, trig, with_trig=True)
+    parameters given in `trig`, the solved angles): `(q, assemblable, residual, sine, trig)`.
+    The angles by `angles.atan2` (vectorized arithmetic, within 2 ulp of the C library's): the
+    batched closed form's kernel, where it is 1.2× (float64) to 1.6× (float32) faster. `solve`
+    keeps the C library's: inside the continuation's loops the arithmetic one measured slower."""
+    q, ok, resid, _, sine, trig_all = _solve(mech, dyads, sigma, q_ref, phi, p, trig, with_trig=True, arith=True)
     return q, ok, resid, sine, trig_all
 
 
@@ -229,7 +233,7 @@ def solve_nearest(mech: Mechanism, dyads, q_guess, phi, p, trig=None):
     return q, ok, resid, sig
 
 
-def _solve(mech, dyads, sigma, q_ref, phi, p, trig, with_trig: bool = False):
+def _solve(mech, dyads, sigma, q_ref, phi, p, trig, with_trig: bool = False, arith: bool = False):
     ok_all = jnp.asarray(True)
     resid = None
     sine = None
@@ -260,8 +264,8 @@ def _solve(mech, dyads, sigma, q_ref, phi, p, trig, with_trig: bool = False):
             ux = (x * wx - s * h * wy) * inv_w
             uy = (x * wy + s * h * wx) * inv_w
             inv_a, inv_b = _inverse(La), _inverse(Lb)
-            env[na], trig[na], miss_a = _angle_from(ux, uy, La, inv_a, csa)
-            env[nb], trig[nb], miss_b = _angle_from(wx - ux, wy - uy, Lb, inv_b, csb)
+            env[na], trig[na], miss_a = _angle_from(ux, uy, La, inv_a, csa, arith)
+            env[nb], trig[nb], miss_b = _angle_from(wx - ux, wy - uy, Lb, inv_b, csb, arith)
             miss = miss_a + miss_b
             # |u × v| / (|La| |Lb|) with v = w − u: |u × w| = h |w|
             sin_d = h * (w2 * inv_w) * jnp.abs(inv_a * inv_b)
@@ -275,7 +279,7 @@ def _solve(mech, dyads, sigma, q_ref, phi, p, trig, with_trig: bool = False):
             h, ok = _safe_sqrt(La * La - across * across)
             ell = along + s * h
             inv_a = _inverse(La)
-            env[na], trig[na], miss = _angle_from(wx - ell * ex, wy - ell * ey, La, inv_a, csa)
+            env[na], trig[na], miss = _angle_from(wx - ell * ex, wy - ell * ey, La, inv_a, csa, arith)
             env[nb] = ell
             sin_d = h * jnp.abs(inv_a)  # the link's component along the slider, over its length
         else:  # PP: ℓa ea + ℓb eb = w
