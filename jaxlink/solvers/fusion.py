@@ -26,7 +26,9 @@ def materialize(tree):
     leaves = [x for x in jax.tree_util.tree_leaves(tree) if jnp.size(x) > 0]
     if not leaves:
         return tree
-    probe = jnp.ravel(leaves[0])[0]
+    # a floating probe: `x == x` of an integer is provably true, and XLA would remove the loop
+    floats = [x for x in leaves if jnp.issubdtype(x.dtype, jnp.floating)]
+    probe = jnp.ravel((floats or leaves)[0])[0]
     trips = (probe == probe).astype(jnp.int32)  # 1 (0 for NaN): unknown to the compiler
 
     def body(state):
