@@ -124,8 +124,7 @@ def main(argv=None) -> dict:
            "grad_over_solve": out["grad_implicit"]["seconds"] / out["solve"]["seconds"],
            "transfer_forward_s": out["forward_transfer"]["seconds"], "transfer_grad_s": out["grad_transfer"]["seconds"],
            "transfer_grad_over_forward": out["grad_transfer"]["seconds"] / out["forward_transfer"]["seconds"],
-           "transfer_vs_solve_points_max_rel_diff": float(np.max(np.abs(g_t - np.asarray(out_g)))
-                                                          / np.max(np.abs(out_g))),
+           "transfer_vs_solve_points_max_rel_diff": float(np.max(np.abs(g_t - out_g)) / np.max(np.abs(out_g))),
            "fd_over_forward": fd_per_design / (out["forward"]["seconds"] / B),
            "grad_vs_fd_max_rel_diff": rel, "grad_vs_forward_mode_max_rel_diff": rel_fwd,
            "compile_s": {k: v["compile_s"] for k, v in out.items()}}

@@ -152,10 +152,16 @@ def main(argv=None):
         p = os.path.join(RES, name)
         return json.load(open(p)) if os.path.exists(p) else {}
 
+    ran = ""
+    if args.only:  # a partial update keeps the other benchmarks' runs (their JSON files stay too)
+        status = {**load("suite.json").get("status", {}), **status}
+        ran = f" (this update re-ran {args.only} in {wall:.0f} s)"
+        wall = sum(v["wall_s"] for v in status.values())
+
     tp, gc, fb, ev, sc, op = (load(n) for n in ("throughput.json", "gradient_cost.json", "fourbar_vs_pylinkage.json",
                                                  "error_vs_runtime.json", "scaling.json", "optimizer_rate.json"))
     L = [f"# jaxlink benchmark summary ({'quick' if args.quick else 'full'})", "",
-         f"{os.cpu_count()} cores, {platform.platform()}; suite wall time {wall:.0f} s. "
+         f"{os.cpu_count()} cores, {platform.platform()}; suite wall time {wall:.0f} s{ran}. "
          "Ratios are against baselines measured in the same run (each script's own run).", ""]
     if tp:
         L += ["## Throughput, feed six-bar (`throughput.json`)", "",
