@@ -31,7 +31,7 @@ import jax.numpy as jnp
 from ..files import expr as _expr
 from ..model.mechanism import Mechanism
 from ..model.structure import blocks
-from .angles import atan2
+from .angles import atan2, sincos
 
 
 @dataclasses.dataclass(frozen=True)
@@ -171,11 +171,13 @@ def _wrap_near(theta, ref):
     return theta + two_pi * jnp.round((ref - theta) / two_pi)
 
 
-def input_trig(mech: Mechanism, phis):
-    """(cos, sin) of the input values (any shape), keyed by the input's name; {} for a length input."""
+def input_trig(mech: Mechanism, phis, arith: bool = True):
+    """(cos, sin) of the input values (any shape), keyed by the input's name; {} for a length input.
+    `arith`: by `angles.sincos` (vectorized arithmetic, for arrays of inputs), else the C library's
+    (for a scalar that XLA may hoist out of a kernel's loop)."""
     if mech.input_kind != "angle":
         return {}
-    return {mech.input_name: (jnp.cos(phis), jnp.sin(phis))}
+    return {mech.input_name: sincos(phis) if arith else (jnp.cos(phis), jnp.sin(phis))}
 
 
 def parameter_trig(mech: Mechanism, P):
