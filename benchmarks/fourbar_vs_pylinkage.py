@@ -5,7 +5,9 @@ The task: many four-bar designs (the built-in `four-bar` scene, a, b, c, d, cx, 
 coupler point P. Measured in this run, on the same designs:
 
 - **pylinkage `Linkage.step_fast`** (1.3; its public numba path: `solver.simulation.simulate`,
-  circle intersections, nearest-to-previous branch), one design, 360 iterations per call;
+  circle intersections, nearest-to-previous branch), one design, 360 iterations per call, against
+  jaxlink's `jl.solve` of one design over the same 360 angles (points included), 200 calls in a
+  row from Python, the two taking turns in every round; each result kept, and each dropped;
 - **pylinkage numba core over many designs**: the same compiled `simulate` called in a Python loop
   over designs, with each design's constraint array and start positions written directly (no
   `Linkage` rebuild: the fastest way pylinkage can sweep designs; single-threaded, as pylinkage is);
@@ -109,13 +111,10 @@ def run_pylinkage(P6, B_joint0, repeats, log):
     from pylinkage.solver.simulation import simulate
 
     out = {}
-    # 1. the public API: one design, step_fast(360) per call
+    # 1. the public API, one design, step_fast(360) per call: timed beside jaxlink's single-design
+    # call (`single_design_calls`)
     lk = pylinkage_linkage(P6[0], B_joint0[0])
     lk.step_fast(iterations=STEPS)  # compile (numba cache) and build solver data
-    n_calls = 200
-    t, _ = best_of(lambda: [lk.step_fast(iterations=STEPS) for _ in range(n_calls)], repeats)
-    out["step_fast_positions_per_s"] = n_calls * STEPS / t
-    log("pylinkage Linkage.step_fast (1 design)", "float64", n_calls * STEPS / t, None)
 
     # 2. the numba core over many designs, constraint arrays written directly
     sd = lk._solver_data
@@ -144,7 +143,36 @@ def run_pylinkage(P6, B_joint0, repeats, log):
     out["core_positions_per_s"] = B * STEPS / t
     out["core_seconds"] = t
     log(f"pylinkage numba core, loop over {B} designs", "float64", B * STEPS / t, None)
-    return out, traj
+    return out, traj, lk
+
+
+def single_design_calls(calls: dict, n_calls: int, rounds: int) -> dict:
+    """Seconds per call of each `calls[name]()` (one design over one revolution), called
+    `n_calls` times in a row from Python, best of `rounds` rounds; the callables take turns within
+    every round (the same machine state for each). Two ways a user loops, each timed:
+
+    - `kept`: every result kept (`[f() for _ in range(n)]`);
+    - `dropped`: each result replaced by the next (`for _ in range(n): r = f()`), so that its
+      buffers are freed and reused.
+    """
+    def kept(f):
+        return [f() for _ in range(n_calls)][-1]
+
+    def dropped(f):
+        r = None
+        for _ in range(n_calls):
+            r = f()
+        return r
+
+    best = {(k, m): math.inf for k in calls for m in ("kept", "dropped")}
+    for f in calls.values():
+        jax.block_until_ready(f())
+    for _ in range(rounds):
+        for (k, m) in best:
+            t = time.perf_counter()
+            jax.block_until_ready((kept if m == "kept" else dropped)(calls[k]))
+            best[k, m] = min(best[k, m], (time.perf_counter() - t) / n_calls)
+    return best
 
 
 # ----------------------------------------------------------------------------- main
@@ -179,16 +207,17 @@ def main(argv=None) -> dict:
     def log(name, dtype, rate, err):
         rows.append((name, dtype, rate, err))
         e = "" if err is None else f"{err:10.2e}"
-        print(f"  {name:48s} {dtype:8s} {rate:12.4g} pos/s {e}", flush=True)
+        print(f"  {name:56s} {dtype:8s} {rate:12.4g} pos/s {e}", flush=True)
 
     results = {"designs": B, "steps": STEPS, "branch": branch}
+    lk = None
     if pylinkage_available() and not args.jaxlink_only:
         import pylinkage
 
         # rocker pin B at φ = 0 on the start branch, the nearest-point seed of pylinkage
         bx = P[:, 3] + P[:, 2] * np.cos(phi4[:, 0])
         by = P[:, 2] * np.sin(phi4[:, 0])
-        pl_out, traj = run_pylinkage(P, np.stack([bx, by], 1), repeats, log)
+        pl_out, traj, lk = run_pylinkage(P, np.stack([bx, by], 1), repeats, log)
         pl_err = float(np.nanmax(np.abs(traj - ref_xy[:, 1:])))
         pl_nan = float(np.mean(~np.isfinite(traj)))
         rows[-1] = rows[-1][:3] + (pl_err,)
@@ -224,21 +253,31 @@ def main(argv=None) -> dict:
         results[f"jaxlink_{name}_converged_fraction"] = float(np.mean(np.asarray(conv)))
 
     # one design over one revolution, called repeatedly from Python (the README's call, points
-    # included), as pylinkage's step_fast above: per-call latency, not batch throughput
+    # included), against pylinkage's step_fast: per-call latency, not batch throughput; the two
+    # take turns in every round, each result kept and each dropped (`single_design_calls`)
     ph1 = jnp.asarray(phis, dtype=np.float64)
     p1 = jnp.asarray(P[0], dtype=np.float64)
     q01 = jnp.asarray(mech.guess, dtype=np.float64)
     one = jl.solve(mech, ph1, p1, q01)
     err1 = float(np.max(np.abs(np.asarray(one.points[:, 0], dtype=float) - ref_xy[0, 1:])))
+    calls = {"jaxlink": lambda: jl.solve(mech, ph1, p1, q01)}
+    if lk is not None:
+        calls["pylinkage"] = lambda: lk.step_fast(iterations=STEPS)
     n_calls = 200
-    t1, _ = best_of(lambda: [jl.solve(mech, ph1, p1, q01) for _ in range(n_calls)][-1], repeats)
-    log("jaxlink solve, 1 design per call (repeated)", "float64", n_calls * STEPS / t1, err1)
-    results["jaxlink_single_design_positions_per_s"] = n_calls * STEPS / t1
-    results["jaxlink_single_design_call_ms"] = 1e3 * t1 / n_calls
+    per_call = single_design_calls(calls, n_calls, 15 if args.quick else 30)
+    for m in ("kept", "dropped"):
+        sfx = "" if m == "kept" else "_dropped"
+        t1 = per_call["jaxlink", m]
+        log(f"jaxlink solve, 1 design per call ({m})", "float64", STEPS / t1, err1)
+        results[f"jaxlink_single_design_positions_per_s{sfx}"] = STEPS / t1
+        results[f"jaxlink_single_design_call_ms{sfx}"] = 1e3 * t1
+        if lk is not None:
+            t2 = per_call["pylinkage", m]
+            log(f"pylinkage Linkage.step_fast, 1 design per call ({m})", "float64", STEPS / t2, None)
+            results[f"pylinkage_step_fast_positions_per_s{sfx}"] = STEPS / t2
+            results[f"pylinkage_step_fast_call_ms{sfx}"] = 1e3 * t2
+            results[f"ratio_single_design_vs_step_fast{sfx}"] = t2 / t1
     results["jaxlink_single_design_max_abs_error_m"] = err1
-    if "pylinkage_step_fast_positions_per_s" in results:
-        results["ratio_single_design_vs_step_fast"] = (results["jaxlink_single_design_positions_per_s"]
-                                                       / results["pylinkage_step_fast_positions_per_s"])
 
     if args.cores is None:  # jaxlink pinned to one core, like pylinkage's numba loop
         extra = ["--jaxlink-only", "--designs", str(B)] + (["--quick"] if args.quick else [])
@@ -258,18 +297,20 @@ def main(argv=None) -> dict:
             results[f"ratio_{k}_vs_pylinkage_step_fast"] = (results[f"jaxlink_{k}_positions_per_s"]
                                                            / results["pylinkage_step_fast_positions_per_s"])
     print(f"\nfour-bar + coupler point, {B} designs x {STEPS} steps; {cores()} cores, jax {jax.__version__}")
-    print(f"{'method':48s} {'dtype':8s} {'positions/s':>12s} {'max|ΔP| m':>10s}")
+    print(f"{'method':56s} {'dtype':8s} {'positions/s':>12s} {'max|ΔP| m':>10s}")
     for name, dt, rate, err in rows:
-        print(f"{name:48s} {dt:8s} {rate:12.4g} {'' if err is None else f'{err:10.2e}'}")
+        print(f"{name:56s} {dt:8s} {rate:12.4g} {'' if err is None else f'{err:10.2e}'}")
     if "ratio_float64_vs_pylinkage_core" in results:
         print(f"jaxlink float64 = {results['ratio_float64_vs_pylinkage_core']:.2f}x pylinkage's numba core "
               f"over designs "
               f"({results['ratio_float64_vs_pylinkage_step_fast']:.2f}x its step_fast); float32 "
               f"{results['ratio_float32_vs_pylinkage_core']:.2f}x")
     if "ratio_single_design_vs_step_fast" in results:
-        print(f"one design x {STEPS} positions per call, repeated: jaxlink "
-              f"{results['jaxlink_single_design_call_ms']:.3f} ms per call = "
-              f"{results['ratio_single_design_vs_step_fast']:.2f}x pylinkage's step_fast")
+        print(f"one design x {STEPS} positions per call, {n_calls} calls in a row: jaxlink "
+              f"{results['jaxlink_single_design_call_ms']:.3f} ms per call (results kept) = "
+              f"{results['ratio_single_design_vs_step_fast']:.2f}x pylinkage's step_fast; "
+              f"{results['jaxlink_single_design_call_ms_dropped']:.3f} ms (each dropped) = "
+              f"{results['ratio_single_design_vs_step_fast_dropped']:.2f}x")
     if "ratio_float64_1core_vs_pylinkage_core" in results:
         print(f"pinned to 1 core (as pylinkage): jaxlink float64 = "
               f"{results['ratio_float64_1core_vs_pylinkage_core']:.2f}x pylinkage's numba core")

@@ -193,6 +193,12 @@ def main(argv=None):
                   f"{fb['jaxlink_float64_max_abs_error_m']:.1e} |",
                   f"| jaxlink float32 | {fb['jaxlink_float32_positions_per_s']:.3g} | "
                   f"{fb['jaxlink_float32_max_abs_error_m']:.1e} |", "",
+                  *([f"One design × {fb['steps']} positions per `jl.solve` call, 200 calls in a row: "
+                     f"{fb['jaxlink_single_design_call_ms']:.3f} ms per call = "
+                     f"**{fb['ratio_single_design_vs_step_fast']:.2f}×** pylinkage's `step_fast` with every "
+                     f"result kept, {fb['jaxlink_single_design_call_ms_dropped']:.3f} ms = "
+                     f"**{fb['ratio_single_design_vs_step_fast_dropped']:.2f}×** with each dropped (goal ≥ 1×).",
+                     ""] if "ratio_single_design_vs_step_fast_dropped" in fb else []),
                   f"jaxlink float64 = **{fb['ratio_float64_vs_pylinkage_core']:.2f}×** pylinkage's numba core "
                   f"(goal ≥ 2×)"
                   + (f"; pinned to one core like pylinkage: **{fb['ratio_float64_1core_vs_pylinkage_core']:.2f}×**"
