@@ -44,8 +44,8 @@ def test_forward_and_reverse_mode_agree():
     phis = jnp.asarray(np.deg2rad(np.arange(0.0, 360.0, 10.0)))
     f = lambda p: jnp.sum(jl.solve_path(mech, phis, p).q[:, 1] ** 2)  # noqa: E731
     p = jnp.asarray(mech.parameters)
-    rev = jax.grad(f)(p)
-    fwd = jax.jacfwd(f)(p)
+    rev = jax.jit(jax.grad(f))(p)  # compiled: eagerly, each primitive would compile on its own
+    fwd = jax.jit(jax.jacfwd(f))(p)
     np.testing.assert_allclose(np.asarray(rev), np.asarray(fwd), rtol=1e-12, atol=1e-12)
 
 
@@ -54,7 +54,7 @@ def test_gradient_wrt_input_is_the_velocity():
     mech = jl.load("sewing-feed")
     phis = jnp.asarray(np.deg2rad(75.0 + 5.0 * np.arange(8)))
     p = jnp.asarray(mech.parameters)
-    q, dq = jax.jvp(lambda ph: jl.solve_path(mech, ph, p).q, (phis,), (jnp.ones_like(phis),))
+    q, dq = jax.jit(lambda ph: jax.jvp(lambda x: jl.solve_path(mech, x, p).q, (ph,), (jnp.ones_like(ph),)))(phis)
     tr = jl.transfer(mech, phis, q, p, order=1)
     np.testing.assert_allclose(np.asarray(dq), np.asarray(tr.mu), rtol=1e-12, atol=1e-12)
 
@@ -63,7 +63,7 @@ def test_non_converged_positions_get_zero_gradient_not_nan():
     mech = jl.load("four-bar", overrides={"a": 40.0})  # non-Grashof: part of the turn unreachable
     phis = jnp.asarray(np.deg2rad(np.arange(0.0, 360.0, 10.0)))
     f = lambda p: jnp.sum(jl.solve_path(mech, phis, p).q)  # noqa: E731
-    g = jax.grad(f)(jnp.asarray(mech.with_parameters(a=40.0)))
+    g = jax.jit(jax.grad(f))(jnp.asarray(mech.with_parameters(a=40.0)))
     assert np.all(np.isfinite(np.asarray(g)))
 
 
@@ -78,23 +78,26 @@ def _central(f, p, i, h):
     return (-f(p + 2 * e) + 8 * f(p + e) - 8 * f(p - e) + f(p - 2 * e)) / (12 * h)
 
 
-def _check_against_differences(mech, f, p, rtol, forward: bool = False):
+def _check_against_differences(mech, f, p, rtol, forward: bool = False, has_aux: bool = False):
     """Reverse mode against central differences (and, with `forward`, against forward mode). The
     differences take their values from the same compiled value-and-gradient function (one
-    compilation fewer than a separate `jax.jit(f)`; each test compiles a continuation solve)."""
+    compilation fewer than a separate `jax.jit(f)`; each test compiles a continuation solve).
+    With `has_aux`, f returns (value, aux), and the aux at p is returned with the gradient (what
+    a separate solve would otherwise compile for)."""
     p = np.asarray(p, dtype=float)
-    vg = jax.jit(jax.value_and_grad(f))
-    g = np.asarray(vg(jnp.asarray(p))[1])
-    fd = np.array([_central(lambda x: float(vg(jnp.asarray(x))[0]), p, i,
-                            1e-5 * (1.0 if k == "angle" else max(abs(p[i]), 1e-3)))
+    vg = jax.jit(jax.value_and_grad(f, has_aux=has_aux))
+    (_, aux), g = vg(jnp.asarray(p)) if has_aux else ((None, None), vg(jnp.asarray(p))[1])
+    g = np.asarray(g)
+    value = (lambda x: float(vg(jnp.asarray(x))[0][0])) if has_aux else (lambda x: float(vg(jnp.asarray(x))[0]))
+    fd = np.array([_central(value, p, i, 1e-5 * (1.0 if k == "angle" else max(abs(p[i]), 1e-3)))
                    for i, k in enumerate(mech.parameter_kinds)])
     scale = np.abs(fd).max()
     assert np.all(np.isfinite(g))
     if forward:
-        gf = np.asarray(jax.jit(jax.jacfwd(f))(jnp.asarray(p)))
+        gf = np.asarray(jax.jit(jax.jacfwd(f, has_aux=has_aux))(jnp.asarray(p))[0 if has_aux else slice(None)])
         np.testing.assert_allclose(g, gf, rtol=1e-10, atol=1e-12 * scale)
     np.testing.assert_allclose(g, fd, rtol=rtol, atol=rtol * scale)
-    return g
+    return (g, aux) if has_aux else g
 
 
 def test_closed_form_rule_all_parameters_unknowns_and_points():
@@ -180,14 +183,13 @@ def test_rule_on_a_single_4x4_block_against_central_differences():
     """A structure whose Φ_q is one 4 × 4 block (Gaussian elimination with pivoting in the rule)."""
     mech = _triad_scene()
     phis = jnp.asarray(np.deg2rad(26.0 + 1.0 * np.arange(12)))
-    sol = jl.solve(mech, phis)
-    assert np.all(np.asarray(sol.result) == jl.RESULTS.converged)
 
     def f(p):
         s = jl.solve_path(mech, phis, p, points=True)
-        return jnp.sum(jnp.cos(s.q)) + 1e3 * jnp.sum(s.points ** 2)
+        return jnp.sum(jnp.cos(s.q)) + 1e3 * jnp.sum(s.points ** 2), s.result
 
-    _check_against_differences(mech, f, mech.parameters, 1e-7, forward=True)
+    _, result = _check_against_differences(mech, f, mech.parameters, 1e-7, forward=True, has_aux=True)
+    assert np.all(np.asarray(result) == jl.RESULTS.converged)
 
 
 # s + l = p + q: 20 + 60 = 45 + 35 mm; at φ2 = 0 all four links are collinear (a change point)
@@ -213,8 +215,8 @@ def test_rule_near_a_change_point(method):
         return jnp.sum(jl.solve_path(mech, phis, p, q0, options=opts).q[:, 1] * jnp.arange(1.0, 1.0 + len(phis)))
 
     _check_against_differences(mech, f, p0, 1e-6)
-    q, dq = jax.jvp(lambda ph: jl.solve_path(mech, ph, jnp.asarray(p0), q0, options=opts).q, (phis,),
-                    (jnp.ones_like(phis),))
+    q, dq = jax.jit(lambda phs: jax.jvp(lambda ph: jl.solve_path(mech, ph, jnp.asarray(p0), q0, options=opts).q,
+                                        (phs,), (jnp.ones_like(phs),)))(phis)
     mu = jl.transfer(mech, phis, q, jnp.asarray(p0), order=1).mu
     assert np.abs(np.asarray(mu)).max() > 3.0  # large: near the change point
     np.testing.assert_allclose(np.asarray(dq), np.asarray(mu), rtol=1e-10, atol=1e-10)
@@ -241,10 +243,11 @@ def test_unassemblable_positions_have_zero_gradient_and_no_nan(method):
         return jnp.sum(s.q * mask_q[:, None]) + jnp.sum(pts * mask_pts[:, None, None])
 
     bad = (jnp.asarray(not_conv, float), jnp.asarray(not_assembled, float))
-    g = np.asarray(jax.grad(f)(p, *bad))
-    gf = np.asarray(jax.jacfwd(f)(p, *bad))
+    grad = jax.jit(jax.grad(f))  # one compilation for both masks
+    g = np.asarray(grad(p, *bad))
+    gf = np.asarray(jax.jit(jax.jacfwd(f))(p, *bad))
     assert np.all(g == 0.0) and np.all(gf == 0.0)
-    g = np.asarray(jax.grad(f)(p, 1.0 - bad[0], 1.0 - bad[1]))
+    g = np.asarray(grad(p, 1.0 - bad[0], 1.0 - bad[1]))
     assert np.all(np.isfinite(g)) and np.any(g != 0.0)
 
 
