@@ -85,16 +85,17 @@ def _check_against_differences(mech, f, p, rtol, forward: bool = False, has_aux:
     With `has_aux`, f returns (value, aux), and the aux at p is returned with the gradient (what
     a separate solve would otherwise compile for)."""
     p = np.asarray(p, dtype=float)
+    main = (lambda out: out[0]) if has_aux else (lambda out: out)  # the part differentiated
     vg = jax.jit(jax.value_and_grad(f, has_aux=has_aux))
-    (_, aux), g = vg(jnp.asarray(p)) if has_aux else ((None, None), vg(jnp.asarray(p))[1])
-    g = np.asarray(g)
-    value = (lambda x: float(vg(jnp.asarray(x))[0][0])) if has_aux else (lambda x: float(vg(jnp.asarray(x))[0]))
-    fd = np.array([_central(value, p, i, 1e-5 * (1.0 if k == "angle" else max(abs(p[i]), 1e-3)))
+    out, g = vg(jnp.asarray(p))
+    aux, g = (out[1] if has_aux else None), np.asarray(g)
+    fd = np.array([_central(lambda x: float(main(vg(jnp.asarray(x))[0])), p, i,
+                            1e-5 * (1.0 if k == "angle" else max(abs(p[i]), 1e-3)))
                    for i, k in enumerate(mech.parameter_kinds)])
     scale = np.abs(fd).max()
     assert np.all(np.isfinite(g))
     if forward:
-        gf = np.asarray(jax.jit(jax.jacfwd(f, has_aux=has_aux))(jnp.asarray(p))[0 if has_aux else slice(None)])
+        gf = np.asarray(main(jax.jit(jax.jacfwd(f, has_aux=has_aux))(jnp.asarray(p))))
         np.testing.assert_allclose(g, gf, rtol=1e-10, atol=1e-12 * scale)
     np.testing.assert_allclose(g, fd, rtol=rtol, atol=rtol * scale)
     return (g, aux) if has_aux else g

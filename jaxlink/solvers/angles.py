@@ -17,10 +17,10 @@ The derivative is the exact one, (x dy − y dx) / (x² + y²).
 `cos` and `sin` cost ≈ 27–43 ns per element together, these ≈ 3–4 ns. The method is the C
 library's (fdlibm, as in musl): x = n π/2 + r by Cody–Waite with π/2 in three parts (the first
 two of 33 bits, so that n times each is exact for |n| < 2²⁰; fdlibm's second round, always) and
-r kept as a head and a tail; minimax
-polynomials of degree 13 (sin) and 14 (cos) on [−π/4, π/4]; the quadrant n mod 4 swaps and
-negates them. Within 1 ulp of numpy's for |x| ≤ 1e5 (`tests/test_angles.py`); an array with any
-element beyond (or not finite) takes the C library's for all of it.
+r kept as a head and a tail; minimax polynomials of degree 13 (sin) and 14 (cos) on [−π/4, π/4];
+the quadrant n mod 4 swaps and negates them. Within 1 ulp of numpy's for |x| ≤ 1e5
+(`tests/test_angles.py`); an array with any element beyond (or not finite) takes the C library's
+for all of it.
 """
 
 from __future__ import annotations
@@ -62,7 +62,7 @@ def _atan2_jvp(primals, tangents):
     return atan2(y, x), (x * dy - y * dx) / jnp.where(r2 == 0, 1.0, r2)
 
 
-# fdlibm's π/2 split (__rem_pio2, first round) and kernel polynomials (__sin, __cos)
+# fdlibm's π/2 split (__rem_pio2, second round) and kernel polynomials (__sin, __cos)
 _INVPIO2 = 6.36619772367581382433e-01
 _PIO2_1 = 1.57079632673412561417e+00  # the first 33 bits of π/2
 _PIO2_2 = 6.07710050630396597660e-11  # the next 33 bits
