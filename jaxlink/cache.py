@@ -61,8 +61,18 @@ def enable_compilation_cache(path: str | None = None) -> str | None:
 # program (about 2 s of a small command). A command's whole computation, traced once, is stored
 # beside the compiled code as a serialized `jax.export.Exported` (StableHLO) and called from there
 # the next time: nothing is traced again, and its compilation comes from the compilation cache.
+#
+# A stored program is a pure function of its inputs. What it is called with — every array leaf of
+# its arguments, a mechanism's parameters and guesses included — is an *argument* of the program,
+# never a constant inside it; everything that is baked in (the function's code, the arguments'
+# tree structure with a mechanism's `Structure.key`, the static options, shapes, dtypes) is part
+# of the key, together with jaxlink's source, the JAX and jaxlib versions, the backend and the x64
+# mode. A function with a closure is refused (it could hide numbers the key does not see). A file
+# that does not hold exactly the program of its key (damaged, truncated, another key) is traced
+# again and replaced, never loaded.
 
 TRACE_SUFFIX = ".jaxlink-trace"
+_MAGIC = b"jaxlink-trace 2\n"
 
 
 _SOURCE_DIGEST: list = []
@@ -87,17 +97,43 @@ def source_digest() -> str:
     return _SOURCE_DIGEST[0]
 
 
-_LOADED: dict = {}  # in this process: (name, key, argument spec) -> a jitted callable
+_LOADED: dict = {}  # in this process: the key text -> a jitted callable of the flat leaves
 _LOADED_MAX = 256
 
 
-def _spec(args) -> tuple:
+def _tree_key(treedef) -> str:
+    """A text of a tree structure that is the same in every process: node types by name, a
+    mechanism's `Structure` by its `key`, other node data by `repr`, `*` for a leaf."""
+    from .model.mechanism import Structure
+
+    data = treedef.node_data()
+    if data is None:
+        return "*"
+    kind, aux = data
+    aux_text = aux.key if isinstance(aux, Structure) else repr(aux)
+    children = ",".join(_tree_key(c) for c in treedef.children())
+    return f"{kind.__module__}.{kind.__qualname__}[{aux_text}]({children})"
+
+
+def _spec(leaves) -> tuple:
+    """Shapes and dtypes (as JAX will hold them: float64 is float32 when x64 is off)."""
+    import jax
     import numpy as np
 
-    return tuple((tuple(np.shape(a)), str(getattr(a, "dtype", None) or np.asarray(a).dtype)) for a in args)
+    return tuple((tuple(np.shape(a)), str(jax.dtypes.canonicalize_dtype(np.result_type(a)))) for a in leaves)
 
 
-def _trace_path(name: str, key: str, spec: tuple) -> str | None:
+def key_text(name: str, fun, treedef, static: tuple, leaves) -> str:
+    """Everything a stored program depends on besides the values of its arguments."""
+    import jax
+    import jaxlib
+
+    return repr((name, f"{fun.__module__}.{fun.__qualname__}", _tree_key(treedef), static, _spec(leaves),
+                 source_digest(), jax.__version__, jaxlib.__version__, jax.default_backend(),
+                 bool(jax.config.read("jax_enable_x64"))))
+
+
+def _trace_path(key: str) -> str | None:
     import hashlib
 
     import jax
@@ -105,54 +141,93 @@ def _trace_path(name: str, key: str, spec: tuple) -> str | None:
     folder = getattr(jax.config, "jax_compilation_cache_dir", None)
     if not folder:
         return None
-    text = repr((name, key, spec, source_digest(), jax.__version__, jax.default_backend(),
-                 bool(jax.config.read("jax_enable_x64"))))
-    return os.path.join(folder, "trace-" + hashlib.sha256(text.encode()).hexdigest()[:40] + TRACE_SUFFIX)
+    return os.path.join(folder, "trace-" + hashlib.sha256(key.encode()).hexdigest()[:40] + TRACE_SUFFIX)
 
 
-def traced(name: str, fun, args: tuple, key: str):
-    """`fun(*args)` (arrays in, a tuple of arrays out) under `jax.jit`, through a stored trace when
-    the compilation cache is on (`enable_compilation_cache`): the first call traces `fun`, stores
-    the program in the cache directory and runs it; a later process calling with the same `name`,
-    `key` (what `fun` closes over: a structure's `key`, static options), argument shapes and
-    dtypes, jaxlink source (`source_digest`), JAX version and backend loads it instead of tracing.
-    In one process the callable is kept: a second call traces nothing either way. When the
-    stored trace cannot be written or read, it is `jax.jit(fun)(*args)`."""
+def traced(name: str, fun, args: tuple, static: tuple = ()):
+    """`fun(*args, *static)` under `jax.jit`, through a stored trace when the compilation cache is
+    on (`enable_compilation_cache`): the first call traces `fun`, stores the program in the cache
+    directory and runs it; a later process calling with the same key (`key_text`: `name`, `fun`,
+    the tree structure of `args`, `static`, shapes and dtypes, jaxlink's source, JAX and jaxlib
+    versions, backend, x64 mode) loads it instead of tracing. In one process the callable is kept.
+
+    `fun` must be a module-level function (no closure): every number it uses comes in through
+    `args` (a tuple of pytrees of arrays; a `Mechanism` is one, its parameters and guesses are
+    leaves), every static option through `static` (hashable values whose `repr` identifies them).
+    When the stored trace cannot be written or read, it is `jax.jit` of the same function."""
     import jax
 
-    spec = _spec(args)
-    memo = (name, key, spec, bool(jax.config.read("jax_enable_x64")))
-    call = _LOADED.get(memo)
+    if getattr(fun, "__closure__", None) or not hasattr(fun, "__qualname__") or "<locals>" in fun.__qualname__:
+        raise TypeError(f"traced({name!r}): {fun!r} must be a module-level function without a closure "
+                        "(pass every number as an argument, every option in `static`)")
+    leaves, treedef = jax.tree_util.tree_flatten(args)
+    key = key_text(name, fun, treedef, tuple(static), leaves)
+    call = _LOADED.get(key)
     if call is None:
-        call = _load_or_store(fun, args, _trace_path(name, key, spec))
+        def flat(*xs):
+            return fun(*jax.tree_util.tree_unflatten(treedef, xs), *static)
+
+        call = _load_or_store(flat, leaves, key, _trace_path(key))
         if len(_LOADED) >= _LOADED_MAX:
             _LOADED.pop(next(iter(_LOADED)))
-        _LOADED[memo] = call
-    return call(*args)
+        _LOADED[key] = call
+    return call(*leaves)
 
 
-def _load_or_store(fun, args, path):
+def _pack(key: str, data: bytes | bytearray) -> bytes:
+    import hashlib
+
+    head = key.encode()
+    body = len(head).to_bytes(8, "little") + head + len(data).to_bytes(8, "little") + bytes(data)
+    return _MAGIC + hashlib.sha256(body).digest() + body
+
+
+def _unpack(key: str, blob: bytes) -> bytes | None:
+    """The serialized program of a stored file, or None unless the file is whole (its digest
+    matches) and was stored under exactly `key`."""
+    import hashlib
+
+    n = len(_MAGIC)
+    if blob[:n] != _MAGIC or len(blob) < n + 32 + 16:
+        return None
+    digest, body = blob[n:n + 32], blob[n + 32:]
+    if hashlib.sha256(body).digest() != digest:
+        return None
+    klen = int.from_bytes(body[:8], "little")
+    if body[8:8 + klen] != key.encode():
+        return None
+    rest = body[8 + klen:]
+    if len(rest) < 8 or int.from_bytes(rest[:8], "little") != len(rest) - 8:
+        return None
+    return rest[8:]
+
+
+def _load_or_store(flat, leaves, key: str, path: str | None):
     import jax
 
     if path is None:
-        return jax.jit(fun)
+        return jax.jit(flat)
     from jax import export
 
     if os.path.exists(path):
         try:
             with open(path, "rb") as fh:
-                return jax.jit(export.deserialize(bytearray(fh.read())).call)
+                stored = _unpack(key, fh.read())
+            if stored is not None:
+                exp = export.deserialize(bytearray(stored))
+                if _spec(leaves) == tuple((tuple(a.shape), str(a.dtype)) for a in exp.in_avals):
+                    return jax.jit(exp.call)
         except Exception:  # noqa: BLE001 (a stale or damaged file: trace again and replace it)
             pass
     try:
-        exp = export.export(jax.jit(fun))(*args)
+        exp = export.export(jax.jit(flat))(*leaves)
         data = exp.serialize()
     except Exception:  # noqa: BLE001 (cannot be exported or serialized here: no stored trace)
-        return jax.jit(fun)
+        return jax.jit(flat)
     tmp = f"{path}.{os.getpid()}.tmp"
     try:
         with open(tmp, "wb") as fh:
-            fh.write(data)
+            fh.write(_pack(key, data))
         os.replace(tmp, path)
     except OSError:
         if os.path.exists(tmp):

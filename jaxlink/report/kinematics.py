@@ -159,31 +159,29 @@ def kinematics_table(mech: Mechanism, phis, *, omega: float = 1.0, outputs=OUTPU
         float(omega), rpm, p)
 
 
-def _arrays(mech: Mechanism, order: int):
-    """The table's whole computation as one function of (phis, p): the solve with its points, the
-    residual at the returned q, the transfer functions up to `order` (empty when not asked), and
-    the length scale of the tolerance."""
-
-    def f(phis, p):
-        sol = solve(mech, phis, p=p)
-        # the residual at the returned q, for every row (the solver's own is measured where it stopped)
-        resid = jax.vmap(lambda qq, ph: jnp.max(jnp.abs(mech.residual(qq, ph, p))))(sol.q, phis)
-        empty = jnp.zeros((0,), p.dtype)
-        mu = nu = dpts = ddpts = empty
-        if order:
-            tr = transfer(mech, phis, sol.q, p=p, order=order)
-            mu, dpts = tr.mu, tr.dpoints
-            if order == 2:
-                nu, ddpts = tr.nu, tr.ddpoints
-        return sol.q, sol.points, sol.result, resid, mu, nu, dpts, ddpts, mech.length_scale(p)
-
-    return f
+def _arrays(mech: Mechanism, phis, p, order: int):
+    """The table's whole computation as one function of (mech, phis, p): the solve with its points,
+    the residual at the returned q, the transfer functions up to `order` (empty when not asked),
+    and the length scale of the tolerance."""
+    sol = solve(mech, phis, p=p)
+    # the residual at the returned q, for every row (the solver's own is measured where it stopped)
+    resid = jax.vmap(lambda qq, ph: jnp.max(jnp.abs(mech.residual(qq, ph, p))))(sol.q, phis)
+    empty: jax.Array | None = jnp.zeros((0,), p.dtype)
+    mu = nu = dpts = ddpts = empty
+    if order:
+        tr = transfer(mech, phis, sol.q, p=p, order=order)
+        mu, dpts = tr.mu, tr.dpoints
+        if order == 2:
+            nu, ddpts = tr.nu, tr.ddpoints
+    return sol.q, sol.points, sol.result, resid, mu, nu, dpts, ddpts, mech.length_scale(p)
 
 
 def _traced_arrays(mech: Mechanism, phis, p, order: int):
     """`_arrays` through jaxlink's stored traces (`jaxlink/cache.py`): a repeated command with the
-    same structure, sizes and dtype traces nothing."""
-    return traced("kinematics_table", _arrays(mech, order), (phis, p), f"{mech.structure.key}|order={order}")
+    same structure, sizes and dtype traces nothing. The mechanism is an argument of the stored
+    program (its guesses choose the branch), never a constant inside it."""
+    guess = np.asarray(mech.guess, dtype=np.asarray(p).dtype)
+    return traced("kinematics_table", _arrays, (mech.replace(parameters=p, guess=guess), phis, p), (order,))
 
 
 def _checked(result, resid, scale: float, p):
