@@ -165,7 +165,7 @@ def summarized(ev: Evaluator, method: str, p: Progress, *, seed: int, budget: in
         for v, u, c in zip(p.runners_value, p.runners_u, p.runners_circuit):
             if np.isfinite(v) and not any(int(c) == cc and np.array_equal(u, uu) for uu, cc, _ in cands):
                 cands.append((np.asarray(u, dtype=float), int(c), float(v)))
-        first = None
+        first: dict = {}
         for k, (u, c, v) in enumerate(cands):
             rep = ev.report(u, c)
             first = first or rep
