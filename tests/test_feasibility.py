@@ -105,7 +105,8 @@ def test_the_certificate_finds_the_window_that_72_samples_miss():
     p, q = jnp.asarray(mech.parameters), jnp.asarray(mech.guess)
     phis = jnp.asarray(np.radians(2.5 + 5.0 * np.arange(72)))
     sigma = _dyads.solve_nearest(mech, dyads, q, phis[0], p)[3]
-    cert = jax.jit(lambda pp: feasibility.certify(mech, dyads, sigma, q, phis, pp))(p)
+    certify = jax.jit(lambda pp: feasibility.certify(mech, dyads, sigma, q, phis, pp))
+    cert = certify(p)
     # the 72 checked positions all assemble: the old check passes the design ...
     assert float(cert.sampled) > 0
     assert bool(np.all(solve(mech, np.asarray(phis)).converged))
@@ -121,8 +122,8 @@ def test_the_certificate_finds_the_window_that_72_samples_miss():
     bad = np.degrees(DENSE[~np.asarray(sol.converged)])
     assert len(bad) > 0 and a - 0.01 <= bad.min() and bad.max() <= b + 0.01
     # a design that turns fully is certified, and assembles at all 36 000 positions
-    full = loads(text(65.5))
-    cert = jax.jit(lambda pp: feasibility.certify(full, dyads, sigma, q, phis, pp))(jnp.asarray(full.parameters))
+    full = loads(text(65.5))  # only l3 differs: the same compiled certificate
+    cert = certify(jnp.asarray(full.parameters))
     assert bool(cert.certified) and float(cert.margin) > 0
     assert bool(np.all(solve(full, DENSE).converged))
 
