@@ -135,9 +135,12 @@ def cmd_optimize(args) -> int:
         print(f"objective   {result.value:.10g}" if result.value is not None else "objective   -")
         if result.metrics:
             print("metrics     " + ", ".join(f"{k} = {v:.6g}" for k, v in result.metrics.items() if v is not None))
+        if result.fallback:
+            print(f"certified   fell back to the {result.fallback + 1}. best design: the {result.fallback} better "
+                  "one(s) cannot be assembled between two checked positions")
     else:
-        print("best        none: no feasible design found: every design tried failed to assemble over its "
-              "revolution (widen the bounds, check the file's design, or give more --budget / --time)")
+        print(f"best        none: {result.reason}")
+        print(f"error: {result.reason}", file=sys.stderr)
     print(f"evaluations {result.evaluations} ({result.designs} designs, "
           f"{100 * result.infeasible_fraction:.1f} % infeasible), {result.wall_s:.2f} s "
           f"({result.search_wall_s:.2f} s searching, {result.compile_s:.2f} s compiling)")

@@ -176,7 +176,7 @@ def detect_placement(ev):
 
     def path_of(x):
         u = jnp.asarray((x - pr.lower) / (pr.upper - pr.lower))
-        xy, ok = ev.path(u, 0, phis, 0)
+        xy, ok = ev.path(u, 0, phis, 0, screen=False)
         return xy.xy, ok
 
     xy0, ok0 = jax.jit(path_of)(x0)

@@ -10,9 +10,16 @@ units) and a circuit index c (which branch signs of the dyads; 0 = the file's). 
    Newton continuation; differentiable in p by implicit differentiation);
 4. the point's path (and its input derivatives if the objective needs them, `_kinematics`),
    with the solved unknowns q and the parameters p (`PathData`);
-5. the objective. A design is *feasible* iff the start and every position converged and the
-   path's pieces (points and their derivatives) are finite; an infeasible design gets the value
-   +inf (never NaN), and it is counted.
+5. the objective. A design is *feasible* iff the start and every position converged, the
+   path's pieces (points and their derivatives) are finite and, for a mechanism made of dyads,
+   no dyad is about to open an unassemblable window between two checked positions (the reach
+   margin interpolated between the samples stays ≥ 0: `jaxlink.analysis.feasibility.screen`);
+   an infeasible design gets the value +inf (never NaN), and it is counted.
+
+The design a search reports is *certified* (`Evaluator.report`): for a mechanism of dyads, the
+reach margin's minimum over the whole revolution, refined between the samples
+(`feasibility.certify`), is ≥ 0; for other mechanisms, every position of the dense re-solve
+(`report_samples`) converged.
 
 One *mechanism evaluation* = one design solved over its revolution (on one circuit: with
 `circuits = "all"` a design costs one evaluation per circuit).
@@ -26,6 +33,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from ..analysis import feasibility as _feasibility
 from ..analysis.transfer import transfer_one
 from ..solvers import dyads as _dyads
 from ..solvers.assemble import NewtonOptions, default_rtol, solve_path
@@ -121,13 +129,17 @@ class Evaluator:
             return closed_form_start(self.mech, self.dyads, self.q_file, self.phi0, p, sigma, tol)
         return continuation_start(self.mech, self.q_file, self.mech.parameters, self.phi0, p, tol)
 
-    def path(self, u, c, phis, order: int):
-        """(PathData in file units, feasible) of one design."""
+    def path(self, u, c, phis, order: int, screen: bool = True):
+        """(PathData in file units, feasible) of one design at the equally spaced inputs `phis`
+        of a revolution; `screen`: a dyad mechanism's reach margin interpolated between them must
+        stay ≥ 0 (see the module doc; off for a handful of samples too coarse to interpolate)."""
         p = self.params(u)
         q0, ok0 = self.start(p, c)
         q0 = jax.lax.stop_gradient(q0)
         sol = solve_path(self.mech, phis, p, q0, options=self.options)
         feasible = ok0 & jnp.all(sol.converged)
+        if screen and self.dyads is not None:  # no window opening between two checked positions
+            feasible = feasible & self._screened(jax.lax.stop_gradient(p), q0, phis)
         lf = self.mech.units.length
         k = self.problem.point
         t = jax.vmap(lambda q, ph: transfer_one(self.mech, q, ph, p, order))(sol.q, phis)
@@ -139,6 +151,24 @@ class Evaluator:
             if piece is not None:
                 feasible = feasible & jnp.all(jnp.isfinite(piece))
         return PathData(xy, dxy, ddxy, sol.q, p), feasible
+
+    def _branches(self, p, q0):
+        """σ of the dyads at the design's start configuration q0 (the branches its path keeps)."""
+        phi0 = jnp.asarray(self.phi0, p.dtype)
+        return jax.lax.stop_gradient(_dyads.solve_nearest(self.mech, self.dyads, q0, phi0, p)[3])
+
+    def _screened(self, p, q0, phis):
+        """Whether the reach margin interpolated between the equally spaced `phis` stays ≥ 0."""
+        est = _feasibility.screen(self.mech, self.dyads, self._branches(p, q0), q0, phis, p)
+        return jnp.all(est >= -_feasibility.MARGIN_SLACK)
+
+    def certificate_single(self, u, c):
+        """The feasibility certificate (`feasibility.Certificate`) of one design on circuit `c` over
+        the search's samples (a mechanism of dyads only)."""
+        p = self.params(u)
+        q0 = jax.lax.stop_gradient(self.start(p, c)[0])
+        phis = jnp.asarray(self.problem.phis, u.dtype)
+        return _feasibility.certify(self.mech, self.dyads, self._branches(p, q0), q0, phis, p)
 
     def value_single(self, u, c, rank: bool = False):
         """Exact objective of one design (+inf if infeasible) and its feasibility; with `rank`
@@ -271,6 +301,7 @@ class Evaluator:
             "feasible": bool(feas),
             "circuit": int(c),
         }
+        out.update(self.certified(u, c, bool(feas)))
         if bool(feas):
             out["objective"] = float(value)
             out["metrics"] = to_python(metrics)
@@ -278,6 +309,21 @@ class Evaluator:
             out["objective"] = None
             out["metrics"] = {}
         return out
+
+    def certified(self, u, c: int, dense_feasible: bool) -> dict:
+        """What certifies that design `u` on circuit `c` assembles over its whole revolution:
+        `certificate` ("reach margin": the dyads' margin refined between the search's samples,
+        `feasibility.certify`; "dense re-solve": every one of the `report_samples` positions
+        converged, for a mechanism not made of dyads), `certified` (bool), and for the reach
+        margin `margin` (the smallest, dimensionless) and `margin_at` (its input value, file
+        units)."""
+        if self.dyads is None:
+            return {"certificate": "dense re-solve", "certified": bool(dense_feasible)}
+        fn = self.compiled(("certificate",), lambda: jax.jit(self.certificate_single))
+        cert = fn(jnp.asarray(u, dtype=float), jnp.asarray(int(c)))
+        name = self.mech.input_name
+        return {"certificate": "reach margin", "certified": bool(cert.certified) and bool(dense_feasible),
+                "margin": float(cert.margin), "margin_at": float(self.mech.from_si(name, float(cert.where)))}
 
     def _report_fn(self, samples: int, order: int):
         """Jitted (u, circuit) → (feasible, value, metrics) at `samples` inputs; the circuit is

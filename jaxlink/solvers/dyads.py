@@ -235,8 +235,29 @@ def solve_nearest(mech: Mechanism, dyads, q_guess, phi, p, trig=None):
     return q, ok, resid, sig
 
 
-def _solve(mech, dyads, sigma, q_ref, phi, p, trig, with_trig: bool = False, arith: bool = False):
+def reach_margins(mech: Mechanism, dyads, sigma, q_ref, phi, p, trig=None):
+    """The reach margin of every dyad at input φ on the branches σ: (n_dyads,), dimensionless,
+    smooth in φ and p, negative exactly where the dyad cannot be assembled.
+
+    The signed square of the `sine` of `solve`, written without a square root so that it goes on
+    smoothly through zero (the branch point):
+
+    - RRR: m = ((L_a + L_b)² − |w|²)(|w|² − (L_a − L_b)²) / (4 L_a² L_b²) = h² |w|² / (L_a² L_b²),
+      sin² of the angle between the two links where it is ≥ 0; < 0 where |w| > L_a + L_b (the
+      links cannot reach) or |w| < |L_a − L_b| (they cannot fold so short);
+    - RRP: m = 1 − ((w × e_b) / L_a)² = h² / L_a²;
+    - PP: m = (e_a × e_b)² (never negative: a PP dyad fails only with parallel directions).
+
+    A later dyad's margin uses the earlier dyads' solution on σ (collinear where they cannot be
+    assembled). The feasibility certificate (`jaxlink.analysis.feasibility`) minimizes it between
+    samples; a branch-point locator can bisect on its zero."""
+    return _solve(mech, dyads, sigma, q_ref, phi, p, trig, arith=True, margins=True)[-1]
+
+
+def _solve(mech, dyads, sigma, q_ref, phi, p, trig, with_trig: bool = False, arith: bool = False,
+           margins: bool = False):
     ok_all = jnp.asarray(True)
+    margin_list = []
     resid = None
     sine = None
     trig = dict(trig) if trig else {}
@@ -271,6 +292,8 @@ def _solve(mech, dyads, sigma, q_ref, phi, p, trig, with_trig: bool = False, ari
             miss = miss_a + miss_b
             # |u × v| / (|La| |Lb|) with v = w − u: |u × w| = h |w|
             sin_d = h * (w2 * inv_w) * jnp.abs(inv_a * inv_b)
+            if margins:
+                margin_list.append(((La + Lb) ** 2 - w2) * (w2 - (La - Lb) ** 2) * (0.5 * inv_a * inv_b) ** 2)
         elif d.kind == "RRP":
             La, csa = _radius_and_offset(mech, ta, d.offsets[0], env, trig)
             ca, sa = mech.unit_vector(tb.angle, env, trig)
@@ -284,6 +307,8 @@ def _solve(mech, dyads, sigma, q_ref, phi, p, trig, with_trig: bool = False, ari
             env[na], trig[na], miss = _angle_from(wx - ell * ex, wy - ell * ey, La, inv_a, csa, arith)
             env[nb] = ell
             sin_d = h * jnp.abs(inv_a)  # the link's component along the slider, over its length
+            if margins:
+                margin_list.append(1.0 - (across * inv_a) ** 2)
         else:  # PP: ℓa ea + ℓb eb = w
             s = jnp.ones_like(jnp.asarray(wx))
             ca, sa = mech.unit_vector(ta.angle, env, trig)
@@ -293,6 +318,8 @@ def _solve(mech, dyads, sigma, q_ref, phi, p, trig, with_trig: bool = False, ari
             det = _cross(ea, eb)
             ok = jnp.abs(det) > 1e-12
             sin_d = jnp.abs(det)
+            if margins:
+                margin_list.append(det * det)
             det = jnp.where(ok, det, 1.0)
             la, lb = _cross((wx, wy), eb) / det, _cross(ea, (wx, wy)) / det
             env[na], env[nb] = la, lb
@@ -307,6 +334,8 @@ def _solve(mech, dyads, sigma, q_ref, phi, p, trig, with_trig: bool = False, ari
         for i, (n, k) in enumerate(zip(mech.unknown_names, mech.unknown_kinds))
     ])
     sig = jnp.stack(sig_used) if sig_used else jnp.zeros((0,), q_ref.dtype)
+    if margins:
+        return q, ok_all, resid, sig, sine, jnp.stack([jnp.asarray(m, q_ref.dtype) for m in margin_list])
     if with_trig:
         return q, ok_all, resid, sig, sine, trig
     return q, ok_all, resid, sig, sine

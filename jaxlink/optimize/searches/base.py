@@ -37,16 +37,27 @@ class Progress(NamedTuple):
     wall_s: np.float64  # seconds spent in `step`
     done: np.bool_  # the search ended by itself
     compile_s: np.float64 = np.float64(0.0)  # of `wall_s`, seconds of compilation (`timing.py`)
+    # the `RUNNERS_UP` best distinct designs seen (the best first; +inf: empty): the designs the
+    # result falls back to when the best is not certified (`result.summarized`)
+    runners_value: np.ndarray = np.full(0, np.inf)
+    runners_u: np.ndarray = np.zeros((0, 0))
+    runners_circuit: np.ndarray = np.zeros(0, np.int64)
 
     @property
     def found(self) -> bool:
         return bool(np.isfinite(self.best_value))
 
 
+#: designs kept besides the best, to fall back to when the best is not certified
+RUNNERS_UP = 8
+
+
 def progress_start(n_variables: int) -> Progress:
     return Progress(chunk=np.int64(0), evaluations=np.int64(0), designs=np.int64(0), infeasible=np.int64(0),
                     best_value=np.float64(np.inf), best_u=np.zeros(n_variables), best_circuit=np.int64(0),
-                    wall_s=np.float64(0.0), done=np.bool_(False), compile_s=np.float64(0.0))
+                    wall_s=np.float64(0.0), done=np.bool_(False), compile_s=np.float64(0.0),
+                    runners_value=np.full(RUNNERS_UP, np.inf), runners_u=np.zeros((RUNNERS_UP, n_variables)),
+                    runners_circuit=np.zeros(RUNNERS_UP, np.int64))
 
 
 class Search(Protocol):
@@ -80,11 +91,35 @@ def improved(p: Progress, U, value, circuit) -> Progress:
     (the first of equal values: deterministic)."""
     if len(value) == 0:
         return p
+    p = _runners(p, U, value, circuit)
     i = int(np.argmin(value))
     if np.isfinite(value[i]) and value[i] < p.best_value:
         return p._replace(best_value=np.float64(value[i]), best_u=np.asarray(U[i], dtype=np.float64),
                           best_circuit=np.int64(circuit[i]))
     return p
+
+
+def _runners(p: Progress, U, value, circuit) -> Progress:
+    """`p` with the designs `U` competing for the `RUNNERS_UP` best distinct designs (by value,
+    then by arrival; a design equal to a kept one on the same circuit is skipped)."""
+    K = len(p.runners_value)
+    value = np.asarray(value, dtype=np.float64)
+    new = np.flatnonzero(np.isfinite(value))
+    if K == 0 or len(new) == 0:
+        return p
+    new = new[np.argsort(value[new], kind="stable")[:K]]
+    vals = np.concatenate([p.runners_value, value[new]])
+    us = np.concatenate([p.runners_u, np.asarray(U, dtype=np.float64)[new]])
+    cs = np.concatenate([p.runners_circuit, np.asarray(circuit, dtype=np.int64)[new]])
+    kept: list[int] = []
+    for i in np.argsort(vals, kind="stable"):
+        if not np.isfinite(vals[i]) or len(kept) == K:
+            break
+        if not any(cs[j] == cs[i] and np.array_equal(us[j], us[i]) for j in kept):
+            kept.append(int(i))
+    rv, ru, rc = np.full(K, np.inf), np.zeros_like(p.runners_u), np.zeros(K, np.int64)
+    rv[:len(kept)], ru[:len(kept)], rc[:len(kept)] = vals[kept], us[kept], cs[kept]
+    return p._replace(runners_value=rv, runners_u=ru, runners_circuit=rc)
 
 
 def counted(p: Progress, evaluations: int, feasible=None) -> Progress:

@@ -7,6 +7,8 @@ import copy
 import dataclasses
 from typing import Any, Mapping
 
+import numpy as np
+
 from ..evaluator import Evaluator
 from .base import Progress
 
@@ -67,6 +69,9 @@ class SearchResult:
     compile_s: float = 0.0
     trace: tuple = ()
     best_file: str | None = None
+    certificate: Mapping[str, Any] | None = None
+    fallback: int | None = None
+    reason: str | None = None
     _best: Any = dataclasses.field(default=None, repr=False, compare=False)  # (evaluator, u, circuit)
 
     def best_file_text(self, text: str | None = None) -> str:
@@ -89,11 +94,13 @@ class SearchResult:
     def to_json(self) -> dict:
         """The JSON document of `jaxlink optimize --out` (a fresh dict)."""
         if self.parameters is None:
-            best: dict = {"parameters": None, "objective": None, "metrics": {}, "feasible": False}
+            best: dict = {"parameters": None, "objective": None, "metrics": {}, "feasible": False,
+                          "certified": False, "reason": self.reason}
         else:
             best = {"parameters": dict(self.parameters), "feasible": self.feasible, "circuit": self.circuit,
                     "objective": self.value, "metrics": copy.deepcopy(dict(self.metrics)),
-                    "search_objective": self.search_value}
+                    "search_objective": self.search_value, **dict(self.certificate or {}),
+                    "fallback": self.fallback}
         out = {
             "method": self.method,
             "file": self.file,
@@ -144,15 +151,37 @@ def traced(log_path) -> list:
 
 def summarized(ev: Evaluator, method: str, p: Progress, *, seed: int, budget: int | None, complete: bool,
                extra: Mapping[str, Any] | None = None, trace=(), best_file: str | None = None) -> SearchResult:
-    """The result of a search on `ev` whose progress is `p`; the best design is re-measured
-    (`Evaluator.report`)."""
+    """The result of a search on `ev` whose progress is `p`. The best design is re-measured
+    (`Evaluator.report`) and must be *certified* to assemble over its whole revolution; if it is
+    not, the next of the runners-up (`Progress.runners_*`, best first) that is certified is the
+    result (`fallback` counts the better ones passed over), and with none, no design (`reason`
+    says why)."""
     pr = ev.problem
+    best: dict = dict(parameters=None, value=None, search_value=None, metrics={}, feasible=False, circuit=None)
+    chosen = None
+    reason = None
     if p.found:
-        rep = ev.report(p.best_u, int(p.best_circuit))
-        best = dict(parameters=rep["parameters"], value=rep["objective"], search_value=float(p.best_value),
-                    metrics=rep["metrics"], feasible=rep["feasible"], circuit=rep["circuit"])
+        cands = [(np.asarray(p.best_u, dtype=float), int(p.best_circuit), float(p.best_value))]
+        for v, u, c in zip(p.runners_value, p.runners_u, p.runners_circuit):
+            if np.isfinite(v) and not any(int(c) == cc and np.array_equal(u, uu) for uu, cc, _ in cands):
+                cands.append((np.asarray(u, dtype=float), int(c), float(v)))
+        first: dict = {}
+        for k, (u, c, v) in enumerate(cands):
+            rep = ev.report(u, c)
+            first = first or rep
+            if rep["feasible"] and rep["certified"]:
+                best = dict(parameters=rep["parameters"], value=rep["objective"], search_value=v,
+                            metrics=rep["metrics"], feasible=True, circuit=rep["circuit"])
+                best["certificate"] = {key: rep[key] for key in ("certificate", "certified", "margin", "margin_at")
+                                       if key in rep}
+                best["fallback"] = k
+                chosen = (ev, tuple(map(float, u)), int(c))
+                break
+        if chosen is None:
+            reason = _uncertified_reason(ev, len(cands), first)
     else:
-        best = dict(parameters=None, value=None, search_value=None, metrics={}, feasible=False, circuit=None)
+        reason = ("no feasible design found: every design tried failed to assemble over its revolution (widen the "
+                  "bounds, check the file's design, or give more --budget / --time)")
     designs = int(p.designs)
     return SearchResult(
         method=method, **best, evaluations=int(p.evaluations), designs=designs,
@@ -162,5 +191,20 @@ def summarized(ev: Evaluator, method: str, p: Progress, *, seed: int, budget: in
         variables={n: [float(a), float(b)] for n, a, b in zip(pr.names, pr.lower, pr.upper)},
         samples=len(pr.phis), devices=ev.n_devices, extra=dict(extra or {}),
         search_wall_s=float(p.wall_s - p.compile_s), compile_s=float(p.compile_s),
-        trace=tuple(dict(t) for t in trace), best_file=best_file,
-        _best=(ev, tuple(map(float, p.best_u)), int(p.best_circuit)) if p.found else None)
+        trace=tuple(dict(t) for t in trace), best_file=best_file, reason=reason, _best=chosen)
+
+
+def _uncertified_reason(ev: Evaluator, n: int, rep: dict) -> str:
+    """Why none of the `n` best designs is a result (`rep`: the best one's report)."""
+    mech = ev.mech
+    what = (f"none of the {n} best designs found is certified to" if n > 1
+            else "the best design found is not certified to")
+    if rep.get("certificate") == "reach margin" and not rep["certified"]:
+        why = (f"the best one cannot be assembled between two of the {len(ev.problem.phis)} checked positions "
+               f"(a dyad's reach margin {rep['margin']:.3g} < 0 at {mech.input_name} = {rep['margin_at']:.6g} "
+               "in the file's unit)")
+    else:
+        why = (f"the best one does not assemble at every one of the {ev.report_samples} positions of the dense "
+               "re-solve")
+    return (f"no design found that assembles over the whole revolution: {what}; {why}. Raise "
+            "[optimize] samples (more checked positions), or widen the bounds, or give more --budget / --time")
