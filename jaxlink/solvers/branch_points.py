@@ -1,0 +1,237 @@
+"""Branch points between the samples of a solved path: change points and toggles of the dyads.
+
+A dyad (`_dyads`) of links L_a, L_b over its known vector w has two assembly branches σ = ±1
+that meet where the two links are collinear. How its margin
+
+    S(φ) = sin² of the angle between the two links = G / (4 L_a² L_b²),
+    G = 4 |w|² L_a² − (|w|² + L_a² − L_b²)²     (RRR: 16 × the squared area of the triangle),
+    S = 1 − (w × e_b)² / L_a²                    (RRP: the link against the slider's normal),
+
+a smooth (polynomial) function of the input along a path, meets zero tells what lies there:
+
+- a **change point** (bifurcation): S touches zero and stays ≥ 0 on both sides, S ≈ c (φ − φ*)².
+  Two smooth branches cross there (the Peaucellier cell's flat rhombus: D = C and D on its line;
+  a Grashof four-bar with s + l = p + q folding flat: parallelogram and antiparallelogram). The
+  closed form on a kept side σ goes on along the *other* smooth branch (its velocity jumps); the
+  smooth continuation flips σ there;
+- a **toggle** (limit position): S crosses zero, S ≈ c (φ − φ*); past it the dyad cannot be
+  assembled and the input cannot go on.
+
+Between two consecutive samples k, k+1 (φ along the path, both assembled, σ of sample k for the
+dyads solved before) a change point is looked for where S′ goes from < 0 to ≥ 0 (a minimum of S
+inside) and located as the root of S′ by Newton's method on S′ (S″ by forward-mode AD),
+safeguarded by bisection in the bracket; it is a change point when the sine there is below
+`singular_ratio` (the same threshold as a `singular` position). A toggle is looked for between an
+assembled and a not assembled sample where S changes sign, located as the root of S the same way.
+Both roots are simple, so Newton converges quadratically: the location is exact to a few ulp of
+the input (measured within 1e-15 rad of the closed forms, tests/test_branch_points.py).
+
+`locate` is pure and batched over the intervals (`vmap`, one `while_loop` per interval, which
+stops at once where there is nothing to locate): no raising, a `kind` code per (interval, dyad).
+`smooth_sides` gives, per sample, the sides σ of the smooth continuation through every change
+point (the closed form's schedule for `NewtonOptions(change_points="smooth")`).
+
+Only structures whose blocks are all dyads (`_dyads.classify`) are covered; elsewhere (a block of
+more than two unknowns) there is nothing to locate (D = 0 columns). A change point of an earlier
+dyad in the same interval as one of a later dyad is located for the earlier one only correctly.
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from ..model.mechanism import Mechanism
+from . import dyads as _dyads
+
+NONE, CHANGE_POINT, TOGGLE = 0, 1, 2
+KINDS = {NONE: "none", CHANGE_POINT: "change point", TOGGLE: "toggle"}
+MAX_ITERATIONS = 60  # safeguarded Newton per interval (bisection alone reaches 2^-60 of the interval)
+
+
+class BranchPoints(NamedTuple):
+    """Branch points located between consecutive samples: one entry per (interval, dyad), shape
+    (…, N − 1, D); interval k lies between `phis[k]` and `phis[k + 1]`, dyads in solve order.
+
+    - `input`: the located input (rad, or m for a length input); NaN where `kind` is `NONE`.
+    - `kind`: int8, `NONE` (0), `CHANGE_POINT` (1) or `TOGGLE` (2) (`KINDS` names them).
+    - `smooth`: at a change point, whether the solved path crossed it smoothly (the dyad's side σ
+      differs between the two samples: the branch whose velocity is continuous); False where it
+      kept its side (the closed form's default: the other branch, its velocity jumps).
+    - `step`: the last Newton correction of the location, an estimate of its error (same unit).
+    """
+
+    input: jax.Array
+    kind: jax.Array
+    smooth: jax.Array
+    step: jax.Array
+
+
+def _margin(mech: Mechanism, dyad, q, phi, p):
+    """S = sin² of the angle between the dyad's two links (see the module docstring) at (q, φ): it
+    uses only the unknowns solved before the dyad. < 0 where the dyad cannot be assembled."""
+    env = mech.env(q, phi, p)
+    terms = mech.loops[dyad.loop][1]
+    ta, tb = terms[dyad.terms[0]], terms[dyad.terms[1]]
+    wx, wy = _dyads._known_parts(mech, dyad, env)
+    La, _ = _dyads._radius_and_offset(mech, ta, dyad.offsets[0], env, None)
+    if dyad.kind == "RRR":
+        Lb, _ = _dyads._radius_and_offset(mech, tb, dyad.offsets[1], env, None)
+        w2 = wx * wx + wy * wy
+        a2, b2 = La * La, Lb * Lb
+        g = 4.0 * w2 * a2 - (w2 + a2 - b2) ** 2
+        return g * 0.25 * _dyads._inverse(a2 * b2)
+    if dyad.kind == "RRP":
+        ca, sa = mech.unit_vector(tb.angle, env)
+        across = wx * sa - wy * ca
+        return 1.0 - across * across * _dyads._inverse(La * La)
+    return jnp.ones_like(jnp.asarray(wx))  # PP: linear, no branches
+
+
+def margins(mech: Mechanism, dyads, sigma, q_ref, phi, p):
+    """(D,) S of every dyad at input φ on the sides σ (closed form)."""
+    q = _dyads.solve(mech, dyads, sigma, q_ref, phi, p)[0]
+    return jnp.stack([_margin(mech, d, q, phi, p) for d in dyads])
+
+
+def _margin_along(mech, dyads, j, sigma, q_ref, p):
+    """φ ↦ S_j(φ) on the sides σ (closed form of the dyads before j)."""
+    def f(phi):
+        q = _dyads.solve(mech, dyads, sigma, q_ref, phi, p)[0]
+        return _margin(mech, dyads[j], q, phi, p)
+    return f
+
+
+def _derivatives(f, x, order: int):
+    """(f, f′) or (f′, f″) at x, by forward-mode AD."""
+    one = jnp.ones_like(x)
+    if order == 0:
+        return jax.jvp(f, (x,), (one,))
+    return jax.jvp(lambda y: jax.jvp(f, (y,), (one,))[1], (x,), (one,))
+
+
+def _root(F, a, b, Fa, Fb, active):
+    """The root of F in the bracket [a, b] (F(a), F(b) of opposite signs or one zero) by Newton's
+    method, each step kept inside the bracket (else bisection), the bracket shrunk at every
+    evaluation. `F(x) -> (F, F′)`. Stops when the step is at the rounding of x or after
+    `MAX_ITERATIONS`. Returns `(root, |last step|)`; no iteration where not `active`."""
+    dtype = jnp.result_type(a)
+    eps = float(np.finfo(dtype).eps)
+    lo, hi = jnp.minimum(a, b), jnp.maximum(a, b)
+    Flo = jnp.where(a <= b, Fa, Fb)
+    s = jnp.where(Flo <= 0, 1.0, -1.0)  # s F(lo) ≤ 0 ≤ s F(hi)
+    Fhi = jnp.where(a <= b, Fb, Fa)
+    # start at the secant root of the bracket (the midpoint where it is not defined)
+    den = Fhi - Flo
+    x0 = jnp.where(den != 0, lo - Flo * (hi - lo) / jnp.where(den != 0, den, 1.0), 0.5 * (lo + hi))
+    x0 = jnp.where((x0 > lo) & (x0 < hi), x0, 0.5 * (lo + hi))
+
+    def cond(st):
+        k, _, _, _, step, done = st
+        return ~done & (k < MAX_ITERATIONS)
+
+    def body(st):
+        k, x, lo, hi, _, _ = st
+        v, dv = F(x)
+        neg = s * v < 0
+        lo, hi = jnp.where(neg, x, lo), jnp.where(neg, hi, x)
+        newton = x - v / jnp.where(dv != 0, dv, 1.0)
+        inside = (dv != 0) & jnp.isfinite(newton) & (newton > lo) & (newton < hi)
+        x_new = jnp.where(v == 0, x, jnp.where(inside, newton, 0.5 * (lo + hi)))
+        step = jnp.abs(x_new - x)
+        tiny = 4 * eps * jnp.maximum(jnp.abs(x), 1.0)
+        done = (step <= tiny) | (hi - lo <= tiny) | ~jnp.isfinite(v)
+        return k + 1, x_new, lo, hi, jnp.where(v == 0, 0.0, step), done
+
+    init = (jnp.zeros((), jnp.int32), x0, lo, hi, jnp.asarray(jnp.inf, dtype), ~active)
+    _, x, _, _, step, _ = jax.lax.while_loop(cond, body, init)
+    return x, step
+
+
+def sides(mech: Mechanism, dyads, q, phis, p):
+    """(N, D) the side σ of every dyad at each solved sample `q` (N, n) (`_dyads.solve_nearest`)."""
+    return jax.vmap(lambda qq, ph: _dyads.solve_nearest(mech, dyads, qq, ph, p)[3])(q, phis)
+
+
+def locate(mech: Mechanism, dyads, sigmas, q, phis, p, assembled, singular_ratio: float,
+           only: int | None = None) -> BranchPoints:
+    """Branch points between consecutive samples of one design's path (see the module docstring).
+
+    **Arguments:** `sigmas` (N, D) the side of every dyad at each sample; `q` (N, n) the solved
+    unknowns (a reference for the angles only); `phis` (N,) the inputs; `p` (P,); `assembled` (N,)
+    bool (converged or singular); `singular_ratio`: the sine below which a minimum of S is a change
+    point (static); `only`: locate for this dyad only (the others `NONE`).
+
+    **Returns:** `BranchPoints`, (N − 1, D) each."""
+    dtype = jnp.result_type(phis)
+    D = len(dyads)
+    a, b = phis[:-1], phis[1:]
+    ok_a, ok_b = assembled[:-1], assembled[1:]
+    # the sides of the assembled end (the left one where both are): the closed form continues it
+    use_b = ~ok_a & ok_b
+    sig = jnp.where(use_b[:, None], sigmas[1:], sigmas[:-1])
+    qr = jnp.where(use_b[:, None], q[1:], q[:-1])
+    thr2 = float(singular_ratio) ** 2
+
+    def one_dyad(j):
+        def interval(sg, qq, x0, x1, oa, ob):
+            f = _margin_along(mech, dyads, j, sg, qq, p)
+            # (S, S′) at both ends: a minimum of S inside (S′ from < 0 to ≥ 0), or S changing sign
+            S0, dS0 = _derivatives(f, x0, 0)
+            S1, dS1 = _derivatives(f, x1, 0)
+            # along the path: S′ with respect to the direction of travel
+            sgn = jnp.where(x1 >= x0, 1.0, -1.0)
+            change = oa & ob & (sgn * dS0 < 0) & (sgn * dS1 >= 0)
+            toggle = (oa != ob) & ((S0 > 0) != (S1 > 0))
+            if j:  # a toggle of this dyad only where the dyads before it assemble at both ends
+                before = (margins(mech, dyads, sg, qq, x0, p)[:j] > 0) & (margins(mech, dyads, sg, qq, x1, p)[:j] > 0)
+                toggle = toggle & jnp.all(before)
+            # the root sought: of S′ (change point) or of S (toggle)
+            x_c, st_c = _root(lambda x: _derivatives(f, x, 1), x0, x1, dS0, dS1, change)
+            x_t, st_t = _root(lambda x: _derivatives(f, x, 0), x0, x1, S0, S1, toggle & ~change)
+            S_at = f(x_c)
+            is_change = change & (S_at <= thr2)
+            kind = jnp.where(is_change, CHANGE_POINT, jnp.where(toggle & ~change, TOGGLE, NONE)).astype(jnp.int8)
+            x = jnp.where(is_change, x_c, jnp.where(kind == TOGGLE, x_t, jnp.nan))
+            step = jnp.where(is_change, st_c, jnp.where(kind == TOGGLE, st_t, jnp.nan))
+            return x, kind, step
+
+        return jax.vmap(interval)(sig, qr, a, b, ok_a, ok_b)
+
+    cols = []
+    for j in range(D):
+        if only is not None and j != only:
+            n = a.shape[0]
+            cols.append((jnp.full((n,), jnp.nan, dtype), jnp.zeros((n,), jnp.int8), jnp.full((n,), jnp.nan, dtype)))
+        else:
+            cols.append(one_dyad(j))
+    if D == 0:
+        n = a.shape[0]
+        empty = jnp.zeros((n, 0), dtype)
+        return BranchPoints(empty, jnp.zeros((n, 0), jnp.int8), jnp.zeros((n, 0), bool), empty)
+    x = jnp.stack([c[0] for c in cols], axis=1)
+    kind = jnp.stack([c[1] for c in cols], axis=1)
+    step = jnp.stack([c[2] for c in cols], axis=1)
+    smooth = (kind == CHANGE_POINT) & (sigmas[:-1] != sigmas[1:])
+    return BranchPoints(x, kind, smooth, step)
+
+
+def smooth_sides(mech: Mechanism, dyads, sigma0, q_ref, phis, p, tol, singular_ratio: float):
+    """(N, D) the sides σ of the smooth continuation from the sides `sigma0` at `phis[0]`: dyad by
+    dyad in solve order (a later dyad's margin depends on the earlier dyads' sides), σ_j flips at
+    every change point of dyad j located between consecutive samples. `tol`: a sample is assembled
+    where the closed form's loops close to it."""
+    N, D = phis.shape[0], len(dyads)
+    sig = jnp.broadcast_to(sigma0, (N, D))
+    assembled = jax.vmap(lambda ph: _dyads.solve(mech, dyads, sigma0, q_ref, ph, p)[2] <= tol)(phis)
+    qs = jnp.broadcast_to(q_ref, (N,) + q_ref.shape)
+    for j in range(D):
+        bp = locate(mech, dyads, sig, qs, phis, p, assembled, singular_ratio, only=j)
+        flips = jnp.cumsum((bp.kind[:, j] == CHANGE_POINT).astype(jnp.int32))
+        parity = jnp.concatenate([jnp.zeros((1,), jnp.int32), flips]) % 2
+        col = sigma0[j] * jnp.where(parity == 1, -1.0, 1.0).astype(sig.dtype)
+        sig = sig.at[:, j].set(col)
+    return sig
