@@ -70,68 +70,52 @@ class BranchPoints(NamedTuple):
     step: jax.Array
 
 
-def _margin(mech: Mechanism, dyad, q, phi, p):
-    """S = sin² of the angle between the dyad's two links (see the module docstring) at (q, φ): it
-    uses only the unknowns solved before the dyad. < 0 where the dyad cannot be assembled."""
-    env = mech.env(q, phi, p)
+def _margin(mech: Mechanism, dyad, env, trig=None):
+    """S = sin² of the angle between the dyad's two links (see the module docstring), from the
+    values `env` (and their (cos, sin) `trig`) of the names solved before it. < 0 where the dyad
+    cannot be assembled."""
     terms = mech.loops[dyad.loop][1]
     ta, tb = terms[dyad.terms[0]], terms[dyad.terms[1]]
-    wx, wy = _dyads._known_parts(mech, dyad, env)
-    La, _ = _dyads._radius_and_offset(mech, ta, dyad.offsets[0], env, None)
+    wx, wy = _dyads._known_parts(mech, dyad, env, trig)
+    La, _ = _dyads._radius_and_offset(mech, ta, dyad.offsets[0], env, trig)
     if dyad.kind == "RRR":
-        Lb, _ = _dyads._radius_and_offset(mech, tb, dyad.offsets[1], env, None)
+        Lb, _ = _dyads._radius_and_offset(mech, tb, dyad.offsets[1], env, trig)
         w2 = wx * wx + wy * wy
         a2, b2 = La * La, Lb * Lb
         g = 4.0 * w2 * a2 - (w2 + a2 - b2) ** 2
         return g * 0.25 * _dyads._inverse(a2 * b2)
     if dyad.kind == "RRP":
-        ca, sa = mech.unit_vector(tb.angle, env)
+        ca, sa = mech.unit_vector(tb.angle, env, trig)
         across = wx * sa - wy * ca
         return 1.0 - across * across * _dyads._inverse(La * La)
     return jnp.ones_like(jnp.asarray(wx))  # PP: linear, no branches
 
 
-def margins(mech: Mechanism, dyads, sigma, q_ref, phi, p):
-    """(D,) S of every dyad at input φ on the sides σ (closed form)."""
-    q = _dyads.solve(mech, dyads, sigma, q_ref, phi, p)[0]
-    return jnp.stack([_margin(mech, d, q, phi, p) for d in dyads])
+def margin(mech: Mechanism, dyads, j: int, sigma, q_ref, phi, p):
+    """S of dyad j at input φ, the dyads before it in closed form on their sides σ (D,)."""
+    q, _, _, _, trig = _dyads.solve_with_trig(mech, dyads[:j], sigma[:j], q_ref, phi, p)
+    return _margin(mech, dyads[j], mech.env(q, phi, p), trig)
 
 
-def _margin_along(mech, dyads, j, sigma, q_ref, p):
-    """φ ↦ S_j(φ) on the sides σ (closed form of the dyads before j)."""
-    def f(phi):
-        q = _dyads.solve(mech, dyads, sigma, q_ref, phi, p)[0]
-        return _margin(mech, dyads[j], q, phi, p)
-    return f
-
-
-def _derivatives(f, x, order: int):
-    """(f, f′) or (f′, f″) at x, by forward-mode AD."""
+def _jets(f, x):
+    """(S, S′, S″) at x, by nested forward-mode AD."""
     one = jnp.ones_like(x)
-    if order == 0:
-        return jax.jvp(f, (x,), (one,))
-    return jax.jvp(lambda y: jax.jvp(f, (y,), (one,))[1], (x,), (one,))
+    (v, d1), (_, d2) = jax.jvp(lambda y: jax.jvp(f, (y,), (one,)), (x,), (one,))
+    return v, d1, d2
 
 
-def _root(F, a, b, Fa, Fb, active):
-    """The root of F in the bracket [a, b] (F(a), F(b) of opposite signs or one zero) by Newton's
-    method, each step kept inside the bracket (else bisection), the bracket shrunk at every
-    evaluation. `F(x) -> (F, F′)`. Stops when the step is at the rounding of x or after
+def _root(F, lo, hi, Flo, Fhi, x0, active):
+    """The root of F in the bracket [lo, hi] (F(lo), F(hi) of opposite signs or one zero) by
+    Newton's method from x0, each step kept inside the bracket (else bisection), the bracket shrunk
+    at every evaluation. `F(x) -> (F, F′)`. Stops when the step is at the rounding of x or after
     `MAX_ITERATIONS`. Returns `(root, |last step|)`; no iteration where not `active`."""
-    dtype = jnp.result_type(a)
+    dtype = jnp.result_type(lo)
     eps = float(np.finfo(dtype).eps)
-    lo, hi = jnp.minimum(a, b), jnp.maximum(a, b)
-    Flo = jnp.where(a <= b, Fa, Fb)
     s = jnp.where(Flo <= 0, 1.0, -1.0)  # s F(lo) ≤ 0 ≤ s F(hi)
-    Fhi = jnp.where(a <= b, Fb, Fa)
-    # start at the secant root of the bracket (the midpoint where it is not defined)
-    den = Fhi - Flo
-    x0 = jnp.where(den != 0, lo - Flo * (hi - lo) / jnp.where(den != 0, den, 1.0), 0.5 * (lo + hi))
-    x0 = jnp.where((x0 > lo) & (x0 < hi), x0, 0.5 * (lo + hi))
+    del Fhi
 
     def cond(st):
-        k, _, _, _, step, done = st
-        return ~done & (k < MAX_ITERATIONS)
+        return ~st[5] & (st[0] < MAX_ITERATIONS)
 
     def body(st):
         k, x, lo, hi, _, _ = st
@@ -144,11 +128,18 @@ def _root(F, a, b, Fa, Fb, active):
         step = jnp.abs(x_new - x)
         tiny = 4 * eps * jnp.maximum(jnp.abs(x), 1.0)
         done = (step <= tiny) | (hi - lo <= tiny) | ~jnp.isfinite(v)
-        return k + 1, x_new, lo, hi, jnp.where(v == 0, 0.0, step), done
+        return k + 1, x_new, lo, hi, step, done
 
     init = (jnp.zeros((), jnp.int32), x0, lo, hi, jnp.asarray(jnp.inf, dtype), ~active)
     _, x, _, _, step, _ = jax.lax.while_loop(cond, body, init)
     return x, step
+
+
+def _secant(lo, hi, Flo, Fhi):
+    """The secant root of a bracket, the midpoint where it is not defined or outside."""
+    den = Fhi - Flo
+    x0 = jnp.where(den != 0, lo - Flo * (hi - lo) / jnp.where(den != 0, den, 1.0), 0.5 * (lo + hi))
+    return jnp.where((x0 > lo) & (x0 < hi), x0, 0.5 * (lo + hi))
 
 
 def sides(mech: Mechanism, dyads, q, phis, p):
@@ -178,26 +169,29 @@ def locate(mech: Mechanism, dyads, sigmas, q, phis, p, assembled, singular_ratio
 
     def one_dyad(j):
         def interval(sg, qq, x0, x1, oa, ob):
-            f = _margin_along(mech, dyads, j, sg, qq, p)
+            f = lambda x: margin(mech, dyads, j, sg, qq, x, p)  # noqa: E731
+            lo, hi = jnp.minimum(x0, x1), jnp.maximum(x0, x1)
             # (S, S′) at both ends: a minimum of S inside (S′ from < 0 to ≥ 0), or S changing sign
-            S0, dS0 = _derivatives(f, x0, 0)
-            S1, dS1 = _derivatives(f, x1, 0)
-            # along the path: S′ with respect to the direction of travel
-            sgn = jnp.where(x1 >= x0, 1.0, -1.0)
-            change = oa & ob & (sgn * dS0 < 0) & (sgn * dS1 >= 0)
-            toggle = (oa != ob) & ((S0 > 0) != (S1 > 0))
+            S_lo, d_lo = jax.jvp(f, (lo,), (jnp.ones_like(lo),))
+            S_hi, d_hi = jax.jvp(f, (hi,), (jnp.ones_like(hi),))
+            change = oa & ob & (d_lo < 0) & (d_hi >= 0)
+            toggle = (oa != ob) & ((S_lo > 0) != (S_hi > 0))
             if j:  # a toggle of this dyad only where the dyads before it assemble at both ends
-                before = (margins(mech, dyads, sg, qq, x0, p)[:j] > 0) & (margins(mech, dyads, sg, qq, x1, p)[:j] > 0)
-                toggle = toggle & jnp.all(before)
-            # the root sought: of S′ (change point) or of S (toggle)
-            x_c, st_c = _root(lambda x: _derivatives(f, x, 1), x0, x1, dS0, dS1, change)
-            x_t, st_t = _root(lambda x: _derivatives(f, x, 0), x0, x1, S0, S1, toggle & ~change)
-            S_at = f(x_c)
-            is_change = change & (S_at <= thr2)
-            kind = jnp.where(is_change, CHANGE_POINT, jnp.where(toggle & ~change, TOGGLE, NONE)).astype(jnp.int8)
-            x = jnp.where(is_change, x_c, jnp.where(kind == TOGGLE, x_t, jnp.nan))
-            step = jnp.where(is_change, st_c, jnp.where(kind == TOGGLE, st_t, jnp.nan))
-            return x, kind, step
+                before = jnp.stack([margin(mech, dyads, i, sg, qq, x, p) for i in range(j) for x in (lo, hi)])
+                toggle = toggle & jnp.all(before > 0)
+            toggle = toggle & ~change
+            # the root sought: of S′ (a change point, a minimum of S) or of S (a toggle); one loop
+            F_lo, F_hi = jnp.where(change, d_lo, S_lo), jnp.where(change, d_hi, S_hi)
+
+            def F(x):
+                v, d1, d2 = _jets(f, x)
+                return jnp.where(change, d1, v), jnp.where(change, d2, d1)
+
+            x, step = _root(F, lo, hi, F_lo, F_hi, _secant(lo, hi, F_lo, F_hi), change | toggle)
+            is_change = change & (f(x) <= thr2)
+            kind = jnp.where(is_change, CHANGE_POINT, jnp.where(toggle, TOGGLE, NONE)).astype(jnp.int8)
+            found = kind != NONE
+            return jnp.where(found, x, jnp.nan), kind, jnp.where(found, step, jnp.nan)
 
         return jax.vmap(interval)(sig, qr, a, b, ok_a, ok_b)
 
@@ -219,19 +213,29 @@ def locate(mech: Mechanism, dyads, sigmas, q, phis, p, assembled, singular_ratio
     return BranchPoints(x, kind, smooth, step)
 
 
-def smooth_sides(mech: Mechanism, dyads, sigma0, q_ref, phis, p, tol, singular_ratio: float):
-    """(N, D) the sides σ of the smooth continuation from the sides `sigma0` at `phis[0]`: dyad by
-    dyad in solve order (a later dyad's margin depends on the earlier dyads' sides), σ_j flips at
-    every change point of dyad j located between consecutive samples. `tol`: a sample is assembled
-    where the closed form's loops close to it."""
+def smooth_sides(mech: Mechanism, dyads, sigma0, q_ref, phis, phi_ref, p, tol, singular_ratio: float):
+    """(N, D) the sides σ of the smooth continuation through the inputs `phis` from the sides
+    `sigma0` at `phi_ref` (where the guess selected them). Dyad by dyad in solve order (a later
+    dyad's margin depends on the earlier dyads' sides), σ_j flips at every change point of dyad j
+    located between consecutive inputs, counted from the input nearest to `phi_ref` (and between
+    `phi_ref` and it: at most one there, exact when `phi_ref` lies within a step of it). `tol`: an
+    input is assembled where the closed form's loops close to it."""
     N, D = phis.shape[0], len(dyads)
+    k0 = jnp.argmin(jnp.abs(phis - phi_ref))
+    anchor = jnp.stack([jnp.asarray(phi_ref, phis.dtype), phis[k0]])
+
+    def assembled(inputs):
+        return jax.vmap(lambda ph: _dyads.solve(mech, dyads, sigma0, q_ref, ph, p)[2] <= tol)(inputs)
+
+    ok, ok_anchor = assembled(phis), assembled(anchor)
     sig = jnp.broadcast_to(sigma0, (N, D))
-    assembled = jax.vmap(lambda ph: _dyads.solve(mech, dyads, sigma0, q_ref, ph, p)[2] <= tol)(phis)
     qs = jnp.broadcast_to(q_ref, (N,) + q_ref.shape)
     for j in range(D):
-        bp = locate(mech, dyads, sig, qs, phis, p, assembled, singular_ratio, only=j)
-        flips = jnp.cumsum((bp.kind[:, j] == CHANGE_POINT).astype(jnp.int32))
-        parity = jnp.concatenate([jnp.zeros((1,), jnp.int32), flips]) % 2
-        col = sigma0[j] * jnp.where(parity == 1, -1.0, 1.0).astype(sig.dtype)
-        sig = sig.at[:, j].set(col)
+        bp = locate(mech, dyads, sig, qs, phis, p, ok, singular_ratio, only=j)
+        at0 = locate(mech, dyads, jnp.broadcast_to(sig[k0], (2, D)), qs[:2], anchor, p, ok_anchor,
+                     singular_ratio, only=j)
+        count = jnp.concatenate([jnp.zeros((1,), jnp.int32),
+                                 jnp.cumsum((bp.kind[:, j] == CHANGE_POINT).astype(jnp.int32))])
+        parity = (count - count[k0] + (at0.kind[0, j] == CHANGE_POINT).astype(jnp.int32)) % 2
+        sig = sig.at[:, j].set(sigma0[j] * jnp.where(parity == 1, -1.0, 1.0).astype(sig.dtype))
     return sig
