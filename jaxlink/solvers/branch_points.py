@@ -38,6 +38,7 @@ dyad in the same interval as one of a later dyad is located for the earlier one 
 
 from __future__ import annotations
 
+import functools
 from typing import NamedTuple
 
 import jax
@@ -93,7 +94,7 @@ def _margin(mech: Mechanism, dyad, env, trig=None):
 
 def margin(mech: Mechanism, dyads, j: int, sigma, q_ref, phi, p):
     """S of dyad j at input φ, the dyads before it in closed form on their sides σ (D,)."""
-    q, _, _, _, trig = _dyads.solve_with_trig(mech, dyads[:j], sigma[:j], q_ref, phi, p)
+    q, _, _, _, _, trig = _dyads._solve(mech, dyads[:j], sigma[:j], q_ref, phi, p, None, with_trig=True)
     return _margin(mech, dyads[j], mech.env(q, phi, p), trig)
 
 
@@ -227,15 +228,108 @@ def smooth_sides(mech: Mechanism, dyads, sigma0, q_ref, phis, phi_ref, p, tol, s
     def assembled(inputs):
         return jax.vmap(lambda ph: _dyads.solve(mech, dyads, sigma0, q_ref, ph, p)[2] <= tol)(inputs)
 
-    ok, ok_anchor = assembled(phis), assembled(anchor)
-    sig = jnp.broadcast_to(sigma0, (N, D))
-    qs = jnp.broadcast_to(q_ref, (N,) + q_ref.shape)
+    # the intervals of `phis`, then (junk) phis[-1] → phi_ref, then the anchor phi_ref → phis[k0]:
+    # one `locate` per dyad
+    inputs = jnp.concatenate([phis, anchor])
+    ok = assembled(inputs)
+    sig = jnp.broadcast_to(sigma0, (N + 2, D))
+    qs = jnp.broadcast_to(q_ref, (N + 2,) + q_ref.shape)
     for j in range(D):
-        bp = locate(mech, dyads, sig, qs, phis, p, ok, singular_ratio, only=j)
-        at0 = locate(mech, dyads, jnp.broadcast_to(sig[k0], (2, D)), qs[:2], anchor, p, ok_anchor,
-                     singular_ratio, only=j)
-        count = jnp.concatenate([jnp.zeros((1,), jnp.int32),
-                                 jnp.cumsum((bp.kind[:, j] == CHANGE_POINT).astype(jnp.int32))])
-        parity = (count - count[k0] + (at0.kind[0, j] == CHANGE_POINT).astype(jnp.int32)) % 2
-        sig = sig.at[:, j].set(sigma0[j] * jnp.where(parity == 1, -1.0, 1.0).astype(sig.dtype))
-    return sig
+        change = locate(mech, dyads, sig, qs, inputs, p, ok, singular_ratio, only=j).kind[:, j] == CHANGE_POINT
+        count = jnp.concatenate([jnp.zeros((1,), jnp.int32), jnp.cumsum(change[:N - 1].astype(jnp.int32))])
+        parity = (count - count[k0] + change[N].astype(jnp.int32)) % 2
+        col = sigma0[j] * jnp.where(parity == 1, -1.0, 1.0).astype(sig.dtype)
+        sig = sig.at[:, j].set(jnp.concatenate([col, jnp.stack([sigma0[j], col[k0]])]))
+    return sig[:N]
+
+
+def _candidates(mech, dyads, sigmas, phis, q, p, assembled):
+    """(N − 1, D) bool: the intervals where `locate` may find something, from S and S′ at the
+    samples only (one forward derivative, no iteration). A minimum of S inside (S′ from < 0 to ≥ 0)
+    is kept only where S could reach zero there: a change point has S ≈ c (φ − φ*)², so that
+    φ − 2 S / S′ from either end predicts φ*; a minimum well above zero (a crank-rocker's least
+    transmission angle) predicts a point far outside the interval and is left out. A toggle is
+    kept where S changes sign between an assembled and a not assembled sample."""
+    a, b = phis[:-1], phis[1:]
+    ok_a, ok_b = assembled[:-1], assembled[1:]
+    use_b = ~ok_a & ok_b
+    sig = jnp.where(use_b[:, None], sigmas[1:], sigmas[:-1])
+    qr = jnp.where(use_b[:, None], q[1:], q[:-1])
+
+    def one(j):
+        def interval(sg, qq, x0, x1, oa, ob):
+            f = lambda x: margin(mech, dyads, j, sg, qq, x, p)  # noqa: E731
+            lo, hi = jnp.minimum(x0, x1), jnp.maximum(x0, x1)
+            S_lo, d_lo = jax.jvp(f, (lo,), (jnp.ones_like(lo),))
+            S_hi, d_hi = jax.jvp(f, (hi,), (jnp.ones_like(hi),))
+            h = hi - lo
+            near = []
+            for x, S, d in ((lo, S_lo, d_lo), (hi, S_hi, d_hi)):
+                guess = x - 2.0 * S / jnp.where(d != 0, d, 1.0)
+                near.append((d == 0) | ((guess >= lo - 2 * h) & (guess <= hi + 2 * h)))
+            change = oa & ob & (d_lo < 0) & (d_hi >= 0) & (near[0] | near[1])
+            toggle = (oa != ob) & ((S_lo > 0) != (S_hi > 0))
+            return change | toggle
+        return jax.vmap(interval)(sig, qr, a, b, ok_a, ok_b)
+
+    if not dyads:
+        return jnp.zeros((a.shape[0], 0), bool)
+    return jnp.stack([one(j) for j in range(len(dyads))], axis=1)
+
+
+@functools.partial(jax.jit, static_argnums=(0,))
+def _stage_candidates(structure, phis, q, p, assembled):
+    dyads = _dyads.classify(structure)
+    sg = sides(structure, dyads, q, phis, p)
+    return _candidates(structure, dyads, sg, phis, q, p, assembled), sg
+
+
+@functools.partial(jax.jit, static_argnums=(0, 6))
+def _stage_locate(structure, phis, q, p, assembled, sg, thr):
+    return locate(structure, _dyads.classify(structure), sg, q, phis, p, assembled, thr)
+
+
+def singular_ratio_default(dtype) -> float:
+    """10 √eps of the dtype: the default `NewtonOptions.singular_ratio`."""
+    return float(10 * np.sqrt(np.finfo(dtype).eps))
+
+
+def branch_points(mech: Mechanism, phis, solution, p=None, *, singular_ratio: float | None = None) -> BranchPoints:
+    """The branch points (change points, toggles) between consecutive samples of a solved path.
+
+    **Arguments:**
+
+    - `mech`: the mechanism; every block of its structure a dyad (else nothing is located: D = 0).
+    - `phis`: (N,) the inputs of the solve, in its order (SI).
+    - `solution`: the `Solution` of `jaxlink.solve(mech, phis, p)` (one design).
+    - `p`: (P,) the parameters of that solve (default `mech.parameters`).
+    - `singular_ratio`: the sine between a dyad's links below which a located minimum is a change
+      point (default 10 √eps, as `NewtonOptions`).
+
+    **Returns:** `BranchPoints` (numpy, (N − 1, D) each; `kind` 0 none, 1 change point, 2 toggle),
+    located to a few ulp of the input by safeguarded Newton on the smooth margin S (the squared
+    sine between the dyad's links): on S′ at a change point, on S at a toggle. Two compiled
+    stages: S and S′ at the samples pick the intervals (a cheap test), and only if there are any is
+    the location compiled and run. Not for use inside `jit` (it decides on the host); the pure
+    function is `jaxlink.solvers.branch_points.locate`.
+    """
+    p = np.asarray(mech.parameters if p is None else p)
+    dtype = p.dtype if np.issubdtype(p.dtype, np.floating) else np.result_type(float)
+    phis = jnp.asarray(phis, dtype=dtype)
+    q = jnp.asarray(solution.q, dtype=dtype)
+    res = np.asarray(solution.result)
+    N = phis.shape[0]
+    dyads = _dyads.classify(mech)
+    D = 0 if dyads is None else len(dyads)
+    empty = BranchPoints(np.full((max(N - 1, 0), D), np.nan, dtype), np.zeros((max(N - 1, 0), D), np.int8),
+                         np.zeros((max(N - 1, 0), D), bool), np.full((max(N - 1, 0), D), np.nan, dtype))
+    if D == 0 or N < 2:
+        return empty
+    assembled = jnp.asarray((res == 0) | (res == 2))
+    pj = jnp.asarray(p, dtype=dtype)
+    cand, sg = _stage_candidates(mech.structure, phis, q, pj, assembled)
+    if not bool(np.any(np.asarray(cand))):
+        return empty
+    thr = singular_ratio_default(dtype) if singular_ratio is None else float(singular_ratio)
+    out = _stage_locate(mech.structure, phis, q, pj, assembled, sg, thr)
+    return BranchPoints(*(np.asarray(x) for x in out))
