@@ -59,11 +59,11 @@ def reactions_table(mech, phis, *, omega: float, p=None, dtype=np.float64, input
     `phis` converted); `rpm`: the speed as given, for the labels; `change_points`: `"keep"` or
     `"smooth"` (`NewtonOptions.change_points`). The branch points located between consecutive rows
     are in `branch_points` (`kinematics.located_branch_points`)."""
-    from ..solvers.assemble import NewtonOptions
-    from .kinematics import _branch_point_columns, located_branch_points
     from ..analysis.kinetostatics import rigidity_errors, solve_reactions
     from ..errors import MechanismError
     from ..model import bodies as _bodies
+    from ..solvers.assemble import NewtonOptions
+    from .kinematics import _branch_point_columns, located_branch_points
 
     mdl = _bodies.model(mech)
     p = np.asarray(mech.parameters if p is None else p, dtype=dtype)

@@ -65,10 +65,10 @@ class BranchPoints(NamedTuple):
     - `step`: the last Newton correction of the location, an estimate of its error (same unit).
     """
 
-    input: jax.Array
-    kind: jax.Array
-    smooth: jax.Array
-    step: jax.Array
+    input: jax.Array | np.ndarray
+    kind: jax.Array | np.ndarray
+    smooth: jax.Array | np.ndarray
+    step: jax.Array | np.ndarray
 
 
 def _margin(mech: Mechanism, dyad, env, trig=None):
