@@ -6,9 +6,9 @@ the joint-variable rates are asked for: q̇ = μ ω and q̈ = ν ω² at constan
 transfer functions μ = dq/dφ, ν = d²q/dφ² (`jaxlink/analysis/transfer.py`); for each point P:
 `P_x_m`, `P_y_m` [, `P_vx_m_s`, `P_vy_m_s`] [, `P_ax_m_s2`, `P_ay_m_s2`]; then `converged` (1/0),
 `residual_m` (max |Φ| at the returned q) and `result` (the name of the solver's code, `RESULTS`);
-only where a branch point was located between two rows (`jaxlink.branch_points`):
-`change_point_deg` and/or `toggle_deg` (`_m` for a length input), its input on the row nearest to
-it, `nan` on the others (files of paths without one keep their columns).
+only where a change point was located between two rows (`jaxlink.branch_points`):
+`change_point_deg` (`_m` for a length input), its input on the row nearest to it, `nan` on the
+others (files of paths without one keep their columns).
 
 Positions that did not assemble (result neither `converged` nor `singular`) are not data: every
 solved quantity of their row is `nan`; at a `singular` position (a dead centre or toggle, assembled
@@ -205,11 +205,12 @@ def located_branch_points(mech: Mechanism, phis, q, result, p, input_values) -> 
 
 
 def _branch_point_columns(mech: Mechanism, located: list, cols: list, data: list):
-    """`change_point_deg` / `toggle_deg` (`_m` for a length input), added only where some branch
-    point was located: on the row nearest to each, its input; nan elsewhere."""
+    """`change_point_deg` (`_m` for a length input), added only where some change point was
+    located: on the row nearest to each, its input; nan elsewhere. (A toggle is not a column: the
+    rows past it are already `cannot_assemble`; the summary and the warning name it.)"""
     unit = "deg" if mech.input_kind == "angle" else "m"
     n = len(data[0])
-    for kind in ("change point", "toggle"):
+    for kind in ("change point",):
         here = [b for b in located if b.kind == kind]
         if not here:
             continue
@@ -326,7 +327,7 @@ def print_summary(table: KinematicsTable, out: TextIO, every_row_hint: bool = Tr
     width = max(len(c) for c in table.columns)
     out.write(f"{'column':<{width}}  {'min':>14} {'max':>14}\n")
     for j, c in enumerate(table.columns):
-        if c in STATUS_COLUMNS or c.startswith(("change_point_", "toggle_")):
+        if c in STATUS_COLUMNS or c.startswith("change_point_"):
             continue
         col = table.data[:, j]
         col = col[np.isfinite(col)]

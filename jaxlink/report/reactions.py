@@ -6,8 +6,8 @@ the torque the drive applies to the input body (counter-clockwise positive); `re
 the code of the row (`converged`; the position solve's code, e.g. `cannot_assemble`, where the
 kinematics did not converge; `singular` where the kinetostatic system is singular). Rows that are
 not `converged` hold `nan`: they are left out of the summary and are gaps in the plot. Where a
-branch point was located between two rows, `change_point_deg` / `toggle_deg` (`_m` for a length
-input) come before `result`, as in `jaxlink kinematics` (`report/kinematics.py`).
+change point was located between two rows, `change_point_deg` (`_m` for a length input) comes
+before `result`, as in `jaxlink kinematics` (`report/kinematics.py`).
 """
 
 from __future__ import annotations
