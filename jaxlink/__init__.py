@@ -5,6 +5,7 @@ The public API (everything else is internal and may change):
 
 - files: `load`, `loads`, `Mechanism`, `MechanismError`;
 - positions: `solve`, `solve_path`, `NewtonOptions`, `Solution`, `SolveStats`, `RESULTS`;
+- branch points between samples (change points, toggles): `branch_points`, `BranchPoints`;
 - kinematics: `transfer`, `Transfer`, `time_derivatives`;
 - kinetostatics: `reactions`, `solve_reactions`, `Reactions`, `body_motion`, `BodyMotion`;
 - dwell (a slider that stands still): `dwell_metrics`, `solve_stroke`, `dwell_roles`, `StrokeScale`, `DwellRoles`;
@@ -38,5 +39,7 @@ from .results import SolveStats as SolveStats
 from .solvers.assemble import NewtonOptions as NewtonOptions
 from .solvers.assemble import solve as solve
 from .solvers.assemble import solve_path as solve_path
+from .solvers.branch_points import BranchPoints as BranchPoints
+from .solvers.branch_points import branch_points as branch_points
 
 __version__ = "0.1.0"

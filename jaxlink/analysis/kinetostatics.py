@@ -337,12 +337,14 @@ def reactions(mech: Mechanism, phis, p=None, *, omega, alpha=0.0, q=None, conver
     return _reactions(mech, phis, p, q, converged, omega, alpha, singular_ratio)
 
 
-def solve_reactions(mech: Mechanism, phis, p=None, *, omega, alpha=0.0, singular_ratio: float | None = None):
+def solve_reactions(mech: Mechanism, phis, p=None, *, omega, alpha=0.0, singular_ratio: float | None = None,
+                    options=None):
     """Solve the positions (`solve`) and then the reactions: returns `(Solution, Reactions)`.
 
-    `p` (P,) or (B, P) as in `solve`; `phis` (N,) in rad; `omega` rad/s."""
+    `p` (P,) or (B, P) as in `solve`; `phis` (N,) in rad; `omega` rad/s; `options`: the
+    `NewtonOptions` of the position solve (e.g. `change_points="smooth"`; default the defaults)."""
     _bodies.model(mech)  # validate before the (longer) position solve
-    sol = solve(mech, phis, p)
+    sol = solve(mech, phis, p) if options is None else solve(mech, phis, p, options=options)
     return sol, reactions(mech, phis, p, omega=omega, alpha=alpha, q=sol.q, converged=sol.converged,
                           singular_ratio=singular_ratio)
 

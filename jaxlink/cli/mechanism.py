@@ -126,6 +126,23 @@ def add_mechanism_arguments(parser: argparse.ArgumentParser, *, positions: bool 
                             help="number of positions (default: a full revolution, 360/step)")
 
 
+def add_change_points_argument(parser: argparse.ArgumentParser) -> None:
+    """--change-points keep|smooth (`NewtonOptions.change_points`)."""
+    parser.add_argument("--change-points", default="keep", choices=("keep", "smooth"),
+                        help="at a change point located between two positions (two assembly branches crossing, "
+                             "e.g. a Peaucellier cell's flat rhombus): 'keep' each dyad's side (default; the path "
+                             "goes on along the other branch, its velocity jumps) or 'smooth' (flip the side there: "
+                             "the branch whose velocity is continuous)")
+
+
+def branch_point_warnings(table) -> None:
+    """The located branch points as warnings on standard error."""
+    from ..report.kinematics import branch_point_text
+
+    for b, line in zip(table.branch_points, branch_point_text(table, table.input_kind, table.change_points)):
+        print(f"{'note' if b.smooth else 'warning'}: {line}", file=sys.stderr)
+
+
 def load_from_args(args):
     """The mechanism of FILE with the `--set` overrides applied."""
     from ..files.overrides import parse_numbers
@@ -239,6 +256,7 @@ def register(sub) -> None:
                         "a link's angular velocity and acceleration, a slider's speed and acceleration along "
                         "its guide)")
     p.add_argument("--csv", metavar="OUT", help="write the table to this CSV file (default: print a summary)")
+    add_change_points_argument(p)
     p.add_argument("--plot", metavar="OUT.png", help="plot the point paths and the curves over the input")
     p.add_argument("--animate", metavar="OUT.gif", help="animated GIF of the moving linkage")
     p.set_defaults(func=cmd_kinematics)
@@ -335,7 +353,8 @@ def cmd_kinematics(args) -> int:
     from ..report import kinematics as _report
 
     table = _report.kinematics_table(mech, phis, omega=omega, outputs=outputs, dtype=dtype, input_values=values,
-                                     rpm=getattr(args, "rpm", None))
+                                     rpm=getattr(args, "rpm", None), change_points=args.change_points)
+    branch_point_warnings(table)
     bad = int((~table.converged).sum())
     info = sys.stderr if args.csv == "-" else sys.stdout  # `--csv -`: the table alone on standard output
     _report.print_summary(table, info, every_row_hint=not args.csv)

@@ -12,7 +12,9 @@ import sys
 from ..report.reactions import failure_summary, plot, print_summary, reactions_table, write_csv
 from .mechanism import (
     PLOT_FORMATS,
+    add_change_points_argument,
     add_mechanism_arguments,
+    branch_point_warnings,
     check_output,
     enable_dtype,
     input_grid,
@@ -38,6 +40,7 @@ def register(sub) -> None:
     )
     add_mechanism_arguments(p)
     p.add_argument("--csv", metavar="OUT", help="write the table to this CSV file (default: print a summary)")
+    add_change_points_argument(p)
     p.add_argument("--plot", metavar="OUT.png", help="plot the reaction magnitudes and the drive torque")
     p.set_defaults(func=cmd_reactions)
 
@@ -53,7 +56,8 @@ def cmd_reactions(args) -> int:
     phis, values = input_grid(mech, args)  # the input column exactly as asked (no rad round trip)
     omega = omega_from_args(args)
     table = reactions_table(mech, phis, omega=omega, dtype=dtype, input_values=values,
-                            rpm=getattr(args, "rpm", None))
+                            rpm=getattr(args, "rpm", None), change_points=args.change_points)
+    branch_point_warnings(table)
     info = sys.stderr if args.csv == "-" else sys.stdout  # `--csv -`: the table alone on standard output
     if args.csv:
         with writing("--csv", args.csv):

@@ -5,7 +5,10 @@ unknown `NAME_rad` or `NAME_m`, with `NAME_rad_s`, `NAME_rad_s2` (or `NAME_m_s`,
 the joint-variable rates are asked for: q̇ = μ ω and q̈ = ν ω² at constant input speed ω, from the
 transfer functions μ = dq/dφ, ν = d²q/dφ² (`jaxlink/analysis/transfer.py`); for each point P:
 `P_x_m`, `P_y_m` [, `P_vx_m_s`, `P_vy_m_s`] [, `P_ax_m_s2`, `P_ay_m_s2`]; then `converged` (1/0),
-`residual_m` (max |Φ| at the returned q) and `result` (the name of the solver's code, `RESULTS`).
+`residual_m` (max |Φ| at the returned q) and `result` (the name of the solver's code, `RESULTS`);
+only where a change point was located between two rows (`jaxlink.branch_points`):
+`change_point_deg` (`_m` for a length input), its input on the row nearest to it, `nan` on the
+others (files of paths without one keep their columns).
 
 Positions that did not assemble (result neither `converged` nor `singular`) are not data: every
 solved quantity of their row is `nan`; at a `singular` position (a dead centre or toggle, assembled
@@ -27,8 +30,9 @@ import numpy as np
 from ..analysis.transfer import transfer
 from ..cache import traced
 from ..model.mechanism import Mechanism
-from ..results import RESULTS
-from ..solvers.assemble import default_rtol, solve
+from ..results import RESULTS, Solution
+from ..solvers import branch_points as _branch_points
+from ..solvers.assemble import NewtonOptions, default_rtol, solve
 from . import grid as _grid
 
 OUTPUTS = ("position", "velocity", "acceleration", "rates")
@@ -66,6 +70,8 @@ class KinematicsTable:
     omega: float
     rpm: float | None
     parameters: np.ndarray
+    branch_points: list = dataclasses.field(default_factory=list)
+    change_points: str = "keep"
 
     def column(self, name: str) -> np.ndarray:
         return self.data[:, self.columns.index(name)]
@@ -84,10 +90,13 @@ class KinematicsTable:
 
 
 def kinematics_table(mech: Mechanism, phis, *, omega: float = 1.0, outputs=OUTPUTS[:3], p=None,
-                     dtype=np.float64, input_values=None, rpm: float | None = None) -> KinematicsTable:
+                     dtype=np.float64, input_values=None, rpm: float | None = None,
+                     change_points: str = "keep") -> KinematicsTable:
     """Solve the positions at `phis` (SI) and what `outputs` (a subset of `OUTPUTS`) asks for at
     constant input speed `omega`. `input_values`: the input column as asked for (degrees for an
-    angle input, metres for a length input; default `phis` converted); `rpm`: the speed as given."""
+    angle input, metres for a length input; default `phis` converted); `rpm`: the speed as given;
+    `change_points`: `"keep"` or `"smooth"` (`NewtonOptions.change_points`). The branch points
+    located between consecutive rows are in `branch_points` (`located_branch_points`)."""
     outputs = tuple(outputs)
     for o in outputs:
         if o not in OUTPUTS:
@@ -95,8 +104,9 @@ def kinematics_table(mech: Mechanism, phis, *, omega: float = 1.0, outputs=OUTPU
     order = 2 if {"acceleration", "rates"} & set(outputs) else (1 if "velocity" in outputs else 0)
     p = np.asarray(mech.parameters if p is None else p, dtype=dtype)
     phis_a = np.asarray(phis, dtype=dtype)
-    q, points, result, resid, mu_, nu_, dpts, ddpts, scale = _traced_arrays(mech, phis_a, p, order)
-    result = _checked(np.asarray(result).copy(), np.asarray(resid, dtype=float), float(scale), p)
+    q, points, raw, resid, mu_, nu_, dpts, ddpts, scale, cand, sides = _traced_arrays(mech, phis_a, p, order,
+                                                                                       change_points)
+    result = _checked(np.asarray(raw).copy(), np.asarray(resid, dtype=float), float(scale), p)
     resid = np.asarray(resid, dtype=float)
     q = np.asarray(q)  # in the dtype of the solve (the drawing measures its rounding)
     v = a = mu = nu = None
@@ -152,18 +162,102 @@ def kinematics_table(mech: Mechanism, phis, *, omega: float = 1.0, outputs=OUTPU
             data += [a[:, i, 0], a[:, i, 1]]
     cols += list(STATUS_COLUMNS)
     data += [conv.astype(float), np.asarray(resid, dtype=float), result.astype(float)]
+    # the candidates of the stored program hold for the solver's codes; where the re-check changed
+    # which rows are assembled, `branch_points` computes them again
+    same = np.array_equal(_assembled(np.asarray(raw)), _assembled(result))
+    located = located_branch_points(mech, phis_a, q, result, p, np.asarray(input_values, dtype=float),
+                                    (cand, sides) if same else None)
+    cols, data = _branch_point_columns(mech, located, cols, data)
     return KinematicsTable(
         cols, np.stack(data, axis=1), conv, assembled, result, np.asarray(phis, dtype=float),
         mech.input_kind, _grid.full_turn(phis, mech.input_kind), q, pts,
         v if "velocity" in outputs else None, a if "acceleration" in outputs else None,
-        float(omega), rpm, p)
+        float(omega), rpm, p, located, change_points)
 
 
-def _arrays(mech: Mechanism, phis, p, order: int):
+@dataclasses.dataclass(frozen=True)
+class BranchPoint:
+    """A branch point located between rows `row` and `row + 1`: `value` as the input column prints
+    it (degrees or metres), `kind` ("change point" or "toggle"), `dyad` (index in solve order),
+    `smooth` (a change point crossed on the branch whose velocity is continuous), `nearest` (the
+    row nearest to it)."""
+
+    value: float
+    kind: str
+    dyad: int
+    row: int
+    smooth: bool
+    nearest: int
+
+
+def _assembled(result):
+    return (result == RESULTS.converged) | (result == RESULTS.singular)
+
+
+def located_branch_points(mech: Mechanism, phis, q, result, p, input_values, candidates=None) -> list:
+    """The branch points between consecutive rows (`jaxlink.branch_points`), in row order.
+    `candidates`: its first stage's `(candidates, sides)` when already computed (the stored program
+    of the table computes them)."""
+    from ..solvers.branch_points import KINDS, branch_points
+
+    sol = Solution(q=jnp.asarray(q), points=None, result=jnp.asarray(result), stats=None)  # type: ignore[arg-type]
+    bp = branch_points(mech, phis, sol, p, candidates=candidates)
+    out = []
+    vals = np.asarray(input_values, dtype=float)
+    phis = np.asarray(phis, dtype=float)
+    for k, j in np.argwhere(bp.kind != 0):
+        x = float(bp.input[k, j])
+        # as printed: the input column's unit, by the same map as the rows (degrees or metres)
+        span = phis[k + 1] - phis[k]
+        t = (x - phis[k]) / span if span != 0 else 0.0
+        value = float(vals[k] + t * (vals[k + 1] - vals[k]))
+        nearest = int(k if abs(x - phis[k]) <= abs(x - phis[k + 1]) else k + 1)
+        out.append(BranchPoint(value, KINDS[int(bp.kind[k, j])], int(j), int(k), bool(bp.smooth[k, j]), nearest))
+    return out
+
+
+def _branch_point_columns(mech: Mechanism, located: list, cols: list, data: list):
+    """`change_point_deg` (`_m` for a length input), added only where some change point was
+    located: on the row nearest to each, its input; nan elsewhere. (A toggle is not a column: the
+    rows past it are already `cannot_assemble`; the summary and the warning name it.)"""
+    unit = "deg" if mech.input_kind == "angle" else "m"
+    n = len(data[0])
+    for kind in ("change point",):
+        here = [b for b in located if b.kind == kind]
+        if not here:
+            continue
+        col = np.full(n, np.nan)
+        for b in here:
+            col[b.nearest] = b.value
+        cols = cols + [f"{kind.replace(' ', '_')}_{unit}"]
+        data = data + [col]
+    return cols, data
+
+
+def branch_point_text(table_or_list, input_kind: str, change_points: str = "keep") -> list:
+    """One line per located branch point: where, and which branch the solve continues on."""
+    located = getattr(table_or_list, "branch_points", table_or_list)
+    unit = "°" if input_kind == "angle" else " m"
+    lines = []
+    for b in located:
+        where = f"{b.kind} at input {b.value:.10g}{unit} (dyad {b.dyad + 1}, between rows {b.row + 1} and {b.row + 2})"
+        if b.kind == "toggle":
+            lines.append(f"{where}: a limit position, the linkage cannot be driven past it")
+        elif b.smooth:
+            lines.append(f"{where}: the solve continues smoothly through it (the branch whose velocity is "
+                         "continuous; --change-points keep to stay on the dyad's side)")
+        else:
+            lines.append(f"{where}: the solve keeps the dyad's side and continues on the other branch (its "
+                         "velocity jumps here); --change-points smooth to continue smoothly")
+    return lines
+
+
+def _arrays(mech: Mechanism, phis, p, order: int, change_points: str):
     """The table's whole computation as one function of (mech, phis, p): the solve with its points,
     the residual at the returned q, the transfer functions up to `order` (empty when not asked),
-    and the length scale of the tolerance."""
-    sol = solve(mech, phis, p=p)
+    the length scale of the tolerance, and the branch-point candidates between consecutive rows
+    (`branch_points`' cheap first stage: the intervals where one may lie, and each row's sides)."""
+    sol = solve(mech, phis, p=p, options=NewtonOptions(change_points=change_points))
     # the residual at the returned q, for every row (the solver's own is measured where it stopped)
     resid = jax.vmap(lambda qq, ph: jnp.max(jnp.abs(mech.residual(qq, ph, p))))(sol.q, phis)
     empty: jax.Array | None = jnp.zeros((0,), p.dtype)
@@ -173,15 +267,17 @@ def _arrays(mech: Mechanism, phis, p, order: int):
         mu, dpts = tr.mu, tr.dpoints
         if order == 2:
             nu, ddpts = tr.nu, tr.ddpoints
-    return sol.q, sol.points, sol.result, resid, mu, nu, dpts, ddpts, mech.length_scale(p)
+    cand, sides = _branch_points.candidates(mech, phis, sol.q, p, sol.result)
+    return sol.q, sol.points, sol.result, resid, mu, nu, dpts, ddpts, mech.length_scale(p), cand, sides
 
 
-def _traced_arrays(mech: Mechanism, phis, p, order: int):
+def _traced_arrays(mech: Mechanism, phis, p, order: int, change_points: str = "keep"):
     """`_arrays` through jaxlink's stored traces (`jaxlink/cache.py`): a repeated command with the
     same structure, sizes and dtype traces nothing. The mechanism is an argument of the stored
     program (its guesses choose the branch), never a constant inside it."""
     guess = np.asarray(mech.guess, dtype=np.asarray(p).dtype)
-    return traced("kinematics_table", _arrays, (mech.replace(parameters=p, guess=guess), phis, p), (order,))
+    return traced("kinematics_table", _arrays, (mech.replace(parameters=p, guess=guess), phis, p),
+                  (order, change_points))
 
 
 def _checked(result, resid, scale: float, p):
@@ -243,7 +339,7 @@ def print_summary(table: KinematicsTable, out: TextIO, every_row_hint: bool = Tr
     width = max(len(c) for c in table.columns)
     out.write(f"{'column':<{width}}  {'min':>14} {'max':>14}\n")
     for j, c in enumerate(table.columns):
-        if c in STATUS_COLUMNS:
+        if c in STATUS_COLUMNS or c.startswith("change_point_"):
             continue
         col = table.data[:, j]
         col = col[np.isfinite(col)]
@@ -251,6 +347,8 @@ def print_summary(table: KinematicsTable, out: TextIO, every_row_hint: bool = Tr
             out.write(f"{c:<{width}}  {col.min():14.6g} {col.max():14.6g}\n")
         else:
             out.write(f"{c:<{width}}  {'nan':>14} {'nan':>14}\n")
+    for line in branch_point_text(table, table.input_kind, table.change_points):
+        out.write(line + "\n")
     if every_row_hint:
         out.write("(use --csv OUT to write every row)\n")
 

@@ -5,7 +5,9 @@ CSV columns: `input_deg` (as asked for; `input_m` for a length input); for each 
 the torque the drive applies to the input body (counter-clockwise positive); `result`, the name of
 the code of the row (`converged`; the position solve's code, e.g. `cannot_assemble`, where the
 kinematics did not converge; `singular` where the kinetostatic system is singular). Rows that are
-not `converged` hold `nan`: they are left out of the summary and are gaps in the plot.
+not `converged` hold `nan`: they are left out of the summary and are gaps in the plot. Where a
+change point was located between two rows, `change_point_deg` (`_m` for a length input) comes
+before `result`, as in `jaxlink kinematics` (`report/kinematics.py`).
 """
 
 from __future__ import annotations
@@ -33,6 +35,8 @@ class ReactionsTable:
     input_kind: str = "angle"
     periodic: bool = False
     rpm: float | None = None
+    branch_points: list = dataclasses.field(default_factory=list)
+    change_points: str = "keep"
 
     def column(self, name: str) -> np.ndarray:
         return self.data[:, self.columns.index(name)]
@@ -49,17 +53,22 @@ class ReactionsTable:
 
 
 def reactions_table(mech, phis, *, omega: float, p=None, dtype=np.float64, input_values=None,
-                    rpm: float | None = None) -> ReactionsTable:
+                    rpm: float | None = None, change_points: str = "keep") -> ReactionsTable:
     """Solve positions at `phis` (SI) and the reactions at input speed `omega` (rad/s). `input_values`:
     the input column as asked for (degrees for an angle input, metres for a length input; default
-    `phis` converted); `rpm`: the speed as given, for the labels."""
+    `phis` converted); `rpm`: the speed as given, for the labels; `change_points`: `"keep"` or
+    `"smooth"` (`NewtonOptions.change_points`). The branch points located between consecutive rows
+    are in `branch_points` (`kinematics.located_branch_points`)."""
     from ..analysis.kinetostatics import rigidity_errors, solve_reactions
     from ..errors import MechanismError
     from ..model import bodies as _bodies
+    from ..solvers.assemble import NewtonOptions
+    from .kinematics import _branch_point_columns, located_branch_points
 
     mdl = _bodies.model(mech)
     p = np.asarray(mech.parameters if p is None else p, dtype=dtype)
-    sol, r = solve_reactions(mech, np.asarray(phis, dtype=dtype), p, omega=omega)
+    opts = None if change_points == "keep" else NewtonOptions(change_points=change_points)
+    sol, r = solve_reactions(mech, np.asarray(phis, dtype=dtype), p, omega=omega, options=opts)
     conv = np.asarray(sol.converged)
     if conv.sum() >= 2:
         errors = rigidity_errors(mech, np.asarray(sol.q)[conv], np.asarray(phis)[conv], p)
@@ -79,10 +88,15 @@ def reactions_table(mech, phis, *, omega: float, p=None, dtype=np.float64, input
     for k, name in enumerate(mdl.joint_names):
         cols += [f"{name}_Fx_N", f"{name}_Fy_N"]
         data += [force[:, k, 0], force[:, k, 1]]
-    cols += ["drive_torque_N_m", "result"]
-    data += [torque, res.astype(float)]
+    cols += ["drive_torque_N_m"]
+    data += [torque]
+    located = located_branch_points(mech, np.asarray(phis, dtype=dtype), np.asarray(sol.q), np.asarray(sol.result),
+                                    p, np.asarray(input_values, dtype=float))
+    cols, data = _branch_point_columns(mech, located, cols, data)  # before `result`, the last column
+    cols += ["result"]
+    data += [res.astype(float)]
     return ReactionsTable(cols, np.stack(data, axis=1), ok, res, mdl.joint_names, float(omega), mech.input_kind,
-                          _grid.full_turn(phis, mech.input_kind), rpm)
+                          _grid.full_turn(phis, mech.input_kind), rpm, located, change_points)
 
 
 def write_csv(out, table: ReactionsTable) -> None:
@@ -127,6 +141,10 @@ def print_summary(table: ReactionsTable, out) -> None:
     t = table.column("drive_torque_N_m")
     i = int(np.nanargmax(np.abs(t)))
     out.write(f"{'drive torque':<{width}}  {t[i]:14.6g} {at[i]:15.6g}   (N·m, largest |τ|)\n")
+    from .kinematics import branch_point_text
+
+    for line in branch_point_text(table, table.input_kind, table.change_points):
+        out.write(line + "\n")
     out.write("(use --csv OUT to write every row)\n")
 
 

@@ -82,6 +82,7 @@ from ..files import expr as _expr
 from ..model import structure as _structure
 from ..model.mechanism import Mechanism
 from ..results import RESULTS, Solution, SolveStats
+from . import branch_points as _branch_points
 from . import dyads as _dyads
 from .fusion import batched_like, materialize
 from .linalg import solve_block_lower, solve_block_lower_scalars, solve_small
@@ -113,6 +114,12 @@ class NewtonOptions(NamedTuple):
       between its columns; for the closed form the sine of the angle between a dyad's two links)
       an assembled position is reported `singular` (dead centre, toggle, change point: the
       solution is not unique there); `None` = 10 √eps (1.5e-7 in float64, 3.5e-3 in float32).
+    - `change_points`: what the path does at a change point of a dyad (two branches crossing, e.g.
+      a Peaucellier cell's flat rhombus, a Grashof four-bar with s + l = p + q folding flat)
+      located between two samples (`branch_points`): `"keep"` (default) keeps each dyad's side σ
+      (the circuit), so the path goes on along the other branch (its velocity jumps there);
+      `"smooth"` flips σ at each located change point, the branch whose velocity is continuous.
+      Closed form and `"continuation"` (where every block is a dyad); `"independent"` keeps.
     """
 
     rtol: float | None = None
@@ -122,9 +129,11 @@ class NewtonOptions(NamedTuple):
     predictor_order: int = 2
     singular_ratio: float | None = None
     method: str = "auto"
+    change_points: str = "keep"
 
 
 METHODS = ("auto", "closed_form", "continuation", "independent")
+CHANGE_POINTS = ("keep", "smooth")
 EXTRA_STEPS = 32  # more Newton steps allowed while converging linearly (double roots)
 REFINE_TRIES = 24  # sub-steps tried when the continuation lands on another circuit
 MAX_LEAD_IN = 4096  # lead-in positions at most (a longer way takes longer steps)
@@ -330,6 +339,8 @@ def method_for(mech: Mechanism, opts: "NewtonOptions") -> str:
     """The path method `opts` resolves to for this mechanism."""
     if opts.method not in METHODS:
         raise ValueError(f"unknown method {opts.method!r}; use one of {METHODS}")
+    if opts.change_points not in CHANGE_POINTS:
+        raise ValueError(f"unknown change_points {opts.change_points!r}; use one of {CHANGE_POINTS}")
     if not opts.continuation and opts.method in ("auto", "continuation"):
         return "independent"
     if opts.method == "auto":
@@ -368,9 +379,10 @@ def _closed_form_path(mech, p, phis, tol, trig_in, trig_p, thr, reference, point
     solved angle as the closed form has them (no new trigonometry; (1, 0) where a position has no
     finite solution)."""
     dyads = _dyads.classify(mech)
-    sigma, q_ref, ref_ok = reference
+    sigma_all, q_ref, ref_ok = reference
+    per_position = sigma_all.ndim == 2  # (N, D): the sides of each position (`change_points="smooth"`)
 
-    def one(phi, t_in):
+    def one(phi, t_in, sigma):
         q, ok, rn, sine, trig = _dyads.solve_with_trig(mech, dyads, sigma, q_ref, phi, p, {**t_in, **trig_p})
         conv = (rn <= tol) & ref_ok
         code = jnp.where(conv, jnp.where(sine < thr, RESULTS.singular, RESULTS.converged),
@@ -393,7 +405,7 @@ def _closed_form_path(mech, p, phis, tol, trig_in, trig_p, thr, reference, point
         return jnp.concatenate(parts)
 
     ang = [n for n, k in zip(mech.unknown_names, mech.unknown_kinds) if k == "angle"]
-    packed = jax.vmap(one)(phis, trig_in)
+    packed = jax.vmap(one, in_axes=(0, 0, 0 if per_position else None))(phis, trig_in, sigma_all)
     return packed if trig_out else _unpack_closed_form(mech, packed, points)
 
 
@@ -740,17 +752,56 @@ def _lead_in_inputs(mech: Mechanism, p, phi_ref, phi0):
     return phi0 - gap, h, n
 
 
-def _continuation_one(mech, opts, p, phis, q0, phi_ref, tol, kw):
+def _smooth_sides(mech: Mechanism, reference, p, phis, phi_ref, tol, thr):
+    """(N, D) the sides of one design's dyads at every position of the smooth continuation from
+    the closed form's branches `reference` (`_closed_form_reference`) at `phi_ref`, where the guess
+    selected them: flipped at each change point located between two inputs
+    (`branch_points.smooth_sides`)."""
+    dyads = _dyads.classify(mech)
+    sigma, q_ref, _ = reference
+    return _branch_points.smooth_sides(mech, dyads, sigma, q_ref, phis, phi_ref, p, tol, thr)
+
+
+def _continuation_smooth(mech: Mechanism, opts: NewtonOptions, P, phis, Q0, phi_ref, phi0, tol, thr, ax):
+    """With `change_points="smooth"` (every block a dyad): `(flips, q_start)`; else None.
+    `flips` (B, N, blocks) ±1 is −1 where the circuit to keep flips between positions k − 1 and k
+    (a change point of that dyad lies between them: the sides of the closed form's smooth
+    continuation from where the guess holds, `_smooth_sides`, differ); `q_start` (B, n) the closed
+    form at the first input on those sides, the continuation's start (instead of a lead-in, which
+    would keep the circuit of the guess through a change point before the first input)."""
+    if opts.change_points != "smooth" or _dyads.classify(mech) is None:
+        return None
+    dyads = _dyads.classify(mech)
+    ref = phi0 if phi_ref is None else phi_ref
+    trig_p = _dyads.parameter_trig(mech, P)
+    reference = jax.vmap(lambda p, q0, t, tp, r: _closed_form_reference(mech, p, q0, t, tp, r))(
+        P, Q0, tol, trig_p, ref)
+    sides = jax.vmap(lambda p, ph, ref_, r, t: _smooth_sides(mech, ref_, p, ph, r, t, thr),
+                     in_axes=(0, ax, 0, 0, 0))(P, phis, reference, ref, tol)
+    q_start = jax.vmap(lambda p, sg, q0, f: _dyads.solve(mech, dyads, sg, q0, f, p)[0])(P, sides[:, 0], Q0, phi0)
+    flips = jnp.concatenate([jnp.ones_like(sides[:, :1]), sides[:, 1:] * sides[:, :-1]], axis=1)
+    return flips, jnp.where(jnp.all(jnp.isfinite(q_start), axis=1, keepdims=True), q_start, Q0)
+
+
+def _continuation_one(mech, opts, p, phis, q0, phi_ref, tol, kw, flips=None):
     """Newton with continuation along `phis` for one design from its guess `q0` (holding at
     `phi_ref`, or at phis[0] when `phi_ref` is None): the lead-in (`_lead_in_inputs`) and then
     every position, each by `_advance`. Returns `(q, rnorm, result, steps)` of the positions.
+    `flips` (N, blocks) ±1: the circuit kept is multiplied by it before position k (the smooth
+    continuation through a change point between k − 1 and k, `_continuation_smooth`).
 
     The lead-in and the positions are one loop over n + N inputs (the first n of the lead-in,
     their results not kept), so that `_advance` — four nested loops — is traced and compiled
     once: two copies doubled the time to compile a continuation solve."""
+    def flipped(track, i):
+        if flips is None:
+            return track
+        return track._replace(sign_ref=track.sign_ref * flips[i].astype(track.sign_ref.dtype))
+
     if phi_ref is None:
         st = batched_like(_track_start(mech, q0, phis[0], p), q0, p, tol, phis)
-        return jax.lax.scan(lambda s, phi: _advance(mech, opts, p, tol, kw, s, phi), st, phis)[1]
+        idx = jnp.arange(phis.shape[0])
+        return jax.lax.scan(lambda s, x: _advance(mech, opts, p, tol, kw, flipped(s, x[1]), x[0]), st, (phis, idx))[1]
     start, h, n = _lead_in_inputs(mech, p, phi_ref, phis[0])
     dtype = jnp.result_type(phis)
     N = phis.shape[0]
@@ -763,6 +814,8 @@ def _continuation_one(mech, opts, p, phis, q0, phi_ref, tol, kw):
         lead = k < n
         i = jnp.clip(k - n, 0, N - 1)
         phi = jnp.where(lead, start + k.astype(dtype) * h, phis[i])
+        if flips is not None:
+            track = track._replace(sign_ref=jnp.where(lead, track.sign_ref, flipped(track, i).sign_ref))
         track, out = _advance(mech, opts, p, tol, kw, track, phi)
         bufs = tuple(b.at[i].set(jnp.where(lead, b[i], o.astype(b.dtype))) for b, o in zip(bufs, out))
         return k + 1, track, bufs
@@ -816,6 +869,10 @@ def _solve_batch_impl(mech: Mechanism, opts: NewtonOptions, points: bool, P, phi
         trig_p = _dyads.parameter_trig(mech, P)
         reference = jax.vmap(lambda p, q0, t, tp, r: _closed_form_reference(mech, p, q0, t, tp, r))(
             P, Q0, tol, trig_p, ref)
+        if opts.change_points == "smooth":  # the sides of every position, flipped at change points
+            sides = jax.vmap(lambda p, ph, ref_, r, t: _smooth_sides(mech, ref_, p, ph, r, t, thr),
+                             in_axes=(0, ax, 0, 0, 0))(P, phis, reference, ref, tol)
+            reference = (sides,) + tuple(reference[1:])
         trig_in, trig_p, reference = materialize((_dyads.input_trig(mech, phis), trig_p, reference))
         out = jax.vmap(
             lambda p, ph, t, ti, tp, r: _closed_form_path(mech, p, ph, t, ti, tp, thr, r, points, trig),
@@ -846,12 +903,20 @@ def _solve_batch_impl(mech: Mechanism, opts: NewtonOptions, points: bool, P, phi
             lambda f: newton(mech, q0, f, p, tol=t, max_steps=opts.max_steps_first, limit_step=True,
                              **kw_of(tp))[:4])(ph),
             in_axes=(0, ax, 0, 0, 0))(P, phis, Q0, tol, trig_p)
-    elif phi_ref is None:
-        out = jax.vmap(lambda p, ph, q0, t, tp: _continuation_one(mech, opts, p, ph, q0, None, t, kw_of(tp)),
-                       in_axes=(0, ax, 0, 0, 0))(P, phis, Q0, tol, trig_p)
     else:
-        out = jax.vmap(lambda p, ph, q0, r, t, tp: _continuation_one(mech, opts, p, ph, q0, r, t, kw_of(tp)),
-                       in_axes=(0, ax, 0, 0, 0, 0))(P, phis, Q0, phi_ref, tol, trig_p)
+        smooth = _continuation_smooth(mech, opts, P, phis, Q0, phi_ref, phi0, tol, thr, ax)
+        flips = None
+        if smooth is not None:  # from the smooth continuation's closed form at the first input
+            flips, Q0 = smooth
+            phi_ref = None
+        if phi_ref is None:
+            out = jax.vmap(lambda p, ph, q0, t, tp, fl: _continuation_one(mech, opts, p, ph, q0, None, t, kw_of(tp),
+                                                                          fl),
+                           in_axes=(0, ax, 0, 0, 0, 0))(P, phis, Q0, tol, trig_p, flips)
+        else:
+            out = jax.vmap(lambda p, ph, q0, r, t, tp, fl: _continuation_one(mech, opts, p, ph, q0, r, t,
+                                                                             kw_of(tp), fl),
+                           in_axes=(0, ax, 0, 0, 0, 0, 0))(P, phis, Q0, phi_ref, tol, trig_p, flips)
     out = _check_residual(mech, P, phis, out, tol, rtol, dtype)
     if points:
         # the points, with the sines and cosines of the angle parameters known

@@ -329,8 +329,10 @@ def _solve(mech, dyads, sigma, q_ref, phi, p, trig, with_trig: bool = False, ari
         ok_all = ok_all & ok
         resid = miss if resid is None else jnp.maximum(resid, miss)
         sine = sin_d if sine is None else jnp.minimum(sine, sin_d)
+    # (an unknown of no dyad given — a prefix of the dyads, `branch_points` — is q_ref's)
     q = jnp.stack([
-        _wrap_near(env[n], q_ref[i]) if k == "angle" else jnp.asarray(env[n], dtype=q_ref.dtype)
+        _wrap_near(env[n], q_ref[i]) if k == "angle" and n in env
+        else jnp.asarray(env.get(n, q_ref[i]), dtype=q_ref.dtype)
         for i, (n, k) in enumerate(zip(mech.unknown_names, mech.unknown_kinds))
     ])
     sig = jnp.stack(sig_used) if sig_used else jnp.zeros((0,), q_ref.dtype)
