@@ -188,6 +188,7 @@ class BranchPoint:
     row: int
     smooth: bool
     nearest: int
+    label: str = ""  # the dyad as the file names it: its loop and its two unknowns
 
 
 def _assembled(result):
@@ -212,8 +213,20 @@ def located_branch_points(mech: Mechanism, phis, q, result, p, input_values, can
         t = (x - phis[k]) / span if span != 0 else 0.0
         value = float(vals[k] + t * (vals[k + 1] - vals[k]))
         nearest = int(k if abs(x - phis[k]) <= abs(x - phis[k + 1]) else k + 1)
-        out.append(BranchPoint(value, KINDS[int(bp.kind[k, j])], int(j), int(k), bool(bp.smooth[k, j]), nearest))
+        out.append(BranchPoint(value, KINDS[int(bp.kind[k, j])], int(j), int(k), bool(bp.smooth[k, j]), nearest,
+                               _dyad_label(mech, int(j))))
     return out
+
+
+def _dyad_label(mech: Mechanism, j: int) -> str:
+    """`loop 'D' (eps, zeta)`: the loop of dyad j (solve order) and the unknowns it solves."""
+    from ..solvers.dyads import classify
+
+    dyads = classify(mech)
+    if dyads is None or j >= len(dyads):
+        return f"dyad {j + 1}"
+    d = dyads[j]
+    return f"loop '{mech.loops[d.loop][0]}' ({', '.join(mech.unknown_names[i] for i in d.unknowns)})"
 
 
 def _branch_point_columns(mech: Mechanism, located: list, cols: list, data: list):
@@ -240,7 +253,8 @@ def branch_point_text(table_or_list, input_kind: str, change_points: str = "keep
     unit = "°" if input_kind == "angle" else " m"
     lines = []
     for b in located:
-        where = f"{b.kind} at input {b.value:.10g}{unit} (dyad {b.dyad + 1}, between rows {b.row + 1} and {b.row + 2})"
+        who = b.label or f"dyad {b.dyad + 1}"
+        where = f"{b.kind} at input {b.value:.10g}{unit} ({who}, between rows {b.row + 1} and {b.row + 2})"
         if b.kind == "toggle":
             lines.append(f"{where}: a limit position, the linkage cannot be driven past it")
         elif b.smooth:
