@@ -135,3 +135,17 @@ def test_four_bar_toggle(four_bar):
     bp = jl.branch_points(four_bar, phis, sol, p)
     assert (bp.kind == 1).sum() == 0 and (bp.kind == 2).sum() == 1
     assert abs(bp.input[bp.kind == 2][0] - toggle) < 1e-9
+
+
+def test_full_turn_closing_interval_is_checked(four_bar):
+    """Over a full turn the interval from the last row back to the first is checked too: the
+    parallelogram sampled at 3° + 6° k folds at 360° (= 0°), between the last row and the first."""
+    from jaxlink.report.kinematics import kinematics_table
+
+    p = _fourbar_p(four_bar, a=20.0, c=20.0, b=55.0, d=55.0)
+    phis = np.deg2rad(3.0 + 6.0 * np.arange(60))
+    table = kinematics_table(four_bar, phis, p=p, outputs=("position",))
+    found = [(b.kind, b.closing, round(b.value, 9)) for b in table.branch_points]
+    assert found == [("change point", False, 180.0), ("change point", True, 360.0)]
+    # each exactly half-way: the nearest row is either neighbour (177° or 183°; 357° or 3° = 363°)
+    assert table.branch_points[0].nearest in (29, 30) and table.branch_points[1].nearest in (59, 0)

@@ -187,8 +187,8 @@ def _search_commands(scene: str) -> list:
             best]
 
 
-@pytest.fixture(scope="module")
-def runs(tmp_path_factory):
+@pytest.fixture(scope="session")  # once per worker (a module's fixture is set up again when xdist
+def runs(tmp_path_factory):  # runs another module's test between two of this module's)
     """The same commands cold, warm (reversed, each search still before the table of its best
     file) and off. The built-in search scenes run cold and warm only (their searches compile the
     most; `optimize` of the plain four-bar file is the cache-off comparison of a search)."""

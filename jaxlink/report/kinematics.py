@@ -189,6 +189,7 @@ class BranchPoint:
     smooth: bool
     nearest: int
     label: str = ""  # the dyad as the file names it: its loop and its two unknowns
+    closing: bool = False  # between the last row and the first (a full turn)
 
 
 def _assembled(result):
@@ -196,15 +197,21 @@ def _assembled(result):
 
 
 def located_branch_points(mech: Mechanism, phis, q, result, p, input_values, candidates=None) -> list:
-    """The branch points between consecutive rows (`jaxlink.branch_points`), in row order.
+    """The branch points between consecutive rows (`jaxlink.branch_points`), in row order; over a
+    full turn also between the last row and the first (`row` the last, `nearest` either).
     `candidates`: its first stage's `(candidates, sides)` when already computed (the stored program
     of the table computes them)."""
     from ..solvers.branch_points import KINDS, branch_points
 
+    n = len(np.asarray(phis))
+    wrap = _grid.full_turn(phis, mech.input_kind)
+    phis, q, result = _closing(np.asarray(phis), np.asarray(q), np.asarray(result), wrap)
+    vals = np.asarray(input_values, dtype=float)
+    if wrap:
+        vals = np.concatenate([vals, vals[:1] + 360.0 * np.sign(vals[-1] - vals[0])])
     sol = Solution(q=jnp.asarray(q), points=None, result=jnp.asarray(result), stats=None)  # type: ignore[arg-type]
     bp = branch_points(mech, phis, sol, p, candidates=candidates)
     out = []
-    vals = np.asarray(input_values, dtype=float)
     phis = np.asarray(phis, dtype=float)
     for k, j in np.argwhere(bp.kind != 0):
         x = float(bp.input[k, j])
@@ -212,9 +219,9 @@ def located_branch_points(mech: Mechanism, phis, q, result, p, input_values, can
         span = phis[k + 1] - phis[k]
         t = (x - phis[k]) / span if span != 0 else 0.0
         value = float(vals[k] + t * (vals[k + 1] - vals[k]))
-        nearest = int(k if abs(x - phis[k]) <= abs(x - phis[k + 1]) else k + 1)
+        nearest = int(k if abs(x - phis[k]) <= abs(x - phis[k + 1]) else k + 1) % n
         out.append(BranchPoint(value, KINDS[int(bp.kind[k, j])], int(j), int(k), bool(bp.smooth[k, j]), nearest,
-                               _dyad_label(mech, int(j))))
+                               _dyad_label(mech, int(j)), bool(k + 1 == n)))
     return out
 
 
@@ -254,7 +261,8 @@ def branch_point_text(table_or_list, input_kind: str, change_points: str = "keep
     lines = []
     for b in located:
         who = b.label or f"dyad {b.dyad + 1}"
-        where = f"{b.kind} at input {b.value:.10g}{unit} ({who}, between rows {b.row + 1} and {b.row + 2})"
+        rows = "the last row and the first" if b.closing else f"rows {b.row + 1} and {b.row + 2}"
+        where = f"{b.kind} at input {b.value:.10g}{unit} ({who}, between {rows})"
         if b.kind == "toggle":
             lines.append(f"{where}: a limit position, the linkage cannot be driven past it")
         elif b.smooth:
@@ -266,11 +274,23 @@ def branch_point_text(table_or_list, input_kind: str, change_points: str = "keep
     return lines
 
 
-def _arrays(mech: Mechanism, phis, p, order: int, change_points: str):
+def _closing(phis, q, result, wrap: bool):
+    """(phis, q, result) with the first row again after the last, one revolution on, when `wrap`
+    (a full turn: the interval from the last row back to the first is checked too)."""
+    if not wrap:
+        return phis, q, result
+    xp = jnp if isinstance(phis, jax.Array) else np
+    turn = 2 * np.pi * xp.sign(phis[-1] - phis[0])
+    return (xp.concatenate([phis, phis[:1] + turn]), xp.concatenate([q, q[:1]]),
+            xp.concatenate([result, result[:1]]))
+
+
+def _arrays(mech: Mechanism, phis, p, order: int, change_points: str, wrap: bool):
     """The table's whole computation as one function of (mech, phis, p): the solve with its points,
     the residual at the returned q, the transfer functions up to `order` (empty when not asked),
     the length scale of the tolerance, and the branch-point candidates between consecutive rows
-    (`branch_points`' cheap first stage: the intervals where one may lie, and each row's sides)."""
+    (`branch_points`' cheap first stage: the intervals where one may lie, and each row's sides;
+    with `wrap`, also from the last row back to the first)."""
     sol = solve(mech, phis, p=p, options=NewtonOptions(change_points=change_points))
     # the residual at the returned q, for every row (the solver's own is measured where it stopped)
     resid = jax.vmap(lambda qq, ph: jnp.max(jnp.abs(mech.residual(qq, ph, p))))(sol.q, phis)
@@ -281,7 +301,8 @@ def _arrays(mech: Mechanism, phis, p, order: int, change_points: str):
         mu, dpts = tr.mu, tr.dpoints
         if order == 2:
             nu, ddpts = tr.nu, tr.ddpoints
-    cand, sides = _branch_points.candidates(mech, phis, sol.q, p, sol.result)
+    phis_c, q_c, result_c = _closing(phis, sol.q, sol.result, wrap)
+    cand, sides = _branch_points.candidates(mech, phis_c, q_c, p, result_c)
     return sol.q, sol.points, sol.result, resid, mu, nu, dpts, ddpts, mech.length_scale(p), cand, sides
 
 
@@ -290,8 +311,9 @@ def _traced_arrays(mech: Mechanism, phis, p, order: int, change_points: str = "k
     same structure, sizes and dtype traces nothing. The mechanism is an argument of the stored
     program (its guesses choose the branch), never a constant inside it."""
     guess = np.asarray(mech.guess, dtype=np.asarray(p).dtype)
+    wrap = _grid.full_turn(phis, mech.input_kind)
     return traced("kinematics_table", _arrays, (mech.replace(parameters=p, guess=guess), phis, p),
-                  (order, change_points))
+                  (order, change_points, wrap))
 
 
 def _checked(result, resid, scale: float, p):
