@@ -255,7 +255,7 @@ def cmd_scenes(args) -> int:
 
 
 def cmd_check(args) -> int:
-    enable_dtype(args.dtype)
+    dtype = enable_dtype(args.dtype)
     import jax.numpy as jnp
 
     from ..model import structure as _structure
@@ -302,10 +302,11 @@ def cmd_check(args) -> int:
         g = info["grubler"]
         print(f"            {g['mobility']} by Grübler: u = {g['members']} members, s = {g['joint_count']} "
               f"joint count, n = 3(u−1) − 2s; independent loops k = s − u + 1 = {g['loops']}")
-    sol = solve(mech, np.asarray([mech.input_start]))
+    p = np.asarray(mech.parameters, dtype)  # the solve in the asked dtype
+    sol = solve(mech, np.asarray([mech.input_start], dtype), p)
     code = int(sol.result[0])
-    jac = np.asarray(__import__("jax").jacfwd(mech.residual)(sol.q[0], jnp.asarray(mech.input_start),
-                                                             jnp.asarray(mech.parameters)))
+    jac = np.asarray(__import__("jax").jacfwd(mech.residual)(sol.q[0], jnp.asarray(mech.input_start, dtype),
+                                                             jnp.asarray(p)))
     _, ratio = solve_small(jnp.asarray(jac), jnp.zeros(jac.shape[0]))
     cond = np.linalg.cond(jac)
     how = ("closed-form dyads" if method_for(mech, NewtonOptions()) == "closed_form"

@@ -109,9 +109,9 @@ class Evaluator:
     # ------------------------------------------------------------------ single design (traced)
     def params(self, u):
         pr = self.problem
-        x = jnp.asarray(pr.lower) + u * jnp.asarray(pr.upper - pr.lower)
+        x = jnp.asarray(pr.lower, u.dtype) + u * jnp.asarray(pr.upper - pr.lower, u.dtype)
         p = jnp.asarray(self.mech.parameters, dtype=u.dtype)
-        return p.at[jnp.asarray(pr.index)].set(x * jnp.asarray(pr.factor))
+        return p.at[jnp.asarray(pr.index)].set(x * jnp.asarray(pr.factor, u.dtype))
 
     def start(self, p, c):
         dtype = p.dtype
