@@ -228,3 +228,56 @@ def test_search_time_and_checkpoint_interval_have_domains():
     with pytest.raises(jl.MechanismError, match="checkpoint_s"):
         run(problem, "montecarlo", budget=8, checkpoint_s=-1)
     assert main(["optimize", "sewing-feed-opt", "--method", "montecarlo", "--time", "nan"]) == 2
+
+
+# ----------------------------------------------------------------------------- [optimize] in every command
+
+@pytest.mark.parametrize("scene,key,value,words", [
+    ("needle-dwell", "stroke", "07:32:00", ("'stroke' must be a number", "datetime.time")),  # a TOML time
+    ("needle-dwell", "crank", "[20.0]", ("[20.0] is not a parameter",)),
+    ("needle-dwell", "arm_offset", "1e300", ("1e+300 is not a parameter",)),
+    ("needle-arachne", "crank", "[20.0]", ("[20.0] is not a parameter",)),  # roles only, no search
+    ("sewing-feed-opt", "gradient_solver", '"adam"', ("'gradient_solver' must be one of",)),
+    ("sewing-feed-opt", "variables", "{ l2 = [4, 0] }", ("lower < upper",)),
+])
+@pytest.mark.parametrize("command", ["check", "kinematics", "reactions"])
+def test_every_command_validates_optimize(tmp_path, scene, key, value, words, command):
+    """Issue 23 item 6: `check`, `kinematics` and `reactions` refuse a bad `[optimize]` value as
+    `optimize` does — exit 2, the file, the key's line, the key and why — before solving anything."""
+    text = (SCENES / f"{scene}.toml").read_text(encoding="utf-8")
+    text = re.sub(rf"^{key} = .*$", "", text, flags=re.M)
+    text = text.replace("[optimize]\n", f"[optimize]\n{key} = {value}\n")
+    path = tmp_path / "o.toml"
+    path.write_text(text, encoding="utf-8")
+    line = text.splitlines().index(f"{key} = {value}") + 1
+    refused(cli(command, str(path)), f"o.toml:{line} [optimize.{key}", *words)
+
+
+def test_optimize_table_of_every_scene_is_valid_and_compiles_nothing():
+    """The built-in scenes' `[optimize]` tables pass (needle-arachne's has roles and no search);
+    validating them compiles nothing (`check` stays fast)."""
+    import logging
+
+    import jax
+
+    import jaxlink as jl
+    from jaxlink.optimize.problem import check_table
+    from jaxlink.scenes import scene_paths
+
+    mechs = []
+    for name in scene_paths():
+        with contextlib.suppress(jl.MechanismError):  # the cam scene is no linkage
+            mechs.append(jl.load(name))
+    assert sum("optimize" in m.tables for m in mechs) >= 5
+    records = []
+    handler = logging.Handler()
+    handler.emit = records.append  # type: ignore[method-assign]
+    logger = logging.getLogger("jax")
+    logger.addHandler(handler)
+    try:
+        with jax.log_compiles(True):
+            for m in mechs:
+                check_table(m)
+    finally:
+        logger.removeHandler(handler)
+    assert not [r for r in records if "ompil" in r.getMessage()], [r.getMessage() for r in records][:3]

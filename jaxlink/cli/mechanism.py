@@ -127,11 +127,16 @@ def add_mechanism_arguments(parser: argparse.ArgumentParser, *, positions: bool 
 
 
 def load_from_args(args):
-    """The mechanism of FILE with the `--set` overrides applied."""
+    """The mechanism of FILE with the `--set` overrides applied, the whole file validated: every
+    table the reader checks, and `[optimize]` as `jaxlink optimize` checks it (for every command,
+    `check` and `kinematics` too; nothing is compiled)."""
     from ..files.overrides import parse_numbers
     from ..files.reader import load
+    from ..optimize.problem import check_table
 
-    return load(args.file, overrides=parse_numbers(getattr(args, "set", [])))
+    mech = load(args.file, overrides=parse_numbers(getattr(args, "set", [])))
+    check_table(mech)
+    return mech
 
 
 def inputs_from_args(mech, args) -> np.ndarray:
@@ -205,8 +210,9 @@ def register(sub) -> None:
 
     p = sub.add_parser(
         "check", help="check a mechanism file and report its structure",
-        description="Validate a mechanism file (every table, [bodies], [joints], [loads] and "
-                    "[environment] included) and report parameters (with their inferred units), "
+        description="Validate a mechanism file (every table, [bodies], [joints], [loads], [environment] "
+                    "and [optimize], as `optimize` checks it, included) and report parameters (with their "
+                    "inferred units), "
                     "unknowns, loops, equations, bodies and joints, mobility and whether the guess "
                     "assembles. "
                     "Exit status 2 with a one-line message naming file, line, key and reason when "
