@@ -281,3 +281,61 @@ def test_optimize_table_of_every_scene_is_valid_and_compiles_nothing():
     finally:
         logger.removeHandler(handler)
     assert not [r for r in records if "ompil" in r.getMessage()], [r.getMessage() for r in records][:3]
+
+
+# ----------------------------------------------------------------------------- domains follow the use
+
+TINY_PIVOT = """\
+[mechanism]
+name = "tiny-pivot"
+length_unit = "mm"
+angle_unit = "deg"
+[parameters]
+a = 20.0
+b = 60.0
+c = 45.0
+p1x = 55.0
+p1y = 3.8e-9     # the frame pivot's y: a rounding residue of 0
+[input]
+name = "phi2"
+[unknowns]
+phi3 = 30.0
+phi4 = 80.0
+[loops]
+main = ["a @ phi2", "b @ phi3", "-c @ phi4", "-(p1x, p1y)"]
+[points]
+P = ["a @ phi2", "30 @ phi3", "(0, p1y)"]
+"""
+
+
+def test_a_tiny_coordinate_is_accepted_and_solved():
+    """Issue 23 item 7: a coordinate (or an offset) may be any small number; the four-bar with its
+    frame pivot at (55 mm, 3.8e-9 mm) solves as Freudenstein's with d = 55 mm (the pivot's y moves
+    the angles by about 1e-10 rad)."""
+    import numpy as np
+    from closed_forms import fourbar_freudenstein
+
+    import jaxlink as jl
+
+    mech = jl.loads(TINY_PIVOT, file="tiny.toml")
+    assert mech.parameters[mech.parameter_index("p1y")] == 3.8e-12  # SI
+    phis = np.deg2rad([0.0, 90.0])
+    sol = jl.solve(mech, phis)
+    assert bool(np.all(sol.converged))
+    ref = np.stack(fourbar_freudenstein(0.020, 0.060, 0.045, 0.055, phis, -1), 1)
+    err = (np.asarray(sol.q) - ref + np.pi) % (2 * np.pi) - np.pi  # angles modulo a turn
+    assert np.abs(err).max() < 1e-9
+
+
+@pytest.mark.parametrize("old,new,words", [
+    ("a = 20.0", "a = 3.8e-9", ("tiny.toml:6", "[parameters.a]", "link length 'a' = 3.8e-09 mm is out of range",
+                                "a link length is 0 or 1e-09 to 1e+06 m")),
+    ("p1x = 55.0", "p1x = 2e9", ("tiny.toml:9", "[parameters.p1x]", "length 'p1x' = 2e+09 mm is out of range",
+                                 "-1e+06 to 1e+06 m")),
+])
+def test_a_link_length_keeps_its_domain(tmp_path, old, new, words):
+    """A link length (a parameter alone as the LENGTH of a loop's term) is still 0 or 1e-9 m to
+    1e6 m; a coordinate is within ±1e6 m."""
+    path = tmp_path / "tiny.toml"
+    path.write_text(TINY_PIVOT.replace(old, new), encoding="utf-8")
+    refused(cli("check", str(path)), *words)
