@@ -228,3 +228,114 @@ def test_search_time_and_checkpoint_interval_have_domains():
     with pytest.raises(jl.MechanismError, match="checkpoint_s"):
         run(problem, "montecarlo", budget=8, checkpoint_s=-1)
     assert main(["optimize", "sewing-feed-opt", "--method", "montecarlo", "--time", "nan"]) == 2
+
+
+# ----------------------------------------------------------------------------- [optimize] in every command
+
+@pytest.mark.parametrize("scene,key,value,words", [
+    ("needle-dwell", "stroke", "07:32:00", ("'stroke' must be a number", "datetime.time")),  # a TOML time
+    ("needle-dwell", "crank", "[20.0]", ("[20.0] is not a parameter",)),
+    ("needle-dwell", "arm_offset", "1e300", ("1e+300 is not a parameter",)),
+    ("needle-arachne", "crank", "[20.0]", ("[20.0] is not a parameter",)),  # roles only, no search
+    ("sewing-feed-opt", "gradient_solver", '"adam"', ("'gradient_solver' must be one of",)),
+    ("sewing-feed-opt", "variables", "{ l2 = [4, 0] }", ("lower < upper",)),
+])
+@pytest.mark.parametrize("command", ["check", "kinematics", "reactions"])
+def test_every_command_validates_optimize(tmp_path, scene, key, value, words, command):
+    """Issue 23 item 6: `check`, `kinematics` and `reactions` refuse a bad `[optimize]` value as
+    `optimize` does — exit 2, the file, the key's line, the key and why — before solving anything."""
+    text = (SCENES / f"{scene}.toml").read_text(encoding="utf-8")
+    text = re.sub(rf"^{key} = .*$", "", text, flags=re.M)
+    text = text.replace("[optimize]\n", f"[optimize]\n{key} = {value}\n")
+    path = tmp_path / "o.toml"
+    path.write_text(text, encoding="utf-8")
+    line = text.splitlines().index(f"{key} = {value}") + 1
+    refused(cli(command, str(path)), f"o.toml:{line} [optimize.{key}", *words)
+
+
+def test_optimize_table_of_every_scene_is_valid_and_compiles_nothing():
+    """The built-in scenes' `[optimize]` tables pass (needle-arachne's has roles and no search);
+    validating them compiles nothing (`check` stays fast)."""
+    import logging
+
+    import jax
+
+    import jaxlink as jl
+    from jaxlink.optimize.problem import check_table
+    from jaxlink.scenes import scene_paths
+
+    mechs = []
+    for name in scene_paths():
+        with contextlib.suppress(jl.MechanismError):  # the cam scene is no linkage
+            mechs.append(jl.load(name))
+    assert sum("optimize" in m.tables for m in mechs) >= 5
+    records = []
+    handler = logging.Handler()
+    handler.emit = records.append  # type: ignore[method-assign]
+    logger = logging.getLogger("jax")
+    logger.addHandler(handler)
+    try:
+        with jax.log_compiles(True):
+            for m in mechs:
+                check_table(m)
+    finally:
+        logger.removeHandler(handler)
+    assert not [r for r in records if "ompil" in r.getMessage()], [r.getMessage() for r in records][:3]
+
+
+# ----------------------------------------------------------------------------- domains follow the use
+
+TINY_PIVOT = """\
+[mechanism]
+name = "tiny-pivot"
+length_unit = "mm"
+angle_unit = "deg"
+[parameters]
+a = 20.0
+b = 60.0
+c = 45.0
+p1x = 55.0
+p1y = 3.8e-9     # the frame pivot's y: a rounding residue of 0
+[input]
+name = "phi2"
+[unknowns]
+phi3 = 30.0
+phi4 = 80.0
+[loops]
+main = ["a @ phi2", "b @ phi3", "-c @ phi4", "-(p1x, p1y)"]
+[points]
+P = ["a @ phi2", "30 @ phi3", "(0, p1y)"]
+"""
+
+
+def test_a_tiny_coordinate_is_accepted_and_solved():
+    """Issue 23 item 7: a coordinate (or an offset) may be any small number; the four-bar with its
+    frame pivot at (55 mm, 3.8e-9 mm) solves as Freudenstein's with d = 55 mm (the pivot's y moves
+    the angles by about 1e-10 rad)."""
+    import numpy as np
+    from closed_forms import fourbar_freudenstein
+
+    import jaxlink as jl
+
+    mech = jl.loads(TINY_PIVOT, file="tiny.toml")
+    assert mech.parameters[mech.parameter_index("p1y")] == 3.8e-12  # SI
+    phis = np.deg2rad([0.0, 90.0])
+    sol = jl.solve(mech, phis)
+    assert bool(np.all(sol.converged))
+    ref = np.stack(fourbar_freudenstein(0.020, 0.060, 0.045, 0.055, phis, -1), 1)
+    err = (np.asarray(sol.q) - ref + np.pi) % (2 * np.pi) - np.pi  # angles modulo a turn
+    assert np.abs(err).max() < 1e-9
+
+
+@pytest.mark.parametrize("old,new,words", [
+    ("a = 20.0", "a = 3.8e-9", ("tiny.toml:6", "[parameters.a]", "link length 'a' = 3.8e-09 mm is out of range",
+                                "a link length is 0 or 1e-09 to 1e+06 m")),
+    ("p1x = 55.0", "p1x = 2e9", ("tiny.toml:9", "[parameters.p1x]", "length 'p1x' = 2e+09 mm is out of range",
+                                 "-1e+06 to 1e+06 m")),
+])
+def test_a_link_length_keeps_its_domain(tmp_path, old, new, words):
+    """A link length (a parameter alone as the LENGTH of a loop's term) is still 0 or 1e-9 m to
+    1e6 m; a coordinate is within ±1e6 m."""
+    path = tmp_path / "tiny.toml"
+    path.write_text(TINY_PIVOT.replace(old, new), encoding="utf-8")
+    refused(cli("check", str(path)), *words)

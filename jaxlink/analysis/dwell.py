@@ -124,7 +124,7 @@ def band_width(s, ds, eps):
         a = (k0 + direction * (m - 1)) % n
         b = (k0 + direction * m) % n
         t = _hermite_root(s[a], s[b], direction * ds[a] * dphi, direction * ds[b] * dphi, level)
-        return (m - 1 + t) * dphi
+        return ((m - 1).astype(t.dtype) + t) * dphi
 
     width = side(1, m_f) + side(-1, m_b)
     return jnp.where(m_f >= n, 2 * jnp.pi, jnp.minimum(width, 2 * jnp.pi))
@@ -373,7 +373,8 @@ def solve_stroke(mech, p=None, samples: int = 7200, *, phi0: float = 0.0, roles:
     """
     roles = dwell_roles(mech) if roles is None else roles
     p = mech.parameters if p is None else p
-    phis = phi0 + 2 * np.pi * np.arange(samples) / samples
+    # the inputs in the dtype of the solve (float32 parameters: float32 inputs)
+    phis = (phi0 + 2 * np.pi * np.arange(samples) / samples).astype(jnp.result_type(p))
     sol = solve(mech, phis, p, points=False)
     t = transfer(mech, phis, sol.q, p, order=2)
     j = mech.unknown_names.index(roles.slider)
@@ -392,7 +393,8 @@ def needle_metrics(mech, p=None, *, samples: int = 7200, scale: StrokeScale = St
     gives `{"converged": False}`.
     """
     roles = dwell_roles(mech) if roles is None else roles
-    p = np.asarray(mech.parameters if p is None else p, dtype=float)
+    p = np.asarray(mech.parameters if p is None else p)
+    p = p if np.issubdtype(p.dtype, np.floating) else p.astype(float)  # float32 stays float32
     batch = p.ndim == 2
     pb = p if batch else p[None]
     phis, q, s, ds, dds, conv = solve_stroke(mech, pb, samples, roles=roles)
@@ -432,13 +434,14 @@ def spectral_derivatives(s):
     is that of the truncated Fourier series: ~1e-10 relative at N = 720 for the needle designs,
     `tests/test_dwell.py`)."""
     n = s.shape[0]
-    k = jnp.fft.rfftfreq(n, 1.0 / n)
+    k = jnp.fft.rfftfreq(n, 1.0 / n, dtype=s.dtype)  # in the dtype of s (float32 stays float32)
     if n % 2 == 0:
         k1 = k.at[-1].set(0.0)  # the Nyquist term of an odd derivative is not defined: drop it
     else:
         k1 = k
     c = jnp.fft.rfft(s)
-    return jnp.fft.irfft(1j * k1 * c, n=n), jnp.fft.irfft(-(k * k) * c, n=n)
+    k1, k2 = k1.astype(c.dtype), (k * k).astype(c.dtype)
+    return jnp.fft.irfft(1j * k1 * c, n=n), jnp.fft.irfft(-k2 * c, n=n)
 
 
 def peak(x, *, refined: bool = True):

@@ -157,7 +157,8 @@ def system(mech: Mechanism, mdl: _bodies.Model, q, phi, p, omega, alpha=0.0):
         r = pts[k] - ref[i]  # (ni, 2)
         f = fb[k]  # (ni, 2, 2)
         mom = (r[:, None, 0] * f[..., 1] - r[:, None, 1] * f[..., 0]) / L + mb[k]  # (ni, 2)
-        vals = sgn[:, None, None] * jnp.stack([f[..., 0], f[..., 1], mom], axis=-1)  # (ni, 2 cols, 3 rows)
+        sign = jnp.asarray(sgn, dtype)  # the dtype of q (a float64 constant would promote float32)
+        vals = sign[:, None, None] * jnp.stack([f[..., 0], f[..., 1], mom], axis=-1)  # (ni, 2 cols, 3 rows)
         A = jnp.zeros((3 * nb, n), dtype).at[st.rows, st.cols].add(vals.reshape(-1))
     else:
         A = jnp.zeros((3 * nb, n), dtype)
@@ -184,9 +185,9 @@ def system(mech: Mechanism, mdl: _bodies.Model, q, phi, p, omega, alpha=0.0):
         tension = sp.preload + sp.stiffness * (length - sp.length)
         ext_f, ext_m = apply(ext_f, ext_m, sp.a, start, tension * u)  # pulls the first end towards the second
         ext_f, ext_m = apply(ext_f, ext_m, sp.b, end, -tension * u)
-    gmi = st.mass[:, None] * (g - acc_c)  # gravity minus inertia force, (nb, 2)
+    gmi = jnp.asarray(st.mass, dtype)[:, None] * (g - acc_c)  # gravity minus inertia force, (nb, 2)
     q_f = -ext_f[:nb] - gmi
-    q_m = (st.inertia * acc_th - _cross_rows(c - ref, gmi) - ext_m[:nb]) / L
+    q_m = (jnp.asarray(st.inertia, dtype) * acc_th - _cross_rows(c - ref, gmi) - ext_m[:nb]) / L
     Q = jnp.stack([q_f[:, 0], q_f[:, 1], q_m], axis=1).reshape(-1)
     return A, Q, L, axes
 

@@ -144,11 +144,16 @@ def branch_point_warnings(table) -> None:
 
 
 def load_from_args(args):
-    """The mechanism of FILE with the `--set` overrides applied."""
+    """The mechanism of FILE with the `--set` overrides applied, the whole file validated: every
+    table the reader checks, and `[optimize]` as `jaxlink optimize` checks it (for every command,
+    `check` and `kinematics` too; nothing is compiled)."""
     from ..files.overrides import parse_numbers
     from ..files.reader import load
+    from ..optimize.problem import check_table
 
-    return load(args.file, overrides=parse_numbers(getattr(args, "set", [])))
+    mech = load(args.file, overrides=parse_numbers(getattr(args, "set", [])))
+    check_table(mech)
+    return mech
 
 
 def inputs_from_args(mech, args) -> np.ndarray:
@@ -222,8 +227,9 @@ def register(sub) -> None:
 
     p = sub.add_parser(
         "check", help="check a mechanism file and report its structure",
-        description="Validate a mechanism file (every table, [bodies], [joints], [loads] and "
-                    "[environment] included) and report parameters (with their inferred units), "
+        description="Validate a mechanism file (every table, [bodies], [joints], [loads], [environment] "
+                    "and [optimize], as `optimize` checks it, included) and report parameters (with their "
+                    "inferred units), "
                     "unknowns, loops, equations, bodies and joints, mobility and whether the guess "
                     "assembles. "
                     "Exit status 2 with a one-line message naming file, line, key and reason when "
@@ -273,7 +279,7 @@ def cmd_scenes(args) -> int:
 
 
 def cmd_check(args) -> int:
-    enable_dtype(args.dtype)
+    dtype = enable_dtype(args.dtype)
     import jax.numpy as jnp
 
     from ..model import structure as _structure
@@ -320,10 +326,11 @@ def cmd_check(args) -> int:
         g = info["grubler"]
         print(f"            {g['mobility']} by Grübler: u = {g['members']} members, s = {g['joint_count']} "
               f"joint count, n = 3(u−1) − 2s; independent loops k = s − u + 1 = {g['loops']}")
-    sol = solve(mech, np.asarray([mech.input_start]))
+    p = np.asarray(mech.parameters, dtype)  # the solve in the asked dtype
+    sol = solve(mech, np.asarray([mech.input_start], dtype), p)
     code = int(sol.result[0])
-    jac = np.asarray(__import__("jax").jacfwd(mech.residual)(sol.q[0], jnp.asarray(mech.input_start),
-                                                             jnp.asarray(mech.parameters)))
+    jac = np.asarray(__import__("jax").jacfwd(mech.residual)(sol.q[0], jnp.asarray(mech.input_start, dtype),
+                                                             jnp.asarray(p)))
     _, ratio = solve_small(jnp.asarray(jac), jnp.zeros(jac.shape[0]))
     cond = np.linalg.cond(jac)
     how = ("closed-form dyads" if method_for(mech, NewtonOptions()) == "closed_form"

@@ -3,8 +3,11 @@
 Every error names the file, the line (found in the text that was parsed) and the key.
 
 **Domains.** Every number is checked where it is read (`NUMBER_LIMIT` as written, then the
-domain of its kind in SI, `DOMAINS`): a value outside them is refused with the file, line, key,
+domain of what it is in SI, `DOMAINS`): a value outside them is refused with the file, line, key,
 the value and the allowed range. A `--set` value is checked the same way and blamed on `--set`.
+What a value is follows from its kind and its use: a parameter that stands alone as the LENGTH of
+a term `NAME @ ANGLE` of a loop is a link length; any other length (a coordinate, an offset, a
+slider's position, a point's offset) may be as small as it likes.
 """
 
 from __future__ import annotations
@@ -30,10 +33,10 @@ LENGTH_UNITS = {"m": 1.0, "mm": 1e-3, "cm": 1e-2}
 ANGLE_UNITS = {"rad": 1.0, "deg": math.pi / 180.0}
 #: largest magnitude of any number written in a mechanism file (in its units)
 NUMBER_LIMIT = 1e15
-#: SI domain of each kind of value: (smallest non-zero magnitude, largest magnitude). Lengths from a
-#: nanometre to 1000 km (0 allowed: an offset), angles within ±1e4 rad (about 1600 turns), pure
-#: numbers within ±1e9.
-DOMAINS = {"length": (1e-9, 1e6), "angle": (0.0, 1e4), "number": (0.0, 1e9)}
+#: SI domain of each kind of value: (smallest non-zero magnitude, largest magnitude). A link length
+#: from a nanometre to 1000 km (or 0); any other length (a coordinate, an offset) within ±1000 km,
+#: however small; angles within ±1e4 rad (about 1600 turns), pure numbers within ±1e9.
+DOMAINS = {"link length": (1e-9, 1e6), "length": (0.0, 1e6), "angle": (0.0, 1e4), "number": (0.0, 1e9)}
 _SI_UNIT = {"length": "m", "angle": "rad", "number": ""}
 KNOWN_TABLES = {
     "mechanism", "parameters", "input", "unknowns", "loops", "points",
@@ -314,18 +317,25 @@ def loads(text: str, *, file: str = "<string>", overrides: Mapping[str, float] |
             return MechanismError(f"--set {pname}={pvalues[pname]:g}: {msg}")
         return err(msg, "parameters", pname)
 
-    def in_domain(name: str, value: float, kind: str, make) -> None:
-        """Refuse a value (file units) outside the SI domain of its kind (`DOMAINS`)."""
-        lo, hi = DOMAINS[kind]
+    def in_domain(name: str, value: float, kind: str, make, what: str | None = None) -> None:
+        """Refuse a value (file units) outside the SI domain (`DOMAINS`) of what it is (`what`:
+        "link length", default its kind)."""
+        what = what or kind
+        lo, hi = DOMAINS[what]
         si = abs(value * fac[kind])
         if si > hi or 0.0 < si < lo:
             unit = {"length": lu, "angle": au, "number": ""}[kind]
             rng = (f"0 or {lo:g} to {hi:g} {_SI_UNIT[kind]}" if lo else f"{-hi:g} to {hi:g} {_SI_UNIT[kind]}").strip()
-            raise make(f"{kind} '{name}' = {value:g}{(' ' + unit) if unit else ''} is out of range: a {kind} "
+            a = "an" if what[0] in "aeiou" else "a"
+            raise make(f"{what} '{name}' = {value:g}{(' ' + unit) if unit else ''} is out of range: {a} {what} "
                        f"is {rng}" + (" in magnitude" if lo else ""))
     fac: dict[str, float] = {"length": units.length, "angle": units.angle, "number": 1.0}
+    # link lengths: parameters standing alone as the LENGTH of a term `NAME @ ANGLE` of a loop
+    links = {t.length.name for _, terms in loops for t in terms
+             if t.polar and isinstance(t.length, _expr.Name) and t.length.name in pvalues}
     for n in pnames:
-        in_domain(n, pvalues[n], kinds[n] or "number", lambda m, _n=n: blame(_n, m))
+        in_domain(n, pvalues[n], kinds[n] or "number", lambda m, _n=n: blame(_n, m),
+                  "link length" if n in links and kinds[n] == "length" else None)
     for n in guesses:
         in_domain(n, guesses[n], kinds[n] or "number", lambda m, _n=n: err(m, "unknowns", _n))
     in_domain(input_name, input_start, kinds[input_name] or "number", lambda m: err(m, "input", "start"))

@@ -35,10 +35,9 @@ import numpy as np
 
 from ..analysis import feasibility as _feasibility
 from ..analysis.transfer import transfer_one
-from ..solvers import dyads as _dyads
 from ..solvers.assemble import NewtonOptions, default_rtol, solve_path
 from .objectives import OBJECTIVES, PathData, to_python
-from .problem import Problem
+from .problem import Problem, start_method
 from .sharding import default_chunk, design_sharding, pad_rows, put
 from .start import circuit_signs, closed_form_start, continuation_start, file_configuration
 
@@ -66,15 +65,7 @@ class Evaluator:
         phi0 = float(problem.phis[0])
         self.phi0 = phi0
         self.q_file = file_configuration(mech, phi0)
-        self.dyads = _dyads.classify(mech)
-        method = problem.start_method
-        if method == "auto":
-            method = "closed_form" if self.dyads is not None else "continuation"
-        if method == "closed_form" and self.dyads is None:
-            raise problem.error("start_method = \"closed_form\" needs a mechanism made of dyads (RRR/RRP/PP "
-                                "blocks); use \"continuation\"", "start_method")
-        if problem.circuits == "all" and self.dyads is None:
-            raise problem.error("circuits = \"all\" needs a mechanism made of dyads; use \"file\"", "circuits")
+        self.dyads, method = start_method(problem)
         self.start_method = method
         # "auto": every circuit when the objective is the untimed path (`points`): which branch
         # traces the shape is part of the answer; the file's otherwise
@@ -117,9 +108,9 @@ class Evaluator:
     # ------------------------------------------------------------------ single design (traced)
     def params(self, u):
         pr = self.problem
-        x = jnp.asarray(pr.lower) + u * jnp.asarray(pr.upper - pr.lower)
+        x = jnp.asarray(pr.lower, u.dtype) + u * jnp.asarray(pr.upper - pr.lower, u.dtype)
         p = jnp.asarray(self.mech.parameters, dtype=u.dtype)
-        return p.at[jnp.asarray(pr.index)].set(x * jnp.asarray(pr.factor))
+        return p.at[jnp.asarray(pr.index)].set(x * jnp.asarray(pr.factor, u.dtype))
 
     def start(self, p, c):
         dtype = p.dtype

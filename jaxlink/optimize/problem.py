@@ -44,6 +44,9 @@ NUMBER_DOMAINS = {
     "rod_max": (0.0, 90.0, True), "toggle_min": (0.0, 180.0, True), "amax_max": (0.0, 1e12, False),
     "penalty": (0.0, 1e12, True), "rpm": (-1e7, 1e7, True), "time": (0.0, 1e7, False),
 }
+#: the string keys of the searches and their values (a search given none of these keys in Python
+#: refuses the value again: `jaxlink/optimize/searches/__init__.py`)
+CHOICES = {"uniform": ("grid", "coordinate"), "gradient_solver": ("lbfgs", "al-lbfgs")}
 #: share of the available memory one batch of the evaluator may take (the rest: JAX, the searches)
 MEMORY_SHARE = 0.5
 
@@ -113,13 +116,91 @@ class Problem:
 def problem_from(mech: Mechanism, overrides: Mapping[str, Any] | None = None) -> Problem:
     """Parse `mech.tables["optimize"]` (with `overrides` of its keys) into a `Problem`.
 
-    Raises `MechanismError` (file, key, reason) for anything wrong.
+    Raises `MechanismError` (file, line, key, reason) for anything wrong.
     """
-    table = dict(mech.tables.get("optimize") or {})
-    table.update(overrides or {})
+    try:
+        return _problem_from(mech, overrides)
+    except MechanismError as e:
+        raise located(e) from None
+
+
+def check_table(mech: Mechanism) -> None:
+    """Validate the file's `[optimize]` table as `jaxlink optimize` does — its keys, their domains,
+    the point, the variables and their bounds, the objective's own keys (its factory reads them)
+    and whether the start method and circuits suit the mechanism — compiling nothing. Every
+    command that loads a file calls it (`jaxlink/cli/mechanism.py`, `load_from_args`), so a file
+    that `optimize` would refuse is refused by `check` and `kinematics` too, with the same message.
+    Nothing to check when the file has no `[optimize]` table (or an empty one)."""
+    table = mech.tables.get("optimize")
+    if table is None or (isinstance(table, dict) and not table):
+        return
+    try:
+        # a table without `variables` sets up no search (needle-arachne's: the roles of the dwell
+        # metrics): what it has is checked, what a search needs is not asked for
+        problem = _problem_from(mech, None, search=not isinstance(table, dict) or "variables" in table)
+        if problem.objective:
+            from .objectives import OBJECTIVES
+
+            OBJECTIVES.build(problem)
+        start_method(problem)
+    except MechanismError as e:
+        raise located(e) from None
+
+
+def start_method(problem: Problem) -> tuple[tuple | None, str]:
+    """`(dyads, method)`: the mechanism's dyads (`jaxlink.solvers.dyads.classify`, None when some
+    block has no closed form) and the start method `start_method` resolves to ("auto":
+    "closed_form" on dyads, else "continuation"). Refuses "closed_form" and `circuits = "all"` on a
+    mechanism that is not made of dyads."""
+    from ..solvers import dyads as _dyads
+
+    dyads = _dyads.classify(problem.mech)
+    method = problem.start_method
+    if method == "auto":
+        method = "closed_form" if dyads is not None else "continuation"
+    if method == "closed_form" and dyads is None:
+        raise problem.error("start_method = \"closed_form\" needs a mechanism made of dyads (RRR/RRP/PP "
+                            "blocks); use \"continuation\"", "start_method")
+    if problem.circuits == "all" and dyads is None:
+        raise problem.error("circuits = \"all\" needs a mechanism made of dyads; use \"file\"", "circuits")
+    return dyads, method
+
+
+def located(e: MechanismError) -> MechanismError:
+    """`e` with the line of its `[optimize]` key in its file (read again: the `Problem` keeps the
+    values, not the text); `e` itself when it has a line, names no file that can be read, or no
+    `optimize` key."""
+    if e.line is not None or not e.file or not (e.key or "").startswith("optimize"):
+        return e
+    from ..files.locator import Locator
+    from ..files.source import read_source
+
+    try:
+        _, text = read_source(e.file)
+    except (MechanismError, OSError):
+        return e
+    table, _, rest = (e.key or "").partition(".")
+    key, _, item = rest.partition(".")
+    loc = Locator(text)
+    line = (loc.line(table, key, item) if key and item else None) or (loc.line(table, key) if key else None)
+    line = line or loc.line(table)
+    return MechanismError(e.reason, file=e.file, line=line, key=e.key) if line else e
+
+
+def _problem_from(mech: Mechanism, overrides: Mapping[str, Any] | None, *, search: bool = True) -> Problem:
+    """`problem_from`; `search=False` (`check_table` of a table without `variables`): every key
+    present checked, none required — no variables, the point and the angle input only if given,
+    the objective only if named or, when not, the one objective that reads the table's own keys
+    (else `objective` is "" and no objective is built)."""
+    raw = mech.tables.get("optimize")
 
     def err(msg, key=None):
         return MechanismError(msg, file=mech.file, key="optimize" + (f".{key}" if key else ""))
+
+    if raw is not None and not isinstance(raw, dict):
+        raise err(f"[optimize] must be a table of keys, got {raw!r}")
+    table = dict(raw or {})
+    table.update(overrides or {})
 
     if not table:
         raise err("the file has no [optimize] section; add one (point, variables, samples, objective)")
@@ -130,17 +211,20 @@ def problem_from(mech: Mechanism, overrides: Mapping[str, Any] | None = None) ->
             raise err(f"unknown key '{k}'; known keys: {', '.join(sorted(KNOWN_KEYS | OBJECTIVES.known_keys()))}", k)
 
     _check_domains(table, err)
+    for key, choices in CHOICES.items():
+        if key in table and table[key] not in choices:
+            raise err(f"'{key}' must be one of {', '.join(map(repr, choices))}, got {table[key]!r}", key)
 
     # point
-    if not mech.point_names:
+    if search and not mech.point_names:
         raise err("the mechanism has no [points]; the objective needs one", "point")
-    point = table.get("point", mech.point_names[0])
-    if not isinstance(point, str) or point not in mech.point_names:
-        raise err(f"unknown point '{point}'; points: {', '.join(mech.point_names)}", "point")
+    point = table.get("point", mech.point_names[0] if mech.point_names else None)
+    if (search or point is not None) and (not isinstance(point, str) or point not in mech.point_names):
+        raise err(f"unknown point '{point}'; points: {', '.join(mech.point_names) or '(none)'}", "point")
 
     # variables
-    variables = table.get("variables")
-    if not isinstance(variables, dict) or not variables:
+    variables = table.get("variables", None if search else {})
+    if not isinstance(variables, dict) or (search and not variables):
         raise err("'variables' must be a table NAME = [lower, upper] (file units) with at least one entry",
                   "variables")
     names, index, lo, hi, fac = [], [], [], [], []
@@ -178,7 +262,7 @@ def problem_from(mech: Mechanism, overrides: Mapping[str, Any] | None = None) ->
         phi0 = mech.to_si(mech.input_name, start)
         if abs(phi0) > 1e4:
             raise err(f"'start' = {start:g} is out of range: the input is within ±1e4 rad", "start")
-    if mech.input_kind != "angle":
+    if search and mech.input_kind != "angle":
         raise err("design search needs a rotating (angle) input: the path is a full revolution", "samples")
     phis = phi0 + 2.0 * np.pi * np.arange(samples) / samples
 
@@ -190,15 +274,24 @@ def problem_from(mech: Mechanism, overrides: Mapping[str, Any] | None = None) ->
         raise err(f"'start_method' must be \"auto\", \"closed_form\" or \"continuation\", got {start_method!r}",
                   "start_method")
 
-    objective = table.get("objective", "points")
-    if not isinstance(objective, str) or objective not in OBJECTIVES:
+    objective = table.get("objective", "points" if search else _objective_reading(table))
+    if (search or objective) and (not isinstance(objective, str) or objective not in OBJECTIVES):
         raise err(f"unknown objective '{objective}'; known: {', '.join(OBJECTIVES)}", "objective")
 
     return Problem(
         mech=mech, names=tuple(names), index=tuple(index), lower=np.asarray(lo), upper=np.asarray(hi),
-        factor=np.asarray(fac), point=mech.point_names.index(point), phis=phis, circuits=circuits,
-        start_method=start_method, objective=objective, options=table,
+        factor=np.asarray(fac), point=mech.point_names.index(point) if point is not None else -1, phis=phis,
+        circuits=circuits,        start_method=start_method, objective=objective, options=table,
     )
+
+
+def _objective_reading(table: Mapping[str, Any]) -> str:
+    """The one objective whose keys include every objective key of `table` ("" if none or several)."""
+    from .objectives import OBJECTIVES
+
+    own = {k for k in table if k not in KNOWN_KEYS}
+    fits = [name for name in OBJECTIVES if own and own <= set(OBJECTIVES.keys_of(name))]
+    return fits[0] if len(fits) == 1 else ""
 
 
 def _check_domains(table: Mapping[str, Any], err) -> None:

@@ -1152,7 +1152,9 @@ def _warn_if_float32(p) -> None:
     global _warned_float32
     if _warned_float32 or jax.config.read("jax_enable_x64"):
         return
-    if p is None or np.result_type(getattr(p, "dtype", np.asarray(p).dtype)) == np.float64:
+    # a traced `p` has a dtype; only a Python or numpy value is converted to read it (never a tracer)
+    dtype = getattr(p, "dtype", None)
+    if p is None or np.result_type(np.asarray(p).dtype if dtype is None else dtype) == np.float64:
         _warned_float32 = True
         warnings.warn(
             "jaxlink: JAX computes in float32 here (jax_enable_x64 is off), so positions are accurate to "
