@@ -1,7 +1,7 @@
 """A cache never changes an answer (issue 23): every command that writes numbers gives the same
 bytes with a cold cache, a warm cache and the cache off, and after changing one thing at a time
-(a guess — the other assembly branch —, `[input] start`, a parameter, `--set`, the input range,
-`--outputs`) a warm run equals a cache-off run.
+(a guess — the other assembly branch —, `[input] start`, a parameter, a constant in a loop,
+`--set`, the input range, `--outputs`, the speed, the dtype) a warm run equals a cache-off run.
 
 Three processes run the same list of commands in-process (`jaxlink.cli.main`), each writing what
 the command printed and the files it wrote: *cold* (an empty cache directory, the commands in
@@ -107,6 +107,7 @@ def _commands(paths: dict) -> list:
         ("outputs", ["kinematics", a, "--count", "9", "--step", "40", "--outputs", "position,rates",
                      "--csv", "{OUT}/outputs.csv"]),
         ("speed", ["kinematics", a, "--count", "9", "--step", "40", "--rpm", "300", "--csv", "{OUT}/speed.csv"]),
+        ("f32", ["kinematics", a, "--count", "9", "--step", "40", "--dtype", "float32", "--csv", "{OUT}/f32.csv"]),
         # every built-in linkage scene, and the reactions of the one with masses
         ("feed", ["kinematics", "sewing-feed", "--count", "8", "--step", "45", "--csv", "{OUT}/feed.csv"]),
         ("needle", ["kinematics", "needle-arachne", "--count", "8", "--step", "45", "--csv", "{OUT}/needle.csv"]),
@@ -232,6 +233,9 @@ def test_the_variants_give_their_own_numbers(runs):
     np.testing.assert_allclose(rows["D"]["P_x_m"], rows["A"]["P_x_m"], rtol=0, atol=1e-15)
     assert not np.allclose(rows["A"]["P_x_m"], rows["E"]["P_x_m"])
     assert out["off"]["set-b.csv"] != out["off"]["kin-A.csv"]
+    f32 = np.genfromtxt(out["off"]["f32.csv"].splitlines(), delimiter=",", names=True)
+    assert not np.array_equal(f32["P_x_m"], rows["A"]["P_x_m"])  # float32 numbers ...
+    np.testing.assert_allclose(f32["P_x_m"], rows["A"]["P_x_m"], rtol=0, atol=1.2e-4 * 0.06)  # ... near float64
 
 
 def test_the_python_api_gives_the_same_numbers(runs):
