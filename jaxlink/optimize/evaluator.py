@@ -35,6 +35,7 @@ import numpy as np
 
 from ..analysis import feasibility as _feasibility
 from ..analysis.transfer import transfer_one
+from ..solvers import dyads as _dyads
 from ..solvers.assemble import NewtonOptions, default_rtol, solve_path
 from .objectives import OBJECTIVES, PathData, to_python
 from .problem import Problem, start_method
