@@ -188,24 +188,41 @@ def _search_commands(scene: str) -> list:
             best]
 
 
-@pytest.fixture(scope="session")  # once per worker (a module's fixture is set up again when xdist
-def runs(tmp_path_factory):  # runs another module's test between two of this module's)
+@pytest.fixture(scope="session")
+def runs(tmp_path_factory):
     """The same commands cold, warm (reversed, each search still before the table of its best
     file) and off. The built-in search scenes run cold and warm only (their searches compile the
-    most; `optimize` of the plain four-bar file is the cache-off comparison of a search)."""
-    tmp = tmp_path_factory.mktemp("differential")
-    paths = _variants(tmp)
-    cmds = _commands(paths) + [_best_kinematics("yu1", str(paths["yu1"]))]
-    groups = [[c] for c in cmds[:-2]] + [cmds[-2:]]
-    assert [c[0] for c in groups[-1]] == ["opt-yu1", "best-yu1"]
-    searches = [_search_commands(scene) for scene in SEARCH_SCENES]
-    cache = tmp / "xla"
-    out = {
-        "cold": _run(tmp / "cold", cmds + sum(searches, []), cache),
-        "warm": _run(tmp / "warm", sum(groups[::-1] + searches[::-1], []), cache),
-        "off": _run(tmp / "off", cmds, ""),
-    }
-    return tmp, paths, cmds, out
+    most; `optimize` of the plain four-bar file is the cache-off comparison of a search).
+
+    Made once per test run: in a folder shared by the pytest-xdist workers, under a file lock,
+    and read back by any worker that needs it again (xdist set this fixture up twice otherwise)."""
+    import fcntl
+    import pickle
+
+    root = tmp_path_factory.getbasetemp()
+    if os.environ.get("PYTEST_XDIST_WORKER"):
+        root = root.parent  # shared by the workers of this run
+    tmp = root / "differential"
+    done = root / "differential.pickle"
+    with open(root / "differential.lock", "w") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)
+        if done.exists():
+            return pickle.loads(done.read_bytes())
+        tmp.mkdir()
+        paths = _variants(tmp)
+        cmds = _commands(paths) + [_best_kinematics("yu1", str(paths["yu1"]))]
+        groups = [[c] for c in cmds[:-2]] + [cmds[-2:]]
+        assert [c[0] for c in groups[-1]] == ["opt-yu1", "best-yu1"]
+        searches = [_search_commands(scene) for scene in SEARCH_SCENES]
+        cache = tmp / "xla"
+        out = {
+            "cold": _run(tmp / "cold", cmds + sum(searches, []), cache),
+            "warm": _run(tmp / "warm", sum(groups[::-1] + searches[::-1], []), cache),
+            "off": _run(tmp / "off", cmds, ""),
+        }
+        result = (tmp, paths, cmds, out)
+        done.write_bytes(pickle.dumps(result))
+        return result
 
 
 def test_cold_warm_and_off_give_the_same_bytes(runs):
