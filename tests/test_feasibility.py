@@ -161,3 +161,21 @@ def test_optimize_exits_1_when_no_design_turns_fully(tmp_path, capsys):
     out = capsys.readouterr()
     assert "none" in out.out and "assemble" in out.err
     assert not (tmp_path / "r.best.toml").exists()
+
+
+def test_a_newton_block_design_is_checked_at_ten_times_the_samples():
+    """The same four-bar with its coupler written as two half vectors: th3 is in two terms, so
+    the loop is a Newton block, not a dyad, and there is no reach margin. Its reported design is
+    re-solved at 10 × the search's 72 samples: the window of l3 = 64.99 (178.31°…181.69°, between
+    two checked positions) is found there, and a design without one passes."""
+    src = text(GAP_L3, targets=[[40.0, 20.0], [30.0, 40.0], [10.0, 30.0]])
+    mech = loads(src.replace('"l3 @ th3"', '"0.5 * l3 @ th3", "0.5 * l3 @ th3"'), file="newton.toml")
+    assert _dyads.classify(mech) is None
+    ev = Evaluator(problem_from(mech, {"report_samples": 72}), chunk=4)
+    pr = ev.problem
+    for l3, turns in ((GAP_L3, False), (65.5, True)):
+        u = pr.to_unit(np.array([l3]))
+        rep = ev.report(u, 0)
+        assert rep["feasible"]  # at the search's own 72 positions: the window falls between two
+        assert rep["certificate"] == "dense re-solve" and rep["dense_positions"] == 720
+        assert rep["certified"] is turns, l3

@@ -42,6 +42,10 @@ from .problem import Problem, start_method
 from .sharding import default_chunk, design_sharding, pad_rows, put
 from .start import circuit_signs, closed_form_start, continuation_start, file_configuration
 
+#: a mechanism not made of dyads is re-solved at this many times the search's samples (at least)
+#: before its design is reported as turning fully (`Evaluator.certified`)
+DENSE_FACTOR = 10
+
 
 class Evaluator:
     """Batched, jitted, sharded evaluation of designs for a `Problem`.
@@ -305,12 +309,18 @@ class Evaluator:
     def certified(self, u, c: int, dense_feasible: bool) -> dict:
         """What certifies that design `u` on circuit `c` assembles over its whole revolution:
         `certificate` ("reach margin": the dyads' margin refined between the search's samples,
-        `feasibility.certify`; "dense re-solve": every one of the `report_samples` positions
-        converged, for a mechanism not made of dyads), `certified` (bool), and for the reach
-        margin `margin` (the smallest, dimensionless) and `margin_at` (its input value, file
+        `feasibility.certify`; "dense re-solve": for a mechanism not made of dyads, every one of
+        `dense_positions` = max(`report_samples`, `DENSE_FACTOR` × the search's samples) positions
+        converged — finer sampling, not a proof between them), `certified` (bool), and for the
+        reach margin `margin` (the smallest, dimensionless) and `margin_at` (its input value, file
         units)."""
         if self.dyads is None:
-            return {"certificate": "dense re-solve", "certified": bool(dense_feasible)}
+            n = max(self.report_samples, DENSE_FACTOR * len(self.problem.phis))
+            ok = bool(dense_feasible)
+            if ok and n != self.report_samples:
+                order = max(self.objective.order, self.objective.report_order)
+                ok = bool(self._report_fn(n, order)(jnp.asarray(u, dtype=float), jnp.asarray(int(c)))[0])
+            return {"certificate": "dense re-solve", "certified": ok, "dense_positions": int(n)}
         fn = self.compiled(("certificate",), lambda: jax.jit(self.certificate_single))
         cert = fn(jnp.asarray(u, dtype=float), jnp.asarray(int(c)))
         name = self.mech.input_name
