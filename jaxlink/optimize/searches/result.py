@@ -172,8 +172,8 @@ def summarized(ev: Evaluator, method: str, p: Progress, *, seed: int, budget: in
             if rep["feasible"] and rep["certified"]:
                 best = dict(parameters=rep["parameters"], value=rep["objective"], search_value=v,
                             metrics=rep["metrics"], feasible=True, circuit=rep["circuit"])
-                best["certificate"] = {key: rep[key] for key in ("certificate", "certified", "margin", "margin_at")
-                                       if key in rep}
+                best["certificate"] = {key: rep[key] for key in ("certificate", "certified", "margin", "margin_at",
+                                                                 "dense_positions") if key in rep}
                 best["fallback"] = k
                 chosen = (ev, tuple(map(float, u)), int(c))
                 break
