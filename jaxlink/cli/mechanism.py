@@ -278,6 +278,43 @@ def cmd_scenes(args) -> int:
     return 0
 
 
+def _print_designer_numbers(mech, lu: str) -> None:
+    """The numbers a designer judges a linkage by: the Grashof class of every four-bar loop, the
+    input's range of motion and the dyads' transmission angles (float64, on the file's branch)."""
+    from ..analysis.grashof import describe, four_bars
+    from ..analysis.motion import motion
+
+    for i, fb in enumerate(four_bars(mech)):
+        print(f"{'four-bar' if i == 0 else '':<12}{describe(fb, mech.units.length, lu)}")
+    m = motion(mech)
+    if m is None:
+        return
+    deg = mech.units.angle != 1.0
+    name = mech.input_name
+
+    def ang(x, digits=10):
+        x = 0.0 if abs(x) < 1e-12 else x  # a limit at 0 found to rounding
+        return f"{np.degrees(x):.{digits}g}°" if deg else f"{x:.{digits}g} rad"
+
+    if m.full_turn:
+        print(f"motion      {name} turns fully (on the guesses' branch)")
+    elif m.lower is not None and m.upper is not None:
+        print(f"motion      {name} from {ang(m.lower)} to {ang(m.upper)} (limit positions: toggles), a range of "
+              f"{ang(m.upper - m.lower)}")
+    else:
+        print(f"motion      {name}: the start does not assemble on a whole turn")
+    def where(x):  # over a full turn, within one revolution [0, 360°)
+        if m.full_turn:
+            x = float(np.mod(x, 2 * np.pi))
+            x = 0.0 if x > 2 * np.pi - 1e-12 else x
+        return ang(x, 6)
+
+    for i, t in enumerate(m.transmission):
+        label = f"loop '{t['loop']}' ({', '.join(t['unknowns'])})"
+        print(f"{'transmission' if i == 0 else '':<13}{label}: {ang(t['min'])} at {name} = {where(t['min_at'])} … "
+              f"{ang(t['max'])} at {where(t['max_at'])}; worst (farthest from 90°) {ang(t['worst'])}")
+
+
 def cmd_check(args) -> int:
     dtype = enable_dtype(args.dtype)
     import jax.numpy as jnp
@@ -340,6 +377,7 @@ def cmd_check(args) -> int:
     if code == RESULTS.converged:
         print("            start configuration: " + ", ".join(
             f"{n} = {mech.from_si(n, float(v)):.6g}" for n, v in zip(mech.unknown_names, sol.q[0])))
+        _print_designer_numbers(mech, lu)
         return 0
     print(f"            {RESULTS.messages[code]}", file=sys.stderr)
     return 1

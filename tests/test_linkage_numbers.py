@@ -1,0 +1,97 @@
+"""The designer's numbers of a four-bar (issue 24, first step): Grashof class and type, the input's
+range of motion (limit positions) and the transmission angle, against their closed forms (law of
+cosines on the triangle of coupler, rocker and the diagonal from the crank pin to the rocker
+pivot, whose length runs from |d − a| to d + a)."""
+
+import json
+import math
+import os
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+import jaxlink as jl
+from jaxlink.analysis.grashof import four_bars
+from jaxlink.analysis.motion import motion
+from jaxlink.cli import main
+
+
+@pytest.fixture(scope="module")
+def four_bar():
+    return jl.load("four-bar")
+
+
+def _p(mech, a, b, c, d):
+    p = np.array(mech.parameters, dtype=float)
+    for k, v in dict(a=a, b=b, c=c, d=d).items():
+        p[mech.parameter_names.index(k)] = v * 1e-3
+    return p
+
+
+@pytest.mark.parametrize("abcd, cls, typ", [
+    ((20, 60, 45, 55), "Grashof", "crank-rocker"),       # the scene: the input shortest
+    ((50, 60, 45, 20), "Grashof", "double-crank"),       # the frame shortest (drag link)
+    ((50, 20, 45, 55), "Grashof", "double-rocker"),      # the coupler shortest
+    ((50, 60, 20, 55), "Grashof", "rocker-crank"),       # the output shortest
+    ((20, 40, 30, 55), "non-Grashof", "triple-rocker"),  # s + l = 75 > p + q = 70
+    ((20, 55, 20, 55), "change point", None),            # the parallelogram: s + l = p + q
+])
+def test_grashof_class_and_type(four_bar, abcd, cls, typ):
+    (fb,) = four_bars(four_bar, _p(four_bar, *abcd))
+    assert (fb.grashof, fb.type) == (cls, typ)
+    assert fb.links["input"] == pytest.approx(abcd[0] * 1e-3) and fb.links["coupler"] == pytest.approx(abcd[1] * 1e-3)
+
+
+def test_crank_rocker_turns_fully_and_its_transmission_angle_is_exact(four_bar):
+    a, b, c, d = 20.0, 60.0, 45.0, 55.0
+    m = motion(four_bar)
+    assert m.full_turn and m.lower is None
+    (t,) = m.transmission
+    mu_min = math.acos((b * b + c * c - (d - a) ** 2) / (2 * b * c))  # crank along the frame, toward B0
+    mu_max = math.acos((b * b + c * c - (d + a) ** 2) / (2 * b * c))  # crank pointing away
+    assert abs(t["min"] - mu_min) < 1e-9 and abs(t["max"] - mu_max) < 1e-9
+    assert abs(math.remainder(t["min_at"], 2 * math.pi)) < 1e-6 and abs(t["max_at"] - math.pi) < 1e-6
+    assert t["worst"] == pytest.approx(min(mu_min, math.pi - mu_max), abs=1e-12)
+
+
+LIMITS = r"""
+import jax, json, sys
+jax.config.update("jax_enable_x64", True)
+import numpy as np, jaxlink as jl
+from jaxlink.analysis.motion import motion
+m = jl.load("four-bar")
+p = np.array(m.parameters, dtype=float)
+for k, v in zip("abcd", json.loads(sys.argv[1])):
+    p[m.parameter_names.index(k)] = v * 1e-3
+r = motion(m, p)
+print(json.dumps([r.full_turn, r.lower, r.upper, r.transmission[0]["max"]]))
+"""
+
+
+def test_non_grashof_input_limits_are_the_toggles():
+    """The input of a triple-rocker stops where coupler and rocker come into line,
+    cos φ = (a² + d² − (b + c)²) / (2 a d): ±132.1° around its start (0°). Run at XLA's shipped
+    optimization level (a subprocess): at the suite's level 0 the located toggle is 3.6e-9 rad off
+    (4.4e-16 at the shipped level; the margin and its derivative agree at both levels)."""
+    a, b, c, d = 20.0, 40.0, 30.0, 55.0
+    env = dict(os.environ, XLA_FLAGS=" ".join(f for f in os.environ.get("XLA_FLAGS", "").split()
+                                              if "xla_backend_optimization_level" not in f))
+    r = subprocess.run([sys.executable, "-c", LIMITS, json.dumps([a, b, c, d])], env=env, capture_output=True,
+                       text=True, timeout=300)
+    assert r.returncode == 0, r.stderr
+    full, lower, upper, mu_max = json.loads(r.stdout.strip().splitlines()[-1])
+    limit = math.acos((a * a + d * d - (b + c) ** 2) / (2 * a * d))
+    assert not full
+    assert abs(upper - limit) < 1e-9 and abs(lower + limit) < 1e-9
+    assert abs(mu_max - math.pi) < 1e-6  # in line at the limits
+
+
+def test_check_prints_them(four_bar, capsys):
+    assert main(["check", "four-bar"]) == 0
+    out = capsys.readouterr().out
+    assert "loop 'main': Grashof, crank-rocker" in out
+    assert "phi2 turns fully" in out
+    mu_min = math.degrees(math.acos((60.0**2 + 45.0**2 - 35.0**2) / (2 * 60 * 45)))
+    assert f"{mu_min:.10g}°" in out
