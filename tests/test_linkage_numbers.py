@@ -95,3 +95,35 @@ def test_check_prints_them(four_bar, capsys):
     assert "phi2 turns fully" in out
     mu_min = math.degrees(math.acos((60.0**2 + 45.0**2 - 35.0**2) / (2 * 60 * 45)))
     assert f"{mu_min:.10g}°" in out
+
+
+NARROW = r"""
+import jax, json, math
+jax.config.update("jax_enable_x64", True)
+import numpy as np, jaxlink as jl
+from jaxlink.analysis.motion import motion
+src = open(jl.load("four-bar").file).read().replace('name = "phi2"', 'name = "phi2"\nstart = 1.234')
+m = jl.loads(src, file="narrow.toml")
+p = np.array(m.parameters, dtype=float)
+for k, v in zip("abcd", (30.0, 64.999999, 65.0, 100.0)):
+    p[m.parameter_names.index(k)] = v * 1e-3
+ph = np.deg2rad(1.234 + 0.1 * np.arange(3600))
+assert bool(np.all(np.asarray(jl.solve(m, ph, p).converged)))  # every sample of motion() assembles
+r = motion(m, p)
+print(json.dumps([r.full_turn, r.lower, r.upper]))
+"""
+
+
+def test_a_window_between_two_samples_is_not_a_full_turn():
+    """a = 30, b = 64.999999, c = 65, d = 100 (mm): the crank cannot pass 180° ± 0.017°, a window
+    between two of the 3600 positions (179.934° and 180.034° from a start of 1.234°). Not a full
+    turn; the limits are the toggles cos φ = (a² + d² − (b + c)²) / (2ad) (shipped XLA level)."""
+    env = dict(os.environ, XLA_FLAGS=" ".join(f for f in os.environ.get("XLA_FLAGS", "").split()
+                                              if "xla_backend_optimization_level" not in f))
+    r = subprocess.run([sys.executable, "-c", NARROW], env=env, capture_output=True, text=True, timeout=300)
+    assert r.returncode == 0, r.stderr
+    full, lower, upper = json.loads(r.stdout.strip().splitlines()[-1])
+    a, b, c, d = 30.0, 64.999999, 65.0, 100.0
+    toggle = math.acos((a * a + d * d - (b + c) ** 2) / (2 * a * d))
+    assert not full
+    assert abs(upper - toggle) < 1e-9 and abs(lower + toggle) < 1e-9

@@ -42,7 +42,7 @@ from ..files.expr import ANGLE
 from ..model import bodies as _bodies
 from ..model.mechanism import Mechanism
 from ..results import RESULTS
-from ..solvers.assemble import solve
+from ..solvers.assemble import NewtonOptions, solve
 from ..solvers.linalg import UNROLL_MAX, solve_small
 from .transfer import along, rates
 
@@ -345,7 +345,7 @@ def solve_reactions(mech: Mechanism, phis, p=None, *, omega, alpha=0.0, singular
     `p` (P,) or (B, P) as in `solve`; `phis` (N,) in rad; `omega` rad/s; `options`: the
     `NewtonOptions` of the position solve (e.g. `change_points="smooth"`; default the defaults)."""
     _bodies.model(mech)  # validate before the (longer) position solve
-    sol = solve(mech, phis, p) if options is None else solve(mech, phis, p, options=options)
+    sol = solve(mech, phis, p, options=options or NewtonOptions())
     return sol, reactions(mech, phis, p, omega=omega, alpha=alpha, q=sol.q, converged=sol.converged,
                           singular_ratio=singular_ratio)
 

@@ -5,8 +5,10 @@ the file's guesses choose (a mechanism made of dyads: `jaxlink.solvers.dyads`).
 are solved in closed form on the file's branches; where some are not assembled, the limit
 positions between an assembled and a not assembled sample are toggles of a dyad and are located
 by `jaxlink.branch_points` (Newton's method on the squared sine between the dyad's links, to a few
-ulp). The result is the interval of inputs around `start` that the input can reach, or a full
-turn.
+ulp). Where every sample is assembled, the reach margins are still minimized between them
+(`jaxlink.analysis.feasibility.certify`): a window narrower than the samples' spacing is found,
+and its two toggles located. The result is the interval of inputs around
+`start` that the input can reach, or a full turn (certified between the samples).
 
 **Transmission angle** of a dyad of two links L_a, L_b (RRR) over its known diagonal w: the
 angle μ between the two links at their joint, cos μ = (L_a² + L_b² − |w|²) / (2 |L_a| |L_b|)
@@ -64,6 +66,39 @@ def _cos_mu(mech, dyads, j, sigma, q_ref, phi, p):
     return (La * La + Lb * Lb - (wx * wx + wy * wy)) / (2.0 * jnp.abs(La) * jnp.abs(Lb))
 
 
+def _window_between_samples(mech, dyads, sigma, q_ref, phis, p):
+    """A window where the linkage cannot assemble that lies wholly between two of the equally
+    spaced inputs `phis` of a turn (all assembled), or None: the reach margin's minimum refined
+    between the samples (`jaxlink.analysis.feasibility.certify`); where it is negative, the two
+    toggles on either side of it in its interval, the roots of that dyad's margin by the
+    bracketed Newton iteration of the branch points (`(first, second)`, turning forward)."""
+    from ..solvers.branch_points import _root, _secant
+    from .feasibility import certify
+
+    pj = jnp.asarray(p)
+    cert = jax.jit(lambda s, q, ph, pp: certify(mech, dyads, s, q, ph, pp))(sigma, q_ref, jnp.asarray(phis), pj)
+    if bool(cert.certified):
+        return None
+    where = jnp.asarray(float(cert.where))
+    j = int(jnp.argmin(_dyads.reach_margins(mech, dyads, sigma, q_ref, where, pj)))
+
+    def f(x):
+        return _dyads.reach_margins(mech, dyads, sigma, q_ref, x, pj)[j]
+
+    def F(x):
+        return jax.jvp(f, (x,), (jnp.ones_like(x),))
+
+    @jax.jit
+    def root(lo, hi):
+        flo, fhi = f(lo), f(hi)
+        return _root(F, lo, hi, flo, fhi, _secant(lo, hi, flo, fhi), jnp.asarray(True))[0]
+
+    h = float(phis[1] - phis[0])
+    k = int(np.floor((float(where) - float(phis[0])) / h))
+    a, b = jnp.asarray(float(phis[0]) + k * h), jnp.asarray(float(phis[0]) + (k + 1) * h)
+    return float(root(a, where)), float(root(where, b))
+
+
 def motion(mech: Mechanism, p=None, *, samples: int = 3600) -> Motion | None:
     """The range of motion and the dyads' transmission angles of `mech` (design `p`, SI, default
     the file's) on the branch of its guesses; None unless the input is an angle and every block
@@ -90,6 +125,10 @@ def motion(mech: Mechanism, p=None, *, samples: int = 3600) -> Motion | None:
             return Motion(False, lower, upper, [])
     q0 = jnp.asarray(np.asarray(sol.q)[0])
     sigma = _dyads.solve_nearest(mech, dyads, q0, jnp.asarray(start), jnp.asarray(p))[3]
+    if full:  # every sample assembled: certify the whole turn between them too
+        window = _window_between_samples(mech, dyads, sigma, q0, phis[:-1], p)
+        if window is not None:
+            full, upper, lower = False, window[0], window[1] - 2 * np.pi
     lo_end = start if full or lower is None else lower
     hi_end = start + 2 * np.pi if full or upper is None else upper
     trans = []

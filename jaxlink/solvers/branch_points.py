@@ -3,9 +3,9 @@
 A dyad (`_dyads`) of links L_a, L_b over its known vector w has two assembly branches σ = ±1
 that meet where the two links are collinear. How its margin
 
-    S(φ) = sin² of the angle between the two links = G / (4 L_a² L_b²),
-    G = 4 |w|² L_a² − (|w|² + L_a² − L_b²)²     (RRR: 16 × the squared area of the triangle),
-    S = 1 − (w × e_b)² / L_a²                    (RRP: the link against the slider's normal),
+    S(φ) = sin² of the angle between the two links, signed (`jaxlink.solvers.dyads.reach_margins`):
+    RRR: ((L_a + L_b)² − |w|²)(|w|² − (L_a − L_b)²) / (4 L_a² L_b²);
+    RRP: 1 − (w × e_b)² / L_a² (the link against the slider's normal); PP: (e_a × e_b)²,
 
 a smooth (polynomial) function of the input along a path, meets zero tells what lies there:
 
@@ -71,31 +71,22 @@ class BranchPoints(NamedTuple):
     step: jax.Array | np.ndarray
 
 
-def _margin(mech: Mechanism, dyad, env, trig=None):
-    """S = sin² of the angle between the dyad's two links (see the module docstring), from the
-    values `env` (and their (cos, sin) `trig`) of the names solved before it. < 0 where the dyad
-    cannot be assembled."""
-    terms = mech.loops[dyad.loop][1]
-    ta, tb = terms[dyad.terms[0]], terms[dyad.terms[1]]
-    wx, wy = _dyads._known_parts(mech, dyad, env, trig)
-    La, _ = _dyads._radius_and_offset(mech, ta, dyad.offsets[0], env, trig)
-    if dyad.kind == "RRR":
-        Lb, _ = _dyads._radius_and_offset(mech, tb, dyad.offsets[1], env, trig)
-        w2 = wx * wx + wy * wy
-        a2, b2 = La * La, Lb * Lb
-        g = 4.0 * w2 * a2 - (w2 + a2 - b2) ** 2
-        return g * 0.25 * _dyads._inverse(a2 * b2)
-    if dyad.kind == "RRP":
-        ca, sa = mech.unit_vector(tb.angle, env, trig)
-        across = wx * sa - wy * ca
-        return 1.0 - across * across * _dyads._inverse(La * La)
-    return jnp.ones_like(jnp.asarray(wx))  # PP: linear, no branches
-
-
 def margin(mech: Mechanism, dyads, j: int, sigma, q_ref, phi, p):
-    """S of dyad j at input φ, the dyads before it in closed form on their sides σ (D,)."""
-    q, _, _, _, _, trig = _dyads._solve(mech, dyads[:j], sigma[:j], q_ref, phi, p, None, with_trig=True)
-    return _margin(mech, dyads[j], mech.env(q, phi, p), trig)
+    """S of dyad j at input φ, the dyads before it in closed form on their sides σ (D,): the reach
+    margin of `jaxlink.solvers.dyads.reach_margins` (one formula for the certificate of the
+    searches and for the branch points)."""
+    return _dyads.reach_margins(mech, dyads[:j + 1], sigma[:j + 1], q_ref, phi, p)[j]
+
+
+def _interval_ends(phis, q, sigmas, assembled):
+    """Per interval k (between samples k and k + 1): its ends `a`, `b`, whether each is assembled,
+    and the sides σ and unknowns q of the assembled end (the left one where both are), which the
+    closed form continues."""
+    ok_a, ok_b = assembled[:-1], assembled[1:]
+    use_b = ~ok_a & ok_b
+    sig = jnp.where(use_b[:, None], sigmas[1:], sigmas[:-1])
+    qr = jnp.where(use_b[:, None], q[1:], q[:-1])
+    return phis[:-1], phis[1:], ok_a, ok_b, sig, qr
 
 
 def _jets(f, x):
@@ -160,12 +151,7 @@ def locate(mech: Mechanism, dyads, sigmas, q, phis, p, assembled, singular_ratio
     **Returns:** `BranchPoints`, (N − 1, D) each."""
     dtype = jnp.result_type(phis)
     D = len(dyads)
-    a, b = phis[:-1], phis[1:]
-    ok_a, ok_b = assembled[:-1], assembled[1:]
-    # the sides of the assembled end (the left one where both are): the closed form continues it
-    use_b = ~ok_a & ok_b
-    sig = jnp.where(use_b[:, None], sigmas[1:], sigmas[:-1])
-    qr = jnp.where(use_b[:, None], q[1:], q[:-1])
+    a, b, ok_a, ok_b, sig, qr = _interval_ends(phis, q, sigmas, assembled)
     thr2 = float(singular_ratio) ** 2
 
     def one_dyad(j):
@@ -250,11 +236,7 @@ def _candidates(mech, dyads, sigmas, phis, q, p, assembled):
     φ − 2 S / S′ from either end predicts φ*; a minimum well above zero (a crank-rocker's least
     transmission angle) predicts a point far outside the interval and is left out. A toggle is
     kept where S changes sign between an assembled and a not assembled sample."""
-    a, b = phis[:-1], phis[1:]
-    ok_a, ok_b = assembled[:-1], assembled[1:]
-    use_b = ~ok_a & ok_b
-    sig = jnp.where(use_b[:, None], sigmas[1:], sigmas[:-1])
-    qr = jnp.where(use_b[:, None], q[1:], q[:-1])
+    a, b, ok_a, ok_b, sig, qr = _interval_ends(phis, q, sigmas, assembled)
 
     def one(j):
         def interval(sg, qq, x0, x1, oa, ob):
