@@ -3,7 +3,7 @@ kinematics, reactions, design search and cam-follower dynamics.
 
 The public API (everything else is internal and may change):
 
-- files: `load`, `loads`, `Mechanism`, `MechanismError`;
+- files: `load`, `loads`, `Mechanism`, `MechanismError`; a mechanism from joints and links: `Sketch`;
 - positions: `solve`, `solve_path`, `NewtonOptions`, `Solution`, `SolveStats`, `RESULTS`;
 - branch points between samples (change points, toggles): `branch_points`, `BranchPoints`;
 - kinematics: `transfer`, `Transfer`, `time_derivatives`;
@@ -33,6 +33,7 @@ from .errors import MechanismError as MechanismError
 from .files.reader import load as load
 from .files.reader import loads as loads
 from .model.mechanism import Mechanism as Mechanism
+from .model.sketch import Sketch as Sketch
 from .results import RESULTS as RESULTS
 from .results import Solution as Solution
 from .results import SolveStats as SolveStats

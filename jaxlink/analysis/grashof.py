@@ -2,8 +2,9 @@
 
 A loop of four polar vectors — the input link (its angle the input plus a constant), two links at
 unknown angles, and a frame vector of constant angle — is a four-bar loop, whatever the rest of
-the mechanism. With s and l the shortest and longest of the four lengths and p, q the others
-(Grashof's law):
+the mechanism. Neighbouring vectors that do not move (the coordinates of two frame joints, as a
+sketch file writes them) are one frame link. With s and l the shortest and longest of the four
+lengths and p, q the others (Grashof's law):
 
 - s + l < p + q, **Grashof**: the shortest link turns fully relative to the others. Its type
   follows from where the shortest link is: the frame — **double-crank** (drag link); the input —
@@ -64,25 +65,48 @@ def four_bars(mech: Mechanism, p=None) -> list:
     env = mech.env(None, 0.0, p)
     unknowns = set(mech.unknown_names)
     out = []
+    moving = unknowns | {mech.input_name}
     for name, terms in mech.loops:
-        if len(terms) != 4 or not all(t.polar for t in terms):
+        # a run of vectors that do not move (a frame vector, or a frame joint's coordinates
+        # `(x, y)` and another's) is one frame link: their sum
+        const = [not any(_names(nd) & moving for nd in t.nodes()) for t in terms]
+        if all(const) or not any(const):
+            continue
+        first = next(i for i in range(len(terms)) if const[i] and not const[i - 1])
+        order = [terms[(first + k) % len(terms)] for k in range(len(terms))]
+        groups: list = []
+        for t in order:
+            c = not any(_names(nd) & moving for nd in t.nodes())
+            if c and groups and groups[-1][0] == "frame":
+                groups[-1][1].append(t)
+            else:
+                groups.append(("frame" if c else "moving", [t]))
+        if len(groups) != 4 or sum(g[0] == "frame" for g in groups) != 1:
             continue
         roles: list = []
-        for t in terms:
+        lengths: list = []
+        for kind, ts in groups:
+            if kind == "frame":
+                roles.append("frame")
+                x = sum(float(mech.term_vector(t, env)[0]) for t in ts)
+                y = sum(float(mech.term_vector(t, env)[1]) for t in ts)
+                lengths.append(float(np.hypot(x, y)))
+                continue
+            t = ts[0]
+            if not t.polar:
+                break
             lnames, anames = _names(t.length), _names(t.angle)
-            if lnames & (unknowns | {mech.input_name}):
+            if lnames & moving:
                 break  # a length that moves: a slider, not a four-bar link
             if mech.input_name in anames and not anames & unknowns:
                 roles.append("input")
             elif len(anames & unknowns) == 1 and mech.input_name not in anames:
                 roles.append("unknown")
-            elif not anames & (unknowns | {mech.input_name}):
-                roles.append("frame")
             else:
                 break
+            lengths.append(abs(float(_expr.evaluate(t.length, env, mech.kinds, mech.units, _expr.LENGTH))))
         if sorted(roles) != ["frame", "input", "unknown", "unknown"]:
             continue
-        lengths = [abs(float(_expr.evaluate(t.length, env, mech.kinds, mech.units, _expr.LENGTH))) for t in terms]
         i_in, i_fr = roles.index("input"), roles.index("frame")
         links: dict = {"input": lengths[i_in], "frame": lengths[i_fr], "coupler": None, "output": None}
         neighbours = {(i_in - 1) % 4, (i_in + 1) % 4}

@@ -315,6 +315,20 @@ def _print_designer_numbers(mech, lu: str) -> None:
               f"{ang(t['max'])} at {where(t['max_at'])}; worst (farthest from 90°) {ang(t['worst'])}")
 
 
+def _sum_text(terms) -> str:
+    """A vector sum as written: `a @ phi + b @ psi - (x, y)`."""
+    out = ""
+    for t in terms:
+        text = t.text.strip()
+        if not out:
+            out = text
+        elif text.startswith("-"):
+            out += " - " + text[1:].strip()
+        else:
+            out += " + " + text.lstrip("+").strip()
+    return out
+
+
 def cmd_check(args) -> int:
     dtype = enable_dtype(args.dtype)
     import jax.numpy as jnp
@@ -339,14 +353,32 @@ def cmd_check(args) -> int:
     print(f"parameters  {len(mech.parameter_names)}: " + ", ".join(
         f"{n} = {mech.from_si(n, v):g}{(' ' + unit[k]) if unit[k] else ''}"
         for n, v, k in zip(mech.parameter_names, mech.parameters, mech.parameter_kinds)))
+    if mech.derived:
+        values = mech.derived_values(np.asarray(mech.parameters, np.float64))
+        print(f"derived     {len(mech.derived)}: " + ", ".join(
+            f"{n} = {text} = {float(values[n]) / mech.kind_factor(k):g}{(' ' + unit[k]) if unit[k] else ''}"
+            for n, text, k, _ in mech.derived))
     print(f"input       {mech.input_name} ({mech.input_kind}), guesses hold at "
           f"{mech.from_si(mech.input_name, mech.input_start):g} {unit[mech.input_kind]}")
     print(f"unknowns    {mech.n_unknowns}: " + ", ".join(
         f"{n} ({k})" for n, k in zip(mech.unknown_names, mech.unknown_kinds)))
     print(f"loops       {len(mech.loops)} independent: " + "; ".join(
         f"{n} ({len(t)} vectors)" for n, t in mech.loops))
+    if mech.sketch is not None:  # what was derived from the joints and links
+        for n, terms in mech.loops:
+            print(f"            {n}: {_sum_text(terms)} = 0")
     print(f"equations   {mech.n_equations} scalar (x and y of each loop)")
-    print(f"points      {', '.join(mech.point_names) or '(none)'}")
+    if mech.sketch is not None:
+        lay = mech.sketch
+        sliders = "".join(f"; slider {j} on {b}" for j, b in lay.sliders)
+        drive = (f"crank {lay.input[1]}" if lay.input[0] == "crank"
+                 else f"actuator {lay.input[1][0]}–{lay.input[1][1]}")
+        print(f"sketch      frame {', '.join(lay.frame)}; links " + ", ".join(
+            f"{b} ({' '.join(js)}{': a plate' if len(js) > 2 else ''})" for b, js in lay.bodies)
+            + f"{sliders}; input: {drive}")
+        print("points      " + ("\n            ".join(f"{n} = {_sum_text(t)}" for n, t in mech.points) or "(none)"))
+    else:
+        print(f"points      {', '.join(mech.point_names) or '(none)'}")
     if mech.bodies is not None:
         mdl = mech.bodies
         names = ("ground", *mdl.body_names)

@@ -72,6 +72,7 @@ def read_bodies(
     length_unit: float,
     input_name: str,
     input_body: str | None,
+    defs: Mapping | None = None,
 ) -> Model | None:
     """The body model of a parsed file `data` (the TOML tables), or None when it declares no
     bodies, joints or loads (`[environment]` alone is still checked).
@@ -143,7 +144,7 @@ def read_bodies(
         terms = []
         for t in value:
             try:
-                term = _expr.parse_term(t)
+                term = _expr.substitute_term(_expr.parse_term(t), defs or {})
             except ExprSyntaxError as exc:
                 raise err(str(exc), table, key, item=str(t)) from None
             if term.polar:
@@ -166,7 +167,7 @@ def read_bodies(
         if not isinstance(value, str):
             raise err(f"'{key}' must be an angle expression like \"phi3\" or \"90\"", table, key)
         try:
-            node = _expr.parse_expr(value)
+            node = _expr.substitute(_expr.parse_expr(value), defs or {})
         except ExprSyntaxError as exc:
             raise err(str(exc), table, key, item=value) from None
         check_names(node, table, key, value)

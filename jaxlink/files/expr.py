@@ -428,6 +428,38 @@ def names_in(node: Node | None) -> list[Name]:
     raise TypeError(node)
 
 
+def substitute(node: Node | None, defs: Mapping[str, Node]) -> Node | None:
+    """`node` with every name of `defs` replaced by its expression (a derived parameter is its
+    expression: `jaxlink/files/reader.py` expands them where they are used)."""
+    if node is None or not defs:
+        return node
+    return _substitute(node, defs)
+
+
+def _substitute(node: Node, defs: Mapping[str, Node]) -> Node:
+    if isinstance(node, Num):
+        return node
+    if isinstance(node, Name):
+        return defs.get(node.name, node)
+    if isinstance(node, Neg):
+        return Neg(_substitute(node.arg, defs))
+    if isinstance(node, Bin):
+        return Bin(node.op, _substitute(node.left, defs), _substitute(node.right, defs))
+    if isinstance(node, Call):
+        return Call(node.func, tuple(_substitute(a, defs) for a in node.args))
+    if isinstance(node, Vec):
+        return Vec(_substitute(node.x, defs), _substitute(node.y, defs))
+    raise TypeError(node)
+
+
+def substitute_term(term: Term, defs: Mapping[str, Node]) -> Term:
+    """`term` with the names of `defs` replaced (its `text` is kept as written)."""
+    if not defs:
+        return term
+    return dataclasses.replace(term, length=substitute(term.length, defs), angle=substitute(term.angle, defs),
+                               x=substitute(term.x, defs), y=substitute(term.y, defs))
+
+
 # ----------------------------------------------------------------------------- kinds and units
 
 # A dimension is (length power, angle power); a bare number has dimension None ("free").
@@ -560,6 +592,12 @@ def kind_constraints(node: Node, expected: Dim | None, kinds: dict, record: Call
                     else (expected[0] + dr[0], expected[1] + dr[1])
                 )
                 kind_constraints(node.left, other, kinds, record)
+            elif (not okl and not okr and node.op == "*" and isinstance(node.left, Name)
+                  and isinstance(node.right, Name) and node.left.name == node.right.name
+                  and (expected[0] / 2, expected[1] / 2) in (LENGTH, ANGLE, NUMBER)):
+                # a square x*x of dimension D: x has dimension D/2 (as in the law of cosines)
+                record(node.left, (expected[0] / 2, expected[1] / 2))
+                return
         kind_constraints(node.left, None, kinds, record) if not okl else None
         kind_constraints(node.right, None, kinds, record) if not okr else None
         return

@@ -40,7 +40,7 @@ DOMAINS = {"link length": (1e-9, 1e6), "length": (0.0, 1e6), "angle": (0.0, 1e4)
 _SI_UNIT = {"length": "m", "angle": "rad", "number": ""}
 KNOWN_TABLES = {
     "mechanism", "parameters", "input", "unknowns", "loops", "points",
-    "bodies", "joints", "loads", "environment", "optimize", "dynamics",
+    "bodies", "joints", "loads", "environment", "optimize", "dynamics", "sketch",
 }
 
 
@@ -86,6 +86,11 @@ def loads(text: str, *, file: str = "<string>", overrides: Mapping[str, float] |
             )
     if not isinstance(mech, dict):
         raise MechanismError("missing [mechanism] table (name, length_unit, angle_unit)", file=file)
+    layout = None
+    if "sketch" in data:  # joints and links: derive the loop form (jaxlink/files/sketch.py)
+        from .sketch import derive
+
+        data, layout = derive(data, err, file)
     name = str(mech.get("name", pathlib.Path(file).stem))
     lu = mech.get("length_unit", "m")
     au = mech.get("angle_unit", "rad")
@@ -101,8 +106,12 @@ def loads(text: str, *, file: str = "<string>", overrides: Mapping[str, float] |
         raise err("[parameters] must be a table of NAME = value", "parameters")
     declared: dict[str, str] = {}
     pvalues: dict[str, float] = {}
+    derived_text: dict[str, str] = {}
     for pname, v in params_raw.items():
         _check_identifier(pname, err, "parameters")
+        if isinstance(v, str):  # a derived parameter: an expression of the others
+            derived_text[pname] = v
+            continue
         if isinstance(v, dict):
             extra = set(v) - {"value", "unit"}
             if extra:
@@ -149,14 +158,22 @@ def loads(text: str, *, file: str = "<string>", overrides: Mapping[str, float] |
         raise err(f"the input '{input_name}' is also a parameter", "input", "name")
     if input_name in guesses:
         raise err(f"the input '{input_name}' is also an unknown", "input", "name")
+    for dname in derived_text:
+        if dname in guesses:
+            raise err(f"'{dname}' is both a parameter and an unknown; rename one", "unknowns", dname)
+        if dname == input_name:
+            raise err(f"the input '{dname}' is also a parameter", "input", "name")
+    defs = _derived(derived_text, pvalues, guesses, input_name, err)
     reserved = set(_expr.FUNCTIONS) | set(_expr.CONSTANTS)
-    for n in list(pvalues) + list(guesses) + [input_name]:
+    for n in list(pvalues) + list(derived_text) + list(guesses) + [input_name]:
         if n in reserved:
             raise MechanismError(f"'{n}' is reserved (a function or the constant pi) and cannot name a quantity",
                                  file=file)
 
     # ---------------------------------------------------------------- loops and points
-    def parse_terms(table: str, required: bool):
+    def parse_terms(table: str, required: bool, named: tuple = ()):
+        """The lists of terms of `table`; a term that is the NAME of a point (of `named`, or of a
+        point defined above in [points]) stands for that point's terms."""
         raw = data.get(table, {})
         if not isinstance(raw, dict) or (required and not raw):
             raise err(f"[{table}] must be a table of NAME = [\"term\", ...]", table)
@@ -169,6 +186,15 @@ def loads(text: str, *, file: str = "<string>", overrides: Mapping[str, float] |
             parsed: list = []
             for i, t in enumerate(terms):
                 ref = re.fullmatch(r"\s*([+-]?)\s*([A-Za-z_][A-Za-z0-9_]*)\s*", t) if isinstance(t, str) else None
+                if table == "loops" and ref and ref.group(2) in dict(named):
+                    # a point used in a loop: its terms, in place
+                    s = -1 if ref.group(1) == "-" else 1
+                    parsed.extend(dataclasses.replace(u, sign=s * u.sign) for u in dict(named)[ref.group(2)])
+                    continue
+                if table == "loops" and ref:
+                    raise err(f"'{ref.group(2)}' is not a point of [points]{_expr.suggest(ref.group(2), dict(named))};"
+                              " a term is 'LENGTH @ ANGLE', '(X, Y)' or the name of a point", table, lname,
+                              item=str(t), keyname=f"{table}.{lname}[{i}]")
                 if table == "points" and ref and ref.group(2) in raw:
                     # a point that starts from (or adds) another point: its terms, in place
                     done = dict(out)
@@ -184,14 +210,14 @@ def loads(text: str, *, file: str = "<string>", overrides: Mapping[str, float] |
                               "is 'LENGTH @ ANGLE', '(X, Y)' or the name of a point defined above", table, lname,
                               item=str(t), keyname=f"{table}.{lname}[{i}]")
                 try:
-                    parsed.append(_expr.parse_term(t))
+                    parsed.append(_expr.substitute_term(_expr.parse_term(t), defs))
                 except ExprSyntaxError as exc:
                     raise err(str(exc), table, lname, item=str(t), keyname=f"{table}.{lname}[{i}]") from None
             out.append((lname, tuple(parsed)))
         return tuple(out)
 
-    loops = parse_terms("loops", True)
     points = parse_terms("points", False)
+    loops = parse_terms("loops", True, points)
 
     known_names = set(pvalues) | set(guesses) | {input_name}
     for table, group in (("loops", loops), ("points", points)):
@@ -259,7 +285,8 @@ def loads(text: str, *, file: str = "<string>", overrides: Mapping[str, float] |
                     first = where.get(nm.name, "its declared unit")
                     raise err(
                         f"'{nm.name}' is used as {'an' if kind == 'angle' else 'a'} {kind} in \"{_term.text}\" "
-                        f"but as {'an' if kinds[nm.name] == 'angle' else 'a'} {kinds[nm.name]} in {first}",
+                        f"but as {'an' if kinds[nm.name] == 'angle' else 'a'} {kinds[nm.name]} in {first}"
+                        + _through(_term.text, derived_text),
                         _t, _l, item=_term.text, keyname=_key,
                     )
 
@@ -284,6 +311,13 @@ def loads(text: str, *, file: str = "<string>", overrides: Mapping[str, float] |
                 )
             kinds[n] = "number"
 
+    derived_kinds = {}
+    for dname, node in defs.items():
+        try:
+            d = _expr.dim_of(node, kinds)
+        except UnitError as exc:
+            raise err(f"inconsistent units in \"{derived_text[dname]}\": {exc}", "parameters", dname) from None
+        derived_kinds[dname] = _expr.DIM_KINDS.get(d) if d is not None else None
     # full dimension check of every expression (catches e.g. length + angle inside a product)
     for node, role, table, lname, term, key in roles:
         try:
@@ -299,6 +333,11 @@ def loads(text: str, *, file: str = "<string>", overrides: Mapping[str, float] |
     overridden: set[str] = set()
     if overrides:
         for k, v in overrides.items():
+            if k in derived_text:
+                raise MechanismError(
+                    f"--set {k}: '{k}' is derived (\"{derived_text[k]}\"); set the parameters it is computed from",
+                    file=file,
+                )
             if k not in pvalues:
                 raise MechanismError(
                     f"--set {k}: no such parameter{_expr.suggest(k, pnames)}; parameters: {', '.join(pnames)}",
@@ -357,7 +396,7 @@ def loads(text: str, *, file: str = "<string>", overrides: Mapping[str, float] |
 
     input_start_si = float(input_start) * fac[kinds[input_name] or "number"]
     body_model = read_bodies(data, file=file, err=err, kinds=kinds, length_unit=units.length,
-                             input_name=input_name, input_body=input_body)
+                             input_name=input_name, input_body=input_body, defs=defs)
 
     tables = {k: v for k, v in data.items() if k not in ("mechanism", "parameters", "input", "unknowns",
                                                           "loops", "points")}
@@ -381,6 +420,8 @@ def loads(text: str, *, file: str = "<string>", overrides: Mapping[str, float] |
         tables=tables,
         kinds=dict(kinds),
         bodies=body_model,
+        derived=tuple((n, derived_text[n], derived_kinds[n] or "number", defs[n]) for n in derived_text),
+        sketch=layout,
     )
     # evaluate once at the guess, where it holds (the input at `[input] start`), in numpy float64,
     # to catch anything left (e.g. sqrt of a negative number)
@@ -397,6 +438,48 @@ def loads(text: str, *, file: str = "<string>", overrides: Mapping[str, float] |
             raise err(f"point '{pname}' is not finite at the guess (the input at [input] start); "
                       "check its expressions (sqrt of a negative number? division by zero?)", "points", pname)
     return mechanism
+
+
+def _derived(texts: dict, base: dict, guesses: dict, input_name: str, err) -> dict:
+    """The derived parameters (`NAME = "expression"` in [parameters]), each expanded down to the
+    parameters with a value: {name: node}. Their expressions use parameters only (values or
+    derived, in any order, without a cycle)."""
+    parsed = {}
+    for name, text in texts.items():
+        try:
+            parsed[name] = _expr.parse_expr(text)
+        except ExprSyntaxError as exc:
+            raise err(str(exc), "parameters", name, item=text) from None
+        for nm in _expr.names_in(parsed[name]):
+            if nm.name in base or nm.name in texts:
+                continue
+            what = ("an unknown" if nm.name in guesses else "the input" if nm.name == input_name else None)
+            if what:
+                raise err(f"derived parameter '{name}' = \"{text}\" uses {what} '{nm.name}': a derived parameter "
+                          "is computed from parameters only", "parameters", name, item=text)
+            raise err(f"unknown name '{nm.name}' in \"{text}\"{_expr.suggest(nm.name, [*base, *texts])}: a derived "
+                      "parameter is computed from the other parameters", "parameters", name, item=text)
+    done: dict = {}
+
+    def expand(name: str, stack: tuple) -> _expr.Node:
+        if name in done:
+            return done[name]
+        if name in stack:
+            cycle = " → ".join([*stack[stack.index(name):], name])
+            raise err(f"derived parameters refer to each other in a cycle: {cycle}", "parameters", name)
+        inner = {nm.name: expand(nm.name, (*stack, name)) for nm in _expr.names_in(parsed[name]) if nm.name in texts}
+        done[name] = _expr.substitute(parsed[name], inner)
+        return done[name]
+
+    for name in texts:
+        expand(name, ())
+    return done
+
+
+def _through(text: str, derived_text: dict) -> str:
+    """A note naming the derived parameters a term uses (where a name's use may come from)."""
+    used = [n for n in dict.fromkeys(re.findall(r"[A-Za-z_][A-Za-z0-9_]*", text)) if n in derived_text]
+    return "".join(f" (through the derived parameter {n} = \"{derived_text[n]}\")" for n in used)
 
 
 def _check_identifier(name: str, err, table: str, key: str | None = None) -> None:

@@ -47,6 +47,11 @@ class Structure:
     - `unknown_names`, `unknown_kinds`, `guess` (SI, at `input_start`).
     - `loops`, `points`: tuples of `(name, tuple[Term])`.
     - `tables`: the raw TOML of the optional tables (`bodies`, `joints`, `loads`, `optimize`, …).
+    - `derived`: the derived parameters `(name, expression, kind, node)`, `node` the expression
+      expanded down to `parameter_names`; the loops, points and body tables hold them expanded
+      (they are functions of `parameters`, not entries of it: `derived_values`).
+    - `sketch`: the joints, bodies, sliders and driver of a file written as a sketch (joints and
+      links, `jaxlink/files/sketch.py`), from which the loops were derived; None for a loop file.
     """
 
     name: str
@@ -66,6 +71,8 @@ class Structure:
     tables: Mapping[str, Any]
     kinds: Mapping[str, str]
     bodies: Any = None  # jaxlink.model.bodies.Model of [bodies]/[joints]/[loads]/[environment], or None
+    derived: tuple = ()  # derived parameters: (name, expression text, kind, expanded node)
+    sketch: Any = None  # jaxlink.files.sketch.Sketch when the file is written as joints and links, or None
 
     # ------------------------------------------------------------------ identity
     # What the compiled functions depend on: everything but the labels (`name`, `description`,
@@ -123,6 +130,12 @@ class Structure:
                 f"parameters: {', '.join(self.parameter_names)}",
                 file=self.file,
             ) from None
+
+    def derived_values(self, p) -> dict:
+        """{name: SI value} of the derived parameters at the parameters `p` (SI)."""
+        env = {n: p[i] for i, n in enumerate(self.parameter_names)}
+        return {n: _expr.evaluate(node, env, self.kinds, self.units, _expr.KIND_DIMS[kind])
+                for n, _text, kind, node in self.derived}
 
     def to_si(self, name: str, value: float) -> float:
         """A value of a parameter, unknown or the input, given in file units, in SI."""

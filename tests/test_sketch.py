@@ -1,0 +1,312 @@
+"""The sketch form (joints and links, `[sketch]`) and its Python builder `jl.Sketch`.
+
+References are independent of the sketch translator: the loop-form scenes (solved by the loop
+files, written by hand), and for the textbook six-bars the geometry itself — each joint the
+intersection of two circles (numpy, branch held from the sketch's pose).
+"""
+
+from __future__ import annotations
+
+import math
+import pathlib
+
+import jax
+import numpy as np
+import pytest
+
+import jaxlink as jl
+from jaxlink.solvers import dyads
+from jaxlink.solvers.assemble import NewtonOptions, method_for
+
+jax.config.update("jax_enable_x64", True)
+pytestmark = pytest.mark.xdist_group("sketch")
+
+SCENES = pathlib.Path(jl.__file__).parent / "scenes"
+TURN = np.linspace(0.0, 2 * np.pi, 73)
+
+
+def _joints_of(scene: str, exprs: dict, phi: float) -> dict:
+    """Joint positions (file units) of a loop-form scene at input `phi` (SI): its file with the
+    joints added as [points] (`exprs`: name -> list of terms), solved by the loop form."""
+    text = (SCENES / f"{scene}.toml").read_text()
+    extra = "\n".join(f"J_{n} = {terms!r}".replace("'", '"') for n, terms in exprs.items())
+    text = text.replace("[points]\n", "[points]\n" + extra + "\n", 1)
+    mech = jl.loads(text)
+    sol = jl.solve(mech, np.asarray([phi]))
+    assert bool(sol.converged[0])
+    pts = np.asarray(sol.points[0]) / mech.units.length
+    return {n: tuple(map(float, pts[mech.point_names.index(f"J_{n}")])) for n in exprs}
+
+
+def _compare(loop_mech, sketch_mech, names, phis=TURN, tol=1e-12):
+    """Positions of `names` (points of both) agree to `tol` relative to the largest, over `phis`."""
+    a = jl.solve(loop_mech, phis)
+    b = jl.solve(sketch_mech, phis)  # both inputs are the crank's angle from the x axis
+    assert bool(np.all(a.converged)) and bool(np.all(b.converged))
+    ia = [loop_mech.point_names.index(n) for n in names]
+    ib = [sketch_mech.point_names.index(n) for n in names]
+    pa, pb = np.asarray(a.points)[:, ia], np.asarray(b.points)[:, ib]
+    err = np.max(np.abs(pa - pb)) / np.max(np.abs(pa))
+    assert err < tol, err
+    return err
+
+
+def _closed_form(mech) -> bool:
+    return method_for(mech, NewtonOptions()) == "closed_form"
+
+
+# ----------------------------------------------------------------------------- the scenes
+
+
+def test_four_bar_sketch_equals_loop_form_and_file_equals_builder():
+    loop = jl.load("four-bar")
+    j = _joints_of("four-bar", {"A": ["a @ phi2"], "B": ["a @ phi2", "b @ phi3"]}, 0.0)
+    p = _joints_of("four-bar", {"P": ["a @ phi2", "cx @ phi3", "cy @ phi3 + 90"]}, 0.0)["P"]
+    sk = (jl.Sketch("four-bar", length_unit="mm", angle_unit="deg")
+          .frame("A0", 0, 0).frame("B0", 55, 0)
+          .joint("A", *j["A"]).joint("B", *j["B"]).joint("P", *p)
+          .link("crank", "A0", "A").link("coupler", "A", "B", "P").link("rocker", "B0", "B")
+          .crank("crank", name="phi2"))
+    mech = sk.mechanism()
+    assert mech.point_names == ("A", "B", "P")  # every moving joint by default
+    assert mech.unknown_names == ("theta_coupler", "theta_rocker")
+    assert mech.input_name == "phi2" and mech.input_start == pytest.approx(0.0, abs=1e-15)
+    # the sketch's dimensions: lengths from the coordinates, in the file unit
+    for name, value in {"crank": 20, "coupler": 60, "rocker": 45, "B0_x": 55,
+                        "coupler_P": math.hypot(30, 15)}.items():
+        assert mech.from_si(name, float(mech.parameters[mech.parameter_index(name)])) == pytest.approx(value, 1e-13)
+    assert mech.from_si("coupler_P_angle", float(mech.parameters[mech.parameter_index("coupler_P_angle")])) \
+        == pytest.approx(math.degrees(math.atan2(15, 30)), 1e-12)
+    assert _closed_form(mech) and [d.kind for d in dyads.classify(mech)] == ["RRR"]
+    _compare(loop, mech, ["P"])
+    # the file and the builder are the same mechanism (same structure, same numbers)
+    from_file = jl.loads(sk.toml())
+    assert from_file.structure == mech.structure
+    np.testing.assert_array_equal(from_file.parameters, mech.parameters)
+    np.testing.assert_array_equal(from_file.guess, mech.guess)
+    # --set reaches a derived dimension: a longer crank is the loop form's longer crank
+    longer = sk.mechanism(overrides={"crank": 22.0})
+    _compare(jl.load("four-bar", overrides={"a": 22.0}), longer, ["P"])
+
+
+def test_slider_crank_sketch_equals_loop_form():
+    loop = jl.load("slider-crank")
+    start = math.radians(30.0)
+    j = _joints_of("slider-crank", {"A": ["h2 @ psi12"], "B": ["h1 @ alpha1", "p14 @ alpha4"]}, start)
+    sk = (jl.Sketch("slider-crank", length_unit="mm", angle_unit="deg")
+          .frame("O1", 0, 0).joint("A", *j["A"]).joint("B", *j["B"])
+          .link("crank", "O1", "A").link("rod", "A", "B")
+          .slider("B", on="frame", along=(1, 0)).crank("crank"))
+    mech = sk.mechanism()
+    assert mech.input_start == pytest.approx(start, 1e-14)
+    assert set(mech.unknown_names) == {"theta_rod", "s_B"}
+    assert _closed_form(mech) and [d.kind for d in dyads.classify(mech)] == ["RRP"]
+    # the guide's offset is a parameter: 12 mm above the crank pivot
+    assert mech.from_si("B_offset", float(mech.parameters[mech.parameter_index("B_offset")])) \
+        == pytest.approx(12.0, 1e-13)
+    _compare(loop, mech, ["A", "B"], phis=TURN + start)
+
+
+def test_sewing_feed_sketch_equals_loop_form():
+    """The seed's bottom-feed six-bar: a crank plate with two arms, a lever plate pivoted between
+    its ends, a collinear carrier plate; two dyads."""
+    loop = jl.load("sewing-feed")
+    start = loop.input_start
+    j = _joints_of("sewing-feed", {
+        "B": ["l2 @ phi2"], "C": ["-l22 @ phi2 + gamma"], "D": ["l2 @ phi2", "l3 @ phi3"],
+        "F": ["l2 @ phi2", "l3 @ phi3", "l4 @ phi4"],
+        "H": ["l2 @ phi2", "l3 @ phi3", "l4 @ phi4", "l6 @ phi6"],
+    }, start)
+    sk = (jl.Sketch("sewing-feed", length_unit="mm", angle_unit="deg")
+          .frame("A", 0, 0)
+          .joint("B", *j["B"]).joint("C", *j["C"]).joint("D", *j["D"]).joint("F", *j["F"])
+          .joint("H", *j["H"]))
+    # the lever's frame pivot E: D + l44 e(phi4) = (l8, l7) in the loop form
+    e = _joints_of("sewing-feed", {"E": ["l2 @ phi2", "l3 @ phi3", "l44 @ phi4"]}, start)["E"]
+    z = _joints_of("sewing-feed", {"Z": ["l2 @ phi2", "l3 @ phi3", "l4 @ phi4", "(l6 + l66) @ phi6"]}, start)["Z"]
+    sk.frame("E", *e).joint("Z", *z)
+    sk.link("crank", "A", "B", "C").link("coupler", "B", "D").link("lever", "E", "D", "F")
+    sk.link("link5", "H", "C").link("carrier", "F", "H", "Z").crank("crank", name="phi2").points("Z", "D")
+    mech = sk.mechanism()
+    assert _closed_form(mech) and [d.kind for d in dyads.classify(mech)] == ["RRR", "RRR"]
+    _compare(loop, mech, ["Z"], phis=TURN + start)
+
+
+def test_needle_arachne_sketch_equals_loop_form():
+    """The ARACHNE needle six-bar: a bell crank (plate C0, C, D) and a vertical needle slider."""
+    loop = jl.load("needle-arachne")
+    j = _joints_of("needle-arachne", {
+        "A": ["l2 @ phi2"], "C": ["(l1, 0)", "l4r @ psi"], "D": ["(l1, 0)", "l4a @ psi - beta"],
+        "B2": ["(l1 + l7, 0)", "s @ 90"]}, 0.0)
+    sk = (jl.Sketch("needle", length_unit="mm", angle_unit="deg")
+          .frame("A0", 0, 0).frame("C0", 52.5, 0)
+          .joint("A", *j["A"]).joint("C", *j["C"]).joint("D", *j["D"]).joint("B", *j["B2"])
+          .link("crank", "A0", "A").link("coupler", "A", "C").link("bellcrank", "C0", "C", "D")
+          .link("rod", "D", "B").slider("B", on="frame", along=(0, 1)).crank("crank", name="phi2"))
+    mech = sk.mechanism()
+    assert _closed_form(mech) and [d.kind for d in dyads.classify(mech)] == ["RRR", "RRP"]
+    _compare(loop, mech, ["B"])
+
+
+# ----------------------------------------------------------------------------- textbook six-bars
+
+
+def _circle(p, q, r1, r2, sigma):
+    """The intersection X of |X − p| = r1 and |X − q| = r2 on the side sigma (+1: left of p → q)."""
+    d = q - p
+    dist = np.hypot(d[..., 0], d[..., 1])[..., None]
+    e = d / dist
+    a = (r1**2 - r2**2 + dist**2) / (2 * dist)
+    h = np.sqrt(r1**2 - a**2)
+    perp = np.stack([-e[..., 1], e[..., 0]], axis=-1)
+    return p + a * e + sigma * h * perp
+
+
+def _side(p, q, x):
+    d, w = q - p, x - p
+    return 1.0 if d[0] * w[1] - d[1] * w[0] > 0 else -1.0
+
+
+def _reference(frame, crank, dyads_, phis, pose_phi):
+    """Positions over `phis` of a linkage made of RRR dyads: `dyads_` = [(X, P, Q, rP, rQ, side)]
+    with side a function of the positions at the sketch's pose; plates as extra dyads."""
+    def at(phi, sides=None):
+        pos = {k: np.asarray(v, float) for k, v in frame.items()}
+        piv, name, r = crank
+        pos[name] = pos[piv] + r * np.array([np.cos(phi), np.sin(phi)])
+        out_sides = {}
+        for x, p, q, rp, rq, pick in dyads_:
+            if sides is None:
+                cands = [_circle(pos[p], pos[q], rp, rq, s) for s in (1.0, -1.0)]
+                s = 1.0 if pick(cands[0], cands[1], pos) else -1.0
+            else:
+                s = sides[x]
+            out_sides[x] = s
+            pos[x] = _circle(pos[p], pos[q], rp, rq, s)
+        return pos, out_sides
+
+    pose, sides = at(pose_phi)
+    return pose, [at(phi, sides)[0] for phi in phis]
+
+
+def _check_sixbar(sk_builder, pose, ref, phis, names):
+    mech = sk_builder.mechanism()
+    assert _closed_form(mech), "a dyadic linkage takes the closed form"
+    sol = jl.solve(mech, phis)
+    assert bool(np.all(sol.converged))
+    got = np.asarray(sol.points) / mech.units.length
+    want = np.asarray([[r[n] for n in names] for r in ref])
+    idx = [mech.point_names.index(n) for n in names]
+    err = np.max(np.abs(got[:, idx] - want)) / np.max(np.abs(want))
+    assert err < 1e-12, err
+    return mech
+
+
+def test_jansen_leg_sketch_matches_circle_intersections():
+    """Theo Jansen's leg with his eleven numbers (a = 38, l = 7.8, m = 15, b … k): two plates,
+    seven moving links, four dyads, a full turn."""
+    a, l_, m, b, c, d, e, f, g, h, i, j, k = 38, 7.8, 15, 41.5, 39.3, 40.1, 55.8, 39.4, 36.7, 65.7, 49, 50, 61.9
+    frame = {"O": (0.0, 0.0), "Z": (-a, -l_)}
+    up = lambda c1, c2, pos: c1[1] > c2[1]  # noqa: E731
+    down = lambda c1, c2, pos: c1[1] < c2[1]  # noqa: E731
+    left = lambda c1, c2, pos: c1[0] < c2[0]  # noqa: E731
+    dy = [("P1", "M", "Z", j, b, up), ("P2", "M", "Z", k, c, down), ("P3", "Z", "P1", d, e, left),
+          ("P4", "P3", "P2", f, g, down), ("P5", "P4", "P2", h, i, down)]
+    phis = np.linspace(0, 2 * np.pi, 61)
+    pose, ref = _reference(frame, ("O", "M", m), dy, phis, 0.0)
+    sk = jl.Sketch("jansen", length_unit="cm", angle_unit="rad").frame("O", 0, 0).frame("Z", -a, -l_)
+    for n in ("M", "P1", "P2", "P3", "P4", "P5"):
+        sk.joint(n, *pose[n])
+    sk.link("crank", "O", "M").link("j", "M", "P1").link("k", "M", "P2").link("bde", "Z", "P1", "P3")
+    sk.link("c", "Z", "P2").link("f", "P3", "P4").link("ghi", "P2", "P4", "P5").crank("crank")
+    mech = _check_sixbar(sk, pose, ref, phis, ["P1", "P2", "P3", "P4", "P5"])
+    assert [d.kind for d in dyads.classify(mech)] == ["RRR"] * 3  # P3 and P5 are on plates
+
+
+def test_stephenson_iii_and_klann_type_sketches_match_circle_intersections():
+    """Stephenson III: a four-bar whose coupler point drives a second dyad to the frame. Klann
+    type: two ternary plates (the coupler, the leg) and two rockers."""
+    phis = np.linspace(0, 2 * np.pi, 61)
+    # Stephenson III: O2 A (crank 1), A B (coupler 3.5, plate with C), O4 B (rocker 3), O2 O4 = 4
+    frame = {"O2": (0.0, 0.0), "O4": (4.0, 0.0), "O6": (1.0, 4.5)}
+    up = lambda c1, c2, pos: c1[1] > c2[1]  # noqa: E731
+    right = lambda c1, c2, pos: c1[0] > c2[0]  # noqa: E731
+    dy = [("B", "A", "O4", 3.5, 3.0, up), ("C", "A", "B", 2.0, 2.2, up), ("D", "C", "O6", 2.5, 2.0, right)]
+    pose, ref = _reference(frame, ("O2", "A", 1.0), dy, phis + 0.3, 0.3)
+    sk = jl.Sketch("stephenson3").frame("O2", 0, 0).frame("O4", 4, 0).frame("O6", 1.0, 4.5)
+    for n in ("A", "B", "C", "D"):
+        sk.joint(n, *pose[n])
+    sk.link("crank", "O2", "A").link("coupler", "A", "B", "C").link("rocker", "O4", "B")
+    sk.link("link5", "C", "D").link("output", "O6", "D").crank("crank")
+    _check_sixbar(sk, pose, ref, phis + 0.3, ["A", "B", "C", "D"])
+
+    # Klann type: crank M A; coupler plate A B C; rocker O1 B; leg plate C D F; rocker O2 D
+    frame = {"M": (0.0, 0.0), "O1": (-2.0, 1.5), "O2": (-3.5, -0.5)}
+    dy = [("B", "A", "O1", 3.0, 1.8, up), ("C", "A", "B", 4.2, 2.6, lambda c1, c2, pos: c1[0] < c2[0]),
+          ("D", "C", "O2", 1.6, 2.2, up), ("F", "C", "D", 4.5, 5.0, lambda c1, c2, pos: c1[1] < c2[1])]
+    pose, ref = _reference(frame, ("M", "A", 0.8), dy, phis, 0.0)
+    sk = jl.Sketch("klann").frame("M", 0, 0).frame("O1", -2.0, 1.5).frame("O2", -3.5, -0.5)
+    for n in ("A", "B", "C", "D", "F"):
+        sk.joint(n, *pose[n])
+    sk.link("crank", "M", "A").link("coupler", "A", "B", "C").link("r1", "O1", "B")
+    sk.link("leg", "C", "D", "F").link("r2", "O2", "D").crank("crank")
+    _check_sixbar(sk, pose, ref, phis, ["B", "C", "D", "F"])
+
+
+# ----------------------------------------------------------------------------- the file and its errors
+
+FOUR_BAR = """\
+[mechanism]
+length_unit = "mm"
+angle_unit = "deg"
+
+[sketch]
+frame = ["A0", "B0"]
+points = ["P"]
+
+[sketch.input]
+crank = "crank"
+
+[sketch.joints]
+A0 = [0, 0]
+B0 = [55, 0]
+A = [20, 0]
+B = [48.0, 44.44]
+P = [30.0, 30.0]
+
+[sketch.links]
+crank = ["A0", "A"]
+coupler = ["A", "B", "P"]
+rocker = ["B0", "B"]
+"""
+
+
+@pytest.mark.parametrize("old,new,words,line", [
+    ('rocker = ["B0", "B"]\n', "", ["mobility 2 by Grübler", "missing link"], 5),
+    ('rocker = ["B0", "B"]', 'rocker = ["B0", "Bx"]', ["'Bx' is not a joint", "did you mean 'B'"], 22),
+    ('crank = "crank"', 'crank = "coupler"', ["no frame joint"], 10),
+    ('A = [20, 0]', 'A = [20]', ["must be [x, y]"], 15),
+    ('[sketch.links]', '[loops]\nx = ["a @ b"]\n\n[sketch.links]', ["derives [loops]"], 19),
+    ('rocker = ["B0", "B"]', 'rocker = ["B0", "B"]\nbase = ["A0", "B0"]', ["two frame joints"], 23),
+    ('points = ["P"]', 'points = ["P"]\nsliders = 3', ["[sketch.sliders] must be a table"], 8),
+])
+def test_bad_sketches_name_the_line_and_the_reason(old, new, words, line):
+    assert old in FOUR_BAR
+    with pytest.raises(jl.MechanismError) as info:
+        jl.loads(FOUR_BAR.replace(old, new, 1), file="fb.toml")
+    msg = str(info.value)
+    for w in words:
+        assert w in msg, (w, msg)
+    assert msg.startswith(f"fb.toml:{line}"), msg
+
+
+def test_sketch_file_checks_and_prints_its_loops(tmp_path, capsys):
+    from jaxlink.cli import main
+
+    path = tmp_path / "fb.toml"
+    path.write_text(FOUR_BAR)
+    assert main(["check", str(path)]) == 0
+    out = capsys.readouterr().out
+    assert "loop_A_B_B0: (A0_x, A0_y) + crank @ theta_crank + coupler @ theta_coupler" in out
+    assert "P = (A0_x, A0_y) + crank @ theta_crank + coupler_P @ theta_coupler + coupler_P_angle" in out
+    assert "frame A0, B0; links crank (A0 A), coupler (A B P: a plate), rocker (B0 B)" in out
