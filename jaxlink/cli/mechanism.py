@@ -142,7 +142,7 @@ def add_units_argument(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--units", default="si", choices=("si", "file"),
                         help="units of the CSV and the summary: 'si' (default: m, rad, m/s, rad/s, …; the input in "
                              "degrees) or 'file': the file's length_unit and angle_unit, every column named with its "
-                             "unit (P_x_mm, phi3_deg, P_vx_mm_s, phi3_deg_s2, …)")
+                             "unit (P_x_mm, phi3_deg, P_vx_mm_s, phi3_deg_s2, drive_torque_N_mm, …)")
 
 
 def units_from_args(mech, args):
@@ -268,7 +268,9 @@ def register(sub) -> None:
             "solves) at constant input speed. A position that did not assemble is nan in every solved "
             "column (and is left out of the summary and the plots); at a singular one (dead centre, "
             "toggle) the positions are given and the rates are nan. Exit status 1 when some position "
-            "did not converge (the warning lists the input ranges)."
+            "did not converge (the warning lists the input ranges). --units file writes the same columns in "
+            "the file's length and angle units (P_x_mm, phi3_deg, …); --export OUT.dxf|OUT.svg (or --plot "
+            "OUT.dxf) writes the paths and the linkage as geometry in the file's length unit."
         ),
     )
     add_mechanism_arguments(p)

@@ -210,10 +210,8 @@ def write_dxf(path: str, geo: Geometry) -> None:
     doc.header["$INSUNITS"] = INSUNITS[geo.unit]
     doc.header["$MEASUREMENT"] = 1  # metric
     for k, name in enumerate(geo.layers):
-        attribs = {"color": _COLORS.get(name, 1 + k % 6)}
-        if name == "CONSTRUCTION":
-            attribs["linetype"] = "DASHED"
-        doc.layers.add(name, **attribs)
+        doc.layers.add(name, color=_COLORS.get(name, 1 + k % 6),
+                       linetype="DASHED" if name == "CONSTRUCTION" else "Continuous")
     msp = doc.modelspace()
     for p in geo.polylines:
         xy = [(float(x), float(y)) for x, y in p.xy]

@@ -14,6 +14,9 @@ Positions that did not assemble (result neither `converged` nor `singular`) are 
 solved quantity of their row is `nan`; at a `singular` position (a dead centre or toggle, assembled
 to about √eps) the positions are given and the rates, velocities and accelerations (unbounded
 there) are `nan`. Summaries leave `nan` out; plots break their lines there (`jaxlink/report/plot.py`).
+
+The table is computed in SI (the input column as asked); `write_csv` and `print_summary` take
+`units` to write it in the file's units (`jaxlink/report/units.py`: `P_x_mm`, `phi3_deg_s2`, …).
 """
 
 from __future__ import annotations
