@@ -170,6 +170,12 @@ def test_file_unit_names_and_factors():
     assert cols == ["input_rad", "phi_rad"] and data[0].tolist() == [math.pi, 1.0]
 
 
+def test_layer_names_are_distinct_in_a_dxf():
+    taken = ["PATH_P"]
+    assert export.layer_name("PATH_", "p", taken) == "PATH_p_2"
+    assert export.layer_name("JOINT_PATH_", "A/B", taken) == "JOINT_PATH_A_B"
+
+
 def test_export_refuses_a_picture_format(tmp_path, capsys):
     code, _, stderr = run(capsys, "kinematics", "four-bar", "--export", str(tmp_path / "x.png"))
     assert code == 2 and "--export" in stderr and ".dxf, .svg" in stderr

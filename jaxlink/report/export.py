@@ -18,7 +18,8 @@ program. `geometry` collects it from the table and the linkage drawing (`jaxlink
 - `POINTS`: a small circle at each point in the pose;
 - `LABELS`: the joints' and points' names (DXF TEXT, SVG text).
 
-A layer name keeps letters, digits, `_` and `-` of a name (other characters become `_`).
+A layer name keeps letters, digits, `_` and `-` of a name (other characters become `_`); one that
+equals an earlier one but for case gets `_2`, `_3`, … (DXF layer names ignore case).
 
 **DXF** (`ezdxf`, DXF R2010): `$INSUNITS` is the file's unit (4 mm, 5 cm, 6 m) and `$MEASUREMENT`
 metric; paths and arms are LWPOLYLINEs (closed flag for a closed path), links and other vectors
@@ -98,9 +99,17 @@ class Geometry:
         return [p for p in self.polylines if p.layer == name]
 
 
-def layer_name(prefix: str, name: str) -> str:
-    """`PATH_P`: `prefix` and the name with characters other than letters, digits, `_`, `-` as `_`."""
-    return prefix + re.sub(r"[^A-Za-z0-9_\-]", "_", name)
+def layer_name(prefix: str, name: str, taken=()) -> str:
+    """`PATH_P`: `prefix` and the name with characters other than letters, digits, `_`, `-` as `_`;
+    `_2`, `_3`, … added while it equals one of `taken` but for case (DXF layer names ignore case:
+    points `p` and `P` get `PATH_p` and `PATH_P_2`)."""
+    base = prefix + re.sub(r"[^A-Za-z0-9_\-]", "_", name)
+    seen = {t.upper() for t in taken}
+    out, k = base, 1
+    while out.upper() in seen:
+        k += 1
+        out = f"{base}_{k}"
+    return out
 
 
 def _pieces(xy: np.ndarray, ok: np.ndarray, periodic: bool) -> list:
@@ -132,7 +141,7 @@ def geometry(mech, table) -> Geometry:
     for i, name in enumerate(mech.point_names):
         xy = np.asarray(table.points[:, i], dtype=float) * s
         ok = np.asarray(table.assembled, bool) & np.isfinite(xy).all(axis=1)
-        lay = layer_name("PATH_", name)
+        lay = layer_name("PATH_", name, layers)
         layers.append(lay)
         polylines += [Polyline(lay, v, c) for v, c in _pieces(xy, ok, table.periodic)]
     point_names = set(mech.point_names)
@@ -141,7 +150,7 @@ def geometry(mech, table) -> Geometry:
             continue
         xy = d.joints[:, k] * s
         ok = np.asarray(d.shown, bool) & np.isfinite(xy).all(axis=1)
-        lay = layer_name("JOINT_PATH_", name)
+        lay = layer_name("JOINT_PATH_", name, layers)
         layers.append(lay)
         polylines += [Polyline(lay, v, c) for v, c in _pieces(xy, ok, table.periodic)]
     layers += list(LAYERS)
