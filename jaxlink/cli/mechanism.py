@@ -24,6 +24,8 @@ MAX_POSITIONS = 1_000_000
 MAX_OMEGA = 1e6
 #: picture formats of --plot (matplotlib's, by the file's extension)
 PLOT_FORMATS = ("png", "pdf", "svg", "svgz", "eps", "ps", "jpg", "jpeg", "tif", "tiff", "webp", "pgf")
+#: geometry formats of --export (`jaxlink/report/export.py`); `kinematics --plot` takes .dxf too
+EXPORT_FORMATS = ("dxf", "svg")
 
 
 # ----------------------------------------------------------------------------- shared helpers
@@ -133,6 +135,21 @@ def add_change_points_argument(parser: argparse.ArgumentParser) -> None:
                              "e.g. a Peaucellier cell's flat rhombus): 'keep' each dyad's side (default; the path "
                              "goes on along the other branch, its velocity jumps) or 'smooth' (flip the side there: "
                              "the branch whose velocity is continuous)")
+
+
+def add_units_argument(parser: argparse.ArgumentParser) -> None:
+    """--units si|file (`jaxlink/report/units.py`)."""
+    parser.add_argument("--units", default="si", choices=("si", "file"),
+                        help="units of the CSV and the summary: 'si' (default: m, rad, m/s, rad/s, …; the input in "
+                             "degrees) or 'file': the file's length_unit and angle_unit, every column named with its "
+                             "unit (P_x_mm, phi3_deg, P_vx_mm_s, phi3_deg_s2, drive_torque_N_mm, …)")
+
+
+def units_from_args(mech, args):
+    """The `FileUnits` of `--units file` (None for `si`)."""
+    from ..report.units import file_units
+
+    return file_units(mech) if getattr(args, "units", "si") == "file" else None
 
 
 def branch_point_warnings(table) -> None:
@@ -251,7 +268,9 @@ def register(sub) -> None:
             "solves) at constant input speed. A position that did not assemble is nan in every solved "
             "column (and is left out of the summary and the plots); at a singular one (dead centre, "
             "toggle) the positions are given and the rates are nan. Exit status 1 when some position "
-            "did not converge (the warning lists the input ranges)."
+            "did not converge (the warning lists the input ranges). --units file writes the same columns in "
+            "the file's length and angle units (P_x_mm, phi3_deg, …); --export OUT.dxf|OUT.svg (or --plot "
+            "OUT.dxf) writes the paths and the linkage as geometry in the file's length unit."
         ),
     )
     add_mechanism_arguments(p)
@@ -262,8 +281,15 @@ def register(sub) -> None:
                         "a link's angular velocity and acceleration, a slider's speed and acceleration along "
                         "its guide)")
     p.add_argument("--csv", metavar="OUT", help="write the table to this CSV file (default: print a summary)")
+    add_units_argument(p)
     add_change_points_argument(p)
-    p.add_argument("--plot", metavar="OUT.png", help="plot the point paths and the curves over the input")
+    p.add_argument("--plot", metavar="OUT.png",
+                   help="plot the point paths and the curves over the input (a picture: .png, .pdf, .svg, …); "
+                        "OUT.dxf writes the geometry, as --export does")
+    p.add_argument("--export", metavar="OUT.dxf",
+                   help="write the geometry in the file's length unit: the traced paths of the points and moving "
+                        "joints and the linkage at its first position, as layers of a DXF file (.dxf) or groups of "
+                        "an SVG file (.svg)")
     p.add_argument("--animate", metavar="OUT.gif", help="animated GIF of the moving linkage")
     p.set_defaults(func=cmd_kinematics)
 
@@ -422,11 +448,16 @@ def cmd_kinematics(args) -> int:
         if o not in OUTPUTS:
             raise MechanismError(f"--outputs: unknown output '{o}'; choose from {', '.join(OUTPUTS)}")
     check_output("--csv", args.csv)
-    check_output("--plot", args.plot, PLOT_FORMATS)
+    check_output("--plot", args.plot, PLOT_FORMATS + ("dxf",))
+    check_output("--export", args.export, EXPORT_FORMATS)
     check_output("--animate", args.animate, ("gif",))
+    for option in ("--plot", "--export"):
+        if getattr(args, option[2:]) == "-":
+            raise MechanismError(f"{option} -: give a file name (a drawing is not written to standard output)")
     mech = load_from_args(args)
     phis, values = input_grid(mech, args)
     omega = omega_from_args(args)
+    units = units_from_args(mech, args)
     from ..report import kinematics as _report
 
     table = _report.kinematics_table(mech, phis, omega=omega, outputs=outputs, dtype=dtype, input_values=values,
@@ -434,18 +465,27 @@ def cmd_kinematics(args) -> int:
     branch_point_warnings(table)
     bad = int((~table.converged).sum())
     info = sys.stderr if args.csv == "-" else sys.stdout  # `--csv -`: the table alone on standard output
-    _report.print_summary(table, info, every_row_hint=not args.csv)
+    _report.print_summary(table, info, every_row_hint=not args.csv, units=units)
     if args.csv:
         with writing("--csv", args.csv):
-            _report.write_csv(args.csv, table)
+            _report.write_csv(args.csv, table, units)
         if args.csv != "-":
             print(f"wrote {args.csv}: {len(phis)} rows, {len(table.columns)} columns", file=info)
-    if args.plot or args.animate:
+    dxf_plot = bool(args.plot) and args.plot.lower().endswith(".dxf")  # not a picture: the geometry
+    for option, path in (("--plot", args.plot if dxf_plot else None), ("--export", args.export)):
+        if path:
+            from ..report import export as _export
+
+            with writing(option, path):
+                _export.export(path, mech, table)
+            print(f"wrote {path} (geometry in {_export.file_units(mech).length})", file=info)
+    picture = args.plot if args.plot and not dxf_plot else None
+    if picture or args.animate:
         from ..report import plot as _plot
 
-        if args.plot:
-            with writing("--plot", args.plot):
-                _plot.plot_kinematics(args.plot, mech, table)
+        if picture:
+            with writing("--plot", picture):
+                _plot.plot_kinematics(picture, mech, table)
             print(f"wrote {args.plot}", file=info)
         if args.animate:
             with writing("--animate", args.animate):

@@ -14,12 +14,14 @@ from .mechanism import (
     PLOT_FORMATS,
     add_change_points_argument,
     add_mechanism_arguments,
+    add_units_argument,
     branch_point_warnings,
     check_output,
     enable_dtype,
     input_grid,
     load_from_args,
     omega_from_args,
+    units_from_args,
     writing,
 )
 
@@ -40,6 +42,7 @@ def register(sub) -> None:
     )
     add_mechanism_arguments(p)
     p.add_argument("--csv", metavar="OUT", help="write the table to this CSV file (default: print a summary)")
+    add_units_argument(p)
     add_change_points_argument(p)
     p.add_argument("--plot", metavar="OUT.png", help="plot the reaction magnitudes and the drive torque")
     p.set_defaults(func=cmd_reactions)
@@ -55,17 +58,18 @@ def cmd_reactions(args) -> int:
     _bodies.model(mech)  # a file without bodies is refused before the solve
     phis, values = input_grid(mech, args)  # the input column exactly as asked (no rad round trip)
     omega = omega_from_args(args)
+    units = units_from_args(mech, args)
     table = reactions_table(mech, phis, omega=omega, dtype=dtype, input_values=values,
                             rpm=getattr(args, "rpm", None), change_points=args.change_points)
     branch_point_warnings(table)
     info = sys.stderr if args.csv == "-" else sys.stdout  # `--csv -`: the table alone on standard output
     if args.csv:
         with writing("--csv", args.csv):
-            write_csv(args.csv, table)
+            write_csv(args.csv, table, units)
         if args.csv != "-":
             print(f"wrote {args.csv}: {len(phis)} rows, {len(table.columns)} columns", file=info)
     else:
-        print_summary(table, sys.stdout)
+        print_summary(table, sys.stdout, units)
     if args.plot:
         with writing("--plot", args.plot):
             plot(args.plot, mech, table)

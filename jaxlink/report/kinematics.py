@@ -14,6 +14,9 @@ Positions that did not assemble (result neither `converged` nor `singular`) are 
 solved quantity of their row is `nan`; at a `singular` position (a dead centre or toggle, assembled
 to about √eps) the positions are given and the rates, velocities and accelerations (unbounded
 there) are `nan`. Summaries leave `nan` out; plots break their lines there (`jaxlink/report/plot.py`).
+
+The table is computed in SI (the input column as asked); `write_csv` and `print_summary` take
+`units` to write it in the file's units (`jaxlink/report/units.py`: `P_x_mm`, `phi3_deg_s2`, …).
 """
 
 from __future__ import annotations
@@ -34,6 +37,7 @@ from ..results import RESULTS, Solution
 from ..solvers import branch_points as _branch_points
 from ..solvers.assemble import NewtonOptions, default_rtol, solve
 from . import grid as _grid
+from .units import FileUnits, convert, input_unit_text
 
 OUTPUTS = ("position", "velocity", "acceleration", "rates")
 """What `kinematics_table` can add to the positions: point velocities and accelerations, and the
@@ -81,12 +85,15 @@ class KinematicsTable:
         """The input column as printed (degrees or metres)."""
         return self.data[:, 0]
 
-    def speed_text(self) -> str:
-        """`600 rpm (ω = 62.83 rad/s)` or `ω = 1 rad/s`."""
-        unit = "rad/s" if self.input_kind == "angle" else "m/s"
+    def speed_text(self, units: FileUnits | None = None) -> str:
+        """`600 rpm (ω = 62.83 rad/s)` or `ω = 1 rad/s` (`units`: in the file's units, `ω = 57.3 deg/s`)."""
+        unit, factor = ("rad/s" if self.input_kind == "angle" else "m/s"), 1.0
+        if units is not None:
+            unit, factor = units.speed(self.input_kind)
+        omega = self.omega * factor
         if self.rpm is not None:
-            return f"{self.rpm:g} rpm (ω = {self.omega:.4g} {unit})"
-        return f"ω = {self.omega:g} {unit}"
+            return f"{self.rpm:g} rpm (ω = {omega:.4g} {unit})"
+        return f"ω = {omega:g} {unit}"
 
 
 def kinematics_table(mech: Mechanism, phis, *, omega: float = 1.0, outputs=OUTPUTS[:3], p=None,
@@ -254,15 +261,17 @@ def _branch_point_columns(mech: Mechanism, located: list, cols: list, data: list
     return cols, data
 
 
-def branch_point_text(table_or_list, input_kind: str, change_points: str = "keep") -> list:
-    """One line per located branch point: where, and which branch the solve continues on."""
+def branch_point_text(table_or_list, input_kind: str, change_points: str = "keep",
+                      units: FileUnits | None = None) -> list:
+    """One line per located branch point: where (`units`: in the file's units), and which branch
+    the solve continues on."""
     located = getattr(table_or_list, "branch_points", table_or_list)
-    unit = "°" if input_kind == "angle" else " m"
+    unit, factor = input_unit_text(input_kind, units)
     lines = []
     for b in located:
         who = b.label or f"dyad {b.dyad + 1}"
         rows = "the last row and the first" if b.closing else f"rows {b.row + 1} and {b.row + 2}"
-        where = f"{b.kind} at input {b.value:.10g}{unit} ({who}, between {rows})"
+        where = f"{b.kind} at input {b.value * factor:.10g}{unit} ({who}, between {rows})"
         if b.kind == "toggle":
             lines.append(f"{where}: a limit position, the linkage cannot be driven past it")
         elif b.smooth:
@@ -331,24 +340,26 @@ def _checked(result, resid, scale: float, p):
     return out.astype(result.dtype)
 
 
-def write_csv(out, table: KinematicsTable) -> None:
+def write_csv(out, table: KinematicsTable, units: FileUnits | None = None) -> None:
     """The table as CSV to `out`: a path, `-` (standard output) or an open text file. Numbers are
-    printed exactly (shortest round-trip), `nan` where not data; `result` by name."""
+    printed exactly (shortest round-trip), `nan` where not data; `result` by name. `units`: the
+    columns in the file's units (`jaxlink/report/units.py`; default SI)."""
     if isinstance(out, str):
         if out == "-":
-            _write_rows(sys.stdout, table)
+            _write_rows(sys.stdout, table, units)
             return
         with open(out, "w", newline="") as fh:
-            _write_rows(fh, table)
+            _write_rows(fh, table, units)
         return
-    _write_rows(out, table)
+    _write_rows(out, table, units)
 
 
-def _write_rows(fh: TextIO, table: KinematicsTable) -> None:
+def _write_rows(fh: TextIO, table: KinematicsTable, units: FileUnits | None = None) -> None:
+    columns, data = convert(table.columns, table.data, units)
     w = csv.writer(fh, lineterminator="\n")
-    w.writerow(table.columns)
-    ic, ir = table.columns.index("converged"), table.columns.index("result")
-    for row in table.data:
+    w.writerow(columns)
+    ic, ir = columns.index("converged"), columns.index("result")
+    for row in data:
         out = ["nan" if np.isnan(x) else repr(float(x)) for x in row]
         out[ic] = str(int(row[ic]))
         out[ir] = RESULTS.name(int(row[ir]))
@@ -360,30 +371,34 @@ def failure_summary(table: KinematicsTable) -> str:
     return _grid.failure_text(table.result, table.input_values, table.input_kind, table.periodic)
 
 
-def print_summary(table: KinematicsTable, out: TextIO, every_row_hint: bool = True) -> None:
+def print_summary(table: KinematicsTable, out: TextIO, every_row_hint: bool = True,
+                  units: FileUnits | None = None) -> None:
     """Counts, the largest residual of the converged rows, and min/max of every column over the rows
-    where it is data (positions that did not assemble are left out)."""
+    where it is data (positions that did not assemble are left out). `units`: in the file's units
+    (the columns as `write_csv` names them; default SI)."""
     n = len(table.data)
-    rates = any(c.endswith(("_s", "_s2")) for c in table.columns)
-    speed = f" at {table.speed_text()}" if rates else ""
-    resid = table.column("residual_m")[table.converged]
-    rtext = f", max residual {resid.max():.2e} m" if resid.size else ""
+    columns, data = convert(table.columns, table.data, units)
+    rates = any(c.endswith(("_s", "_s2")) for c in columns)
+    speed = f" at {table.speed_text(units)}" if rates else ""
+    lu = "m" if units is None else units.length
+    resid = data[:, columns.index(f"residual_{lu}")][table.converged]
+    rtext = f", max residual {resid.max():.2e} {lu}" if resid.size else ""
     out.write(f"{n} positions{speed}, {int(table.converged.sum())} converged{rtext}\n")
     missing = int((~table.assembled).sum())
     if missing:
         out.write(f"{missing} positions not assembled (nan in the table, left out below)\n")
-    width = max(len(c) for c in table.columns)
+    width = max(len(c) for c in columns)
     out.write(f"{'column':<{width}}  {'min':>14} {'max':>14}\n")
-    for j, c in enumerate(table.columns):
-        if c in STATUS_COLUMNS or c.startswith("change_point_"):
+    for j, c in enumerate(columns):
+        if c in ("converged", "result", f"residual_{lu}") or c.startswith("change_point_"):
             continue
-        col = table.data[:, j]
+        col = data[:, j]
         col = col[np.isfinite(col)]
         if col.size:
             out.write(f"{c:<{width}}  {col.min():14.6g} {col.max():14.6g}\n")
         else:
             out.write(f"{c:<{width}}  {'nan':>14} {'nan':>14}\n")
-    for line in branch_point_text(table, table.input_kind, table.change_points):
+    for line in branch_point_text(table, table.input_kind, table.change_points, units):
         out.write(line + "\n")
     if every_row_hint:
         out.write("(use --csv OUT to write every row)\n")

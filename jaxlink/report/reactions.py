@@ -7,7 +7,9 @@ the code of the row (`converged`; the position solve's code, e.g. `cannot_assemb
 kinematics did not converge; `singular` where the kinetostatic system is singular). Rows that are
 not `converged` hold `nan`: they are left out of the summary and are gaps in the plot. Where a
 change point was located between two rows, `change_point_deg` (`_m` for a length input) comes
-before `result`, as in `jaxlink kinematics` (`report/kinematics.py`).
+before `result`, as in `jaxlink kinematics` (`report/kinematics.py`). With `units` (`--units file`,
+`report/units.py`) the CSV and the summary are in the file's units: `input_deg` (`input_rad` in a
+file in radians), the forces in N, `drive_torque_N_mm` (N·cm, N·m: force × the file's length unit).
 """
 
 from __future__ import annotations
@@ -20,6 +22,7 @@ import numpy as np
 
 from ..results import RESULTS
 from . import grid as _grid
+from .units import FileUnits, convert
 
 
 @dataclasses.dataclass
@@ -46,10 +49,11 @@ class ReactionsTable:
         f = self.data[:, 1:1 + 2 * len(self.joint_names)].reshape(len(self.data), -1, 2)
         return np.hypot(f[..., 0], f[..., 1])
 
-    def speed_text(self) -> str:
+    def speed_text(self, units: FileUnits | None = None) -> str:
+        unit, factor = ("rad/s", 1.0) if units is None else units.speed(self.input_kind)
         if self.rpm is not None:
-            return f"{self.rpm:g} rpm (ω = {self.omega:.4g} rad/s)"
-        return f"ω = {self.omega:g} rad/s"
+            return f"{self.rpm:g} rpm (ω = {self.omega * factor:.4g} {unit})"
+        return f"ω = {self.omega * factor:g} {unit}"
 
 
 def reactions_table(mech, phis, *, omega: float, p=None, dtype=np.float64, input_values=None,
@@ -99,19 +103,21 @@ def reactions_table(mech, phis, *, omega: float, p=None, dtype=np.float64, input
                           _grid.full_turn(phis, mech.input_kind), rpm, located, change_points)
 
 
-def write_csv(out, table: ReactionsTable) -> None:
-    """The table as CSV to `out`: a path, `-` (standard output) or an open text file."""
+def write_csv(out, table: ReactionsTable, units: FileUnits | None = None) -> None:
+    """The table as CSV to `out`: a path, `-` (standard output) or an open text file; `units`: in
+    the file's units (default SI)."""
     if isinstance(out, str) and out != "-":
         with open(out, "w", newline="") as fh:
-            _write_rows(fh, table)
+            _write_rows(fh, table, units)
     else:
-        _write_rows(sys.stdout if out == "-" else out, table)
+        _write_rows(sys.stdout if out == "-" else out, table, units)
 
 
-def _write_rows(fh, table: ReactionsTable) -> None:
+def _write_rows(fh, table: ReactionsTable, units: FileUnits | None = None) -> None:
+    columns, data = convert(table.columns, table.data, units)
     w = csv.writer(fh, lineterminator="\n")
-    w.writerow(table.columns)
-    for row in table.data:
+    w.writerow(columns)
+    for row in data:
         out = ["nan" if np.isnan(x) else repr(float(x)) for x in row[:-1]]
         w.writerow(out + [RESULTS.name(int(row[-1]))])
 
@@ -121,29 +127,33 @@ def failure_summary(table: ReactionsTable) -> str:
     return _grid.failure_text(table.result, table.data[:, 0], table.input_kind, table.periodic)
 
 
-def print_summary(table: ReactionsTable, out) -> None:
+def print_summary(table: ReactionsTable, out, units: FileUnits | None = None) -> None:
     """The largest |F| of every joint and the largest |τ|, with the input where they occur (an
-    angle reduced to [0, 360)), over the solved rows."""
+    angle reduced to [0, 360°) or [0, 2π)), over the solved rows; `units`: the input and the
+    torque in the file's units (default: degrees or metres, N·m)."""
     n = len(table.data)
-    out.write(f"{n} positions, {int(table.ok.sum())} solved, {table.speed_text()}\n")
+    out.write(f"{n} positions, {int(table.ok.sum())} solved, {table.speed_text(units)}\n")
     if not table.ok.any():
         return
     mags = table.magnitudes()
-    ang = table.data[:, 0]
+    columns, data = convert(table.columns, table.data, units)
+    ang = data[:, 0]
     angle = table.input_kind == "angle"
-    at = _grid.reduce_deg(ang) if angle else ang
-    head = "at input (deg)" if angle else "at input (m)"
+    in_unit = columns[0].split("_", 1)[1]  # deg, rad, m, mm, …
+    at = (_grid.reduce_deg(ang) if in_unit == "deg" else np.mod(ang, 2 * np.pi)) if angle else ang
+    head = f"at input ({in_unit})"
     width = max(len(j) for j in table.joint_names + ("drive torque",))
     out.write(f"{'joint':<{width}}  {'max |F| (N)':>14} {head:>15}\n")
     for k, name in enumerate(table.joint_names):
         i = int(np.nanargmax(mags[:, k]))
         out.write(f"{name:<{width}}  {mags[i, k]:14.6g} {at[i]:15.6g}\n")
-    t = table.column("drive_torque_N_m")
+    lu = "m" if units is None else units.length
+    t = data[:, columns.index(f"drive_torque_N_{lu}")]
     i = int(np.nanargmax(np.abs(t)))
-    out.write(f"{'drive torque':<{width}}  {t[i]:14.6g} {at[i]:15.6g}   (N·m, largest |τ|)\n")
+    out.write(f"{'drive torque':<{width}}  {t[i]:14.6g} {at[i]:15.6g}   (N·{lu}, largest |τ|)\n")
     from .kinematics import branch_point_text
 
-    for line in branch_point_text(table, table.input_kind, table.change_points):
+    for line in branch_point_text(table, table.input_kind, table.change_points, units):
         out.write(line + "\n")
     out.write("(use --csv OUT to write every row)\n")
 
