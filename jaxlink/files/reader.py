@@ -421,7 +421,8 @@ def loads(text: str, *, file: str = "<string>", overrides: Mapping[str, float] |
         kinds=dict(kinds),
         bodies=body_model,
         derived=tuple((n, derived_text[n], derived_kinds[n] or "number", defs[n]) for n in derived_text),
-        sketch=layout,
+        sketch=None if layout is None else dataclasses.replace(layout, joints=tuple(
+            (j, tuple(_expr.substitute_term(_expr.parse_term(t), defs) for t in ts)) for j, ts in layout.joints)),
     )
     # evaluate once at the guess, where it holds (the input at `[input] start`), in numpy float64,
     # to catch anything left (e.g. sqrt of a negative number)

@@ -63,8 +63,9 @@ class Layout:
     """What a sketch file names, kept on the model (`Structure.sketch`) for the drawing and the
     designer's numbers: no numbers, only names and the vector sums of the joints.
 
-    - `joints`: `(name, terms)` of every joint, its position as a vector sum from the origin (the
-      terms are strings of the loop form);
+    - `joints`: `(name, terms)` of every joint, its position as a vector sum from the origin
+      (`derive` gives the terms as strings of the loop form; the model holds them parsed, as
+      `jaxlink.files.expr.Term`s with the derived parameters expanded: `Structure.joint_positions`);
     - `frame`: the frame joints; `bodies`: `(name, joint names)` of every link and plate;
     - `sliders`: `(joint, body)`; `input`: `("crank", link)` or `("actuator", (C1, C2))`.
     """

@@ -233,6 +233,15 @@ class Structure:
         rows = [jnp.stack(_broadcast(*self._sum(terms, env, "all", trig), like=q)) for _, terms in self.points]
         return jnp.stack(rows)
 
+    def joint_positions(self, q, phi, p, trig=None):
+        """Positions of the joints of a sketch file (`sketch.joints`, in its order), shape
+        (n_joints, 2), metres; None for a loop file."""
+        if self.sketch is None:
+            return None
+        env = self.env(q, phi, p)
+        rows = [jnp.stack(_broadcast(*self._sum(terms, env, "all", trig), like=q)) for _, terms in self.sketch.joints]
+        return jnp.stack(rows)
+
     def length_scale(self, p):
         """A length that sets the residual tolerance: the largest |length parameter| (m)."""
         idx = [i for i, k in enumerate(self.parameter_kinds) if k == "length"]
