@@ -89,10 +89,11 @@ def test_four_bar_sketch_equals_loop_form_and_file_equals_builder():
     _compare(jl.load("four-bar", overrides={"a": 22.0}), longer, ["P"])
 
 
-def test_slider_crank_sketch_equals_loop_form():
-    loop = jl.load("slider-crank")
+@pytest.mark.parametrize("scene", ["slider-crank", "slider-crank-mass"])
+def test_slider_crank_sketch_equals_loop_form(scene):
+    loop = jl.load(scene)
     start = math.radians(30.0)
-    j = _joints_of("slider-crank", {"A": ["h2 @ psi12"], "B": ["h1 @ alpha1", "p14 @ alpha4"]}, start)
+    j = _joints_of(scene, {"A": ["h2 @ psi12"], "B": ["h1 @ alpha1", "p14 @ alpha4"]}, start)
     sk = (jl.Sketch("slider-crank", length_unit="mm", angle_unit="deg")
           .frame("O1", 0, 0).joint("A", *j["A"]).joint("B", *j["B"])
           .link("crank", "O1", "A").link("rod", "A", "B")
@@ -107,24 +108,22 @@ def test_slider_crank_sketch_equals_loop_form():
     _compare(loop, mech, ["A", "B"], phis=TURN + start)
 
 
-def test_sewing_feed_sketch_equals_loop_form():
+@pytest.mark.parametrize("scene", ["sewing-feed", "sewing-feed-opt"])
+def test_sewing_feed_sketch_equals_loop_form(scene):
     """The seed's bottom-feed six-bar: a crank plate with two arms, a lever plate pivoted between
     its ends, a collinear carrier plate; two dyads."""
-    loop = jl.load("sewing-feed")
+    loop = jl.load(scene)
     start = loop.input_start
-    j = _joints_of("sewing-feed", {
+    j = _joints_of(scene, {
         "B": ["l2 @ phi2"], "C": ["-l22 @ phi2 + gamma"], "D": ["l2 @ phi2", "l3 @ phi3"],
+        "E": ["l2 @ phi2", "l3 @ phi3", "l44 @ phi4"],  # the lever's frame pivot: (l8, l7)
         "F": ["l2 @ phi2", "l3 @ phi3", "l4 @ phi4"],
         "H": ["l2 @ phi2", "l3 @ phi3", "l4 @ phi4", "l6 @ phi6"],
+        "Z": ["l2 @ phi2", "l3 @ phi3", "l4 @ phi4", "(l6 + l66) @ phi6"],
     }, start)
-    sk = (jl.Sketch("sewing-feed", length_unit="mm", angle_unit="deg")
-          .frame("A", 0, 0)
-          .joint("B", *j["B"]).joint("C", *j["C"]).joint("D", *j["D"]).joint("F", *j["F"])
-          .joint("H", *j["H"]))
-    # the lever's frame pivot E: D + l44 e(phi4) = (l8, l7) in the loop form
-    e = _joints_of("sewing-feed", {"E": ["l2 @ phi2", "l3 @ phi3", "l44 @ phi4"]}, start)["E"]
-    z = _joints_of("sewing-feed", {"Z": ["l2 @ phi2", "l3 @ phi3", "l4 @ phi4", "(l6 + l66) @ phi6"]}, start)["Z"]
-    sk.frame("E", *e).joint("Z", *z)
+    sk = jl.Sketch("sewing-feed", length_unit="mm", angle_unit="deg").frame("A", 0, 0).frame("E", *j["E"])
+    for n in ("B", "C", "D", "F", "H", "Z"):
+        sk.joint(n, *j[n])
     sk.link("crank", "A", "B", "C").link("coupler", "B", "D").link("lever", "E", "D", "F")
     sk.link("link5", "H", "C").link("carrier", "F", "H", "Z").crank("crank", name="phi2").points("Z", "D")
     mech = sk.mechanism()
@@ -132,17 +131,36 @@ def test_sewing_feed_sketch_equals_loop_form():
     _compare(loop, mech, ["Z"], phis=TURN + start)
 
 
-def test_needle_arachne_sketch_equals_loop_form():
+@pytest.mark.parametrize("scene", ["needle-arachne", "needle-dwell", "needle-arachne-unit"])
+def test_needle_arachne_sketch_equals_loop_form(scene):
     """The ARACHNE needle six-bar: a bell crank (plate C0, C, D) and a vertical needle slider."""
-    loop = jl.load("needle-arachne")
-    j = _joints_of("needle-arachne", {
-        "A": ["l2 @ phi2"], "C": ["(l1, 0)", "l4r @ psi"], "D": ["(l1, 0)", "l4a @ psi - beta"],
+    loop = jl.load(scene)
+    j = _joints_of(scene, {
+        "A": ["l2 @ phi2"], "C0": ["(l1, 0)"], "C": ["(l1, 0)", "l4r @ psi"], "D": ["(l1, 0)", "l4a @ psi - beta"],
         "B2": ["(l1 + l7, 0)", "s @ 90"]}, 0.0)
-    sk = (jl.Sketch("needle", length_unit="mm", angle_unit="deg")
-          .frame("A0", 0, 0).frame("C0", 52.5, 0)
+    lu = "m" if scene.endswith("unit") else "mm"
+    sk = (jl.Sketch("needle", length_unit=lu, angle_unit="deg")
+          .frame("A0", 0, 0).frame("C0", *j["C0"])
           .joint("A", *j["A"]).joint("C", *j["C"]).joint("D", *j["D"]).joint("B", *j["B2"])
           .link("crank", "A0", "A").link("coupler", "A", "C").link("bellcrank", "C0", "C", "D")
           .link("rod", "D", "B").slider("B", on="frame", along=(0, 1)).crank("crank", name="phi2"))
+    mech = sk.mechanism()
+    assert _closed_form(mech) and [d.kind for d in dyads.classify(mech)] == ["RRR", "RRP"]
+    _compare(loop, mech, ["B"])
+
+
+def test_needle_arachne_original_sketch_equals_loop_form():
+    """The thesis's original needle drive: the rocker itself drives the rod; frame pivot C0 off
+    the crank's axis."""
+    loop = jl.load("needle-arachne-original")
+    j = _joints_of("needle-arachne-original", {
+        "A": ["l2 @ phi2"], "C0": ["(l1, l6)"], "C": ["l2 @ phi2", "l3 @ phi3"],
+        "B2": ["(l1, l6)", "l4 @ psi", "l5 @ phi5"]}, 0.0)
+    sk = (jl.Sketch("needle-original", length_unit="mm", angle_unit="deg")
+          .frame("A0", 0, 0).frame("C0", *j["C0"])
+          .joint("A", *j["A"]).joint("C", *j["C"]).joint("B", *j["B2"])
+          .link("crank", "A0", "A").link("coupler", "A", "C").link("rocker", "C0", "C")
+          .link("rod", "C", "B").slider("B", on="frame", along=(0, 1)).crank("crank", name="phi2"))
     mech = sk.mechanism()
     assert _closed_form(mech) and [d.kind for d in dyads.classify(mech)] == ["RRR", "RRP"]
     _compare(loop, mech, ["B"])
