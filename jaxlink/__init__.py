@@ -6,6 +6,7 @@ The public API (everything else is internal and may change):
 - files: `load`, `loads`, `Mechanism`, `MechanismError`; a mechanism from joints and links: `Sketch`;
 - positions: `solve`, `solve_path`, `NewtonOptions`, `Solution`, `SolveStats`, `RESULTS`;
 - branch points between samples (change points, toggles): `branch_points`, `BranchPoints`;
+- the whole closed curve of a linkage whose input cannot turn fully: `whole_curve`, `WholeCurve`;
 - kinematics: `transfer`, `Transfer`, `time_derivatives`;
 - kinetostatics: `reactions`, `solve_reactions`, `Reactions`, `body_motion`, `BodyMotion`;
 - dwell (a slider that stands still): `dwell_metrics`, `solve_stroke`, `dwell_roles`, `StrokeScale`, `DwellRoles`;
@@ -28,6 +29,8 @@ from .analysis.kinetostatics import solve_reactions as solve_reactions
 from .analysis.transfer import Transfer as Transfer
 from .analysis.transfer import time_derivatives as time_derivatives
 from .analysis.transfer import transfer as transfer
+from .analysis.whole_curve import WholeCurve as WholeCurve
+from .analysis.whole_curve import whole_curve as whole_curve
 from .cache import enable_compilation_cache as enable_compilation_cache
 from .errors import MechanismError as MechanismError
 from .files.reader import load as load

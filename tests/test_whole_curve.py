@@ -1,0 +1,128 @@
+"""The whole closed curve of a linkage whose input cannot turn fully (`jl.whole_curve`): its
+segments end at the closed-form limit positions, it closes, it stays on the loops, and each
+segment is the circle–circle intersection on its side (numpy, written here)."""
+
+from __future__ import annotations
+
+import jax
+import numpy as np
+import pytest
+
+import jaxlink as jl
+
+jax.config.update("jax_enable_x64", True)
+pytestmark = pytest.mark.xdist_group("sketch")
+
+TRIPLE_ROCKER = """
+[mechanism]
+length_unit = "mm"
+angle_unit = "deg"
+[parameters]
+a = 30.0
+b = 40.0
+c = 35.0
+d = 50.0
+[input]
+name = "phi2"
+start = 90.0
+[unknowns]
+phi3 = 0.0
+phi4 = 60.0
+[loops]
+main = ["a @ phi2", "b @ phi3", "-c @ phi4", "-d @ 0"]
+[points]
+B = ["a @ phi2", "b @ phi3"]
+"""
+
+
+def _coupler_joint(a, b, c, d, phi, side):
+    """B of the four-bar A0 = 0, B0 = (d, 0): |B − A| = b, |B − B0| = c, left (+1) or right of A → B0."""
+    A = np.stack([a * np.cos(phi), a * np.sin(phi)], -1)
+    w = np.array([d, 0.0]) - A
+    dist = np.hypot(w[:, 0], w[:, 1])
+    e = w / dist[:, None]
+    x = (b * b - c * c + dist**2) / (2 * dist)
+    hh = np.sqrt(np.maximum(b * b - x * x, 0.0))
+    return A + x[:, None] * e + side * hh[:, None] * np.stack([-e[:, 1], e[:, 0]], -1)
+
+
+def test_triple_rocker_whole_curve_switches_branch_at_its_limits():
+    mech = jl.loads(TRIPLE_ROCKER)
+    wc = jl.whole_curve(mech, samples=720)
+    a, b, c, d = 30.0, 40.0, 35.0, 50.0
+    limit = np.arccos((a * a + d * d - (b + c) ** 2) / (2 * a * d))  # coupler and rocker in line
+    assert not wc.full_turn and len(wc.segments) == 2
+    (f0, t0, s0), (f1, t1, s1) = wc.segments
+    assert abs(f0 + limit) < 1e-9 and abs(t0 - limit) < 1e-9 and abs(f1 - limit) < 1e-9 and abs(t1 + limit) < 1e-9
+    assert s0 == (-s1[0],)
+    # closed, on the loop everywhere, and each half the intersection on its own side
+    assert np.abs(wc.points[0] - wc.points[-1]).max() < 1e-15
+    r = jax.vmap(mech.residual, in_axes=(0, 0, None))(wc.q, wc.input, mech.parameters)
+    assert float(np.abs(r).max()) < 1e-15
+    sides = []
+    for k in (0, 1):
+        sel = wc.segment == k
+        errs = [np.abs(_coupler_joint(a, b, c, d, wc.input[sel], sgn) * 1e-3 - wc.points[sel, 0]).max()
+                for sgn in (1.0, -1.0)]
+        # to rounding, amplified by the square root next to the toggles (|h| ~ sqrt(ulp) there)
+        assert min(errs) < 1e-9 and max(errs) > 1e-3, errs
+        sides.append(int(np.argmin(errs)))
+    assert sides[0] != sides[1]  # the two halves are the two assemblies
+
+
+def test_watt_linkage_driven_by_a_rocker_traces_its_figure_eight():
+    """Watt's straight-line linkage: two equal rockers O1A, O2B and a coupler AB with its midpoint
+    M; driven by the rocker O1A, which reaches an interval only. The whole curve is the
+    figure-eight of M, both halves; the limits are where coupler and the other rocker are in line:
+    |O1 + r e(φ) − O2| = c + r or |c − r|."""
+    r, c = 50.0, 30.0
+    o2 = np.array([70.0, 30.0])
+    text = f"""
+[mechanism]
+length_unit = "mm"
+angle_unit = "deg"
+[parameters]
+r1 = {r}
+r2 = {r}
+cc = {c}
+ox = {o2[0]}
+oy = {o2[1]}
+[input]
+name = "phi1"
+start = 10.0
+[unknowns]
+phi3 = 90.0
+phi4 = 190.0
+[loops]
+main = ["r1 @ phi1", "cc @ phi3", "-r2 @ phi4", "-(ox, oy)"]
+[points]
+M = ["r1 @ phi1", "cc/2 @ phi3"]
+"""
+    mech = jl.loads(text)
+    motion_check = jl.solve(mech, np.radians([10.0]))
+    assert bool(motion_check.converged[0])
+    wc = jl.whole_curve(mech, samples=720)
+    assert not wc.full_turn and len(wc.segments) == 2
+    # the closed-form limits: |r e(φ) − o2|² = L² ⇒ cos(φ − α) = (r² + |o2|² − L²) / (2 r |o2|)
+    alpha, D = np.arctan2(o2[1], o2[0]), np.hypot(*o2)
+    limits = []
+    for L in (c + r, abs(c - r)):
+        cos_ = (r * r + D * D - L * L) / (2 * r * D)
+        if abs(cos_) <= 1:
+            limits += [alpha + np.arccos(cos_), alpha - np.arccos(cos_)]
+    ends = [e for a, b, _ in wc.segments for e in (a, b)]
+    for e in ends:
+        assert min(abs(np.remainder(e - lim + np.pi, 2 * np.pi) - np.pi) for lim in limits) < 1e-9, (e, limits)
+    # the figure-eight crosses itself: M passes the same place on the two halves
+    h0, h1 = wc.points[wc.segment == 0, 0], wc.points[wc.segment == 1, 0]
+    gap = np.min(np.hypot(h0[:, None, 0] - h1[None, :, 0], h0[:, None, 1] - h1[None, :, 1]))
+    assert gap < 2e-4  # within a sample's spacing (m)
+    r_ = jax.vmap(mech.residual, in_axes=(0, 0, None))(wc.q, wc.input, mech.parameters)
+    assert float(np.abs(r_).max()) < 1e-15
+
+
+def test_a_crank_turns_fully_in_one_segment():
+    wc = jl.whole_curve(jl.load("four-bar"), samples=360)
+    assert wc.full_turn and len(wc.segments) == 1
+    a, b, _ = wc.segments[0]
+    assert b - a == pytest.approx(2 * np.pi)
