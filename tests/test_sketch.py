@@ -328,3 +328,41 @@ def test_sketch_file_checks_and_prints_its_loops(tmp_path, capsys):
     assert "loop_A_B_B0: (A0_x, A0_y) + crank @ theta_crank + coupler @ theta_coupler" in out
     assert "P = (A0_x, A0_y) + crank @ theta_crank + coupler_P @ theta_coupler + coupler_P_angle" in out
     assert "frame A0, B0; links crank (A0 A), coupler (A B P: a plate), rocker (B0 B)" in out
+
+
+def test_sketch_masses_give_the_reactions_of_the_loop_file():
+    """slider-crank-mass written as a sketch with [sketch.masses] and the same loads: the drive
+    torque and every joint force equal the loop file's (its bodies and joints written by hand)."""
+    loop = jl.load("slider-crank-mass")
+    start = 0.0
+    j = _joints_of("slider-crank-mass", {"A": ["h2 @ psi12"], "B": ["h1 @ alpha1", "p14 @ alpha4"]}, start)
+    sk = (jl.Sketch("slider-crank-mass", length_unit="mm", angle_unit="deg")
+          .frame("O", 0, 0).joint("A", *j["A"]).joint("B", *j["B"])
+          .link("crank", "O", "A").link("rod", "A", "B")
+          .slider("B", on="frame", along=(1, 0)).crank("crank"))
+    sk.table("environment", {"gravity": [0.0, -9.81]})
+    sk.table("loads", {
+        "work": {"kind": "force", "body": "B_block", "at": "B", "force": [-200.0, 0.0]},
+        "rod_moment": {"kind": "torque", "body": "rod", "torque": 2.0},
+        "return_spring": {"kind": "spring", "bodies": ["ground", "B_block"], "from": ["(200, 12)"], "to": "B",
+                          "stiffness": 500.0, "length": 60.0, "preload": 10.0}})
+    text = sk.toml().replace("[sketch.links]", "[sketch.masses]\n"
+                             "crank = { mass = 0.3, centroid = [%r, %r], inertia = 2.0e-4 }\n"
+                             "rod = { mass = 0.5, inertia = 2.6667e-4 }\n"
+                             "B = { mass = 0.8 }\n\n[sketch.links]" % (j["A"][0] / 3, j["A"][1] / 3))
+    mech = jl.loads(text)
+    phis = np.radians(np.arange(0.0, 360.0, 15.0))
+    _, ra = jl.solve_reactions(loop, phis, omega=30.0, alpha=5.0)
+    _, rb = jl.solve_reactions(mech, phis, omega=30.0, alpha=5.0)
+    assert bool(np.all(np.asarray(ra.result) == jl.RESULTS.converged))
+    assert bool(np.all(np.asarray(rb.result) == jl.RESULTS.converged))
+    scale = float(np.abs(np.asarray(ra.torque)).max())
+    np.testing.assert_allclose(np.asarray(rb.torque), np.asarray(ra.torque), rtol=0, atol=1e-12 * scale)
+    names_a, names_b = loop.bodies.joint_names, mech.bodies.joint_names
+    pairs = {"O": "O", "A": "A", "B": "B", "guide": "B_slide"}
+    fa, fb = np.asarray(ra.force), np.asarray(rb.force)
+    for na, nb in pairs.items():
+        a, b = fa[:, names_a.index(na)], fb[:, names_b.index(nb)]
+        fscale = float(np.abs(a).max())
+        # the same joint may be written with its two bodies the other way round: force or its opposite
+        assert min(np.abs(a - b).max(), np.abs(a + b).max()) < 1e-11 * fscale, (na, nb)
