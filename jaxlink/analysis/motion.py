@@ -58,11 +58,8 @@ def _cos_mu(mech, dyads, j, sigma, q_ref, phi, p):
     """cos μ of RRR dyad j at input φ (the dyads before it on their sides σ)."""
     q, _, _, _, _, trig = _dyads._solve(mech, dyads[:j], sigma[:j], q_ref, phi, p, None, with_trig=True)
     env = mech.env(q, phi, p)
-    d = dyads[j]
-    terms = mech.loops[d.loop][1]
-    wx, wy = _dyads._known_parts(mech, d, env, trig)
-    La, _ = _dyads._radius_and_offset(mech, terms[d.terms[0]], d.offsets[0], env, trig)
-    Lb, _ = _dyads._radius_and_offset(mech, terms[d.terms[1]], d.offsets[1], env, trig)
+    (wx, wy), a, b = _dyads.geometry(mech, dyads[j], env, trig)
+    La, Lb = a.L, b.L
     return (La * La + Lb * Lb - (wx * wx + wy * wy)) / (2.0 * jnp.abs(La) * jnp.abs(Lb))
 
 
