@@ -46,12 +46,15 @@ class Motion:
     - `transmission`: per RRR dyad (solve order), a dict `loop`, `unknowns`, `min`, `min_at`,
       `max`, `max_at` (μ in rad, where in the input's SI unit) and `worst` (rad, the angle
       farthest from 90°).
+    - `outputs`: with a full turn, per slider or rocker the stroke or swing, its dead centres, the
+      time ratio and the velocity ratio (`jaxlink.analysis.stroke.outputs`); else empty.
     """
 
     full_turn: bool
     lower: float | None
     upper: float | None
     transmission: list
+    outputs: list = dataclasses.field(default_factory=list)
 
 
 def _cos_mu(mech, dyads, j, sigma, q_ref, phi, p):
@@ -161,4 +164,9 @@ def motion(mech: Mechanism, p=None, *, samples: int = 3600) -> Motion | None:
         trans.append({"loop": mech.loops[d.loop][0], "unknowns": tuple(mech.unknown_names[i] for i in d.unknowns),
                       "min": mu_min, "min_at": ext["min"][1], "max": mu_max, "max_at": ext["max"][1],
                       "worst": min(mu_min, np.pi - mu_max)})
-    return Motion(full, lower, upper, trans)
+    outs = []
+    if full:
+        from .stroke import outputs
+
+        outs = outputs(mech, dyads, sigma, q0, phis, p)
+    return Motion(full, lower, upper, trans, outs)
