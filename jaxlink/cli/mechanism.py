@@ -330,8 +330,8 @@ def _output_line(o, name, ang, where, length_factor, lu) -> str:
     head = f"{o['kind']} {o['name']}: {what} {val(o['stroke'])} ({val(o['min'], 8)} … {val(o['max'], 8)})"
     if o["time_ratio"] is None:
         return f"{head}, no dead centre; {vel}"
-    return (f"{head}, dead centres at {name} = {where(o['min_at'])} and {where(o['max_at'])}; rise {ang(o['rise'], 8)}, "
-            f"fall {ang(o['fall'], 8)}: time ratio {o['time_ratio']:.10g}; {vel}")
+    return (f"{head}, dead centres at {name} = {where(o['min_at'])} and {where(o['max_at'])}; "
+            f"rise {ang(o['rise'], 8)}, fall {ang(o['fall'], 8)}: time ratio {o['time_ratio']:.10g}; {vel}")
 
 
 def cmd_check(args) -> int:

@@ -53,6 +53,8 @@ The forms themselves are `jaxlink.solvers.dyads.forms`; the classification `.cla
 
 from __future__ import annotations
 
+from typing import Any
+
 import jax.numpy as jnp
 
 from ...files import expr as _expr
@@ -172,14 +174,13 @@ def _vectors(mech: Mechanism, pt: Part, env, trig):
     """(s m e, s k e) of a part (None for 0): e = e(c) in the frame of the angle that turns it,
     e(α) for a known angle; (s m_x, s m_y), (s k_x, s k_y) for a Cartesian part."""
     ev = _expr.evaluate
+    out: list[Any] = []
     if pt.polar:
         c, s = mech.unit_vector(pt.angle, env, trig)
-        out = []
         for node, role in ((pt.const[0], _expr.LENGTH), (pt.coef[0], _expr.NUMBER)):
             v = None if node is None else pt.sign * ev(node, env, mech.kinds, mech.units, role)
             out.append(None if v is None else (v * c, v * s))
         return out[0], out[1]
-    out = []
     for nodes, role in ((pt.const, _expr.LENGTH), (pt.coef, _expr.NUMBER)):
         if nodes[0] is None and nodes[1] is None:
             out.append(None)
@@ -223,6 +224,8 @@ def geometry(mech: Mechanism, d: Dyad, env, trig=None):
     PP: (d_a, unit), (d_b, unit)."""
     wx, wy = _known_parts(mech, d, env, trig)
     fixed = d.slot(None)
+    first: Any
+    second: Any
     if d.kind == "RRR":
         first, second = _body(mech, d.slot(0), env, trig), _body(mech, d.slot(1), env, trig)
     elif d.kind == "RRP":
@@ -274,14 +277,17 @@ def _solve(mech, dyads, sigma, q_ref, phi, p, trig, with_trig: bool = False, ari
                 s = sigma[k]
             out = _forms.rrr(first, second, w, s, arith)
         elif d.kind == "RRP":
-            s = _forms.side_rrp(*second, w, q_ref[ib]) if sigma is None else sigma[k]
-            out = _forms.rrp(first, *second, w, s, arith)
+            dv, unit = second
+            s = _forms.side_rrp(dv, unit, w, q_ref[ib]) if sigma is None else sigma[k]
+            out = _forms.rrp(first, dv, unit, w, s, arith)
         elif d.kind == "RPR":
-            s = _forms.side_rpr(first, *second, q_ref[ib]) if sigma is None else sigma[k]
-            out = _forms.rpr(first, *second, w, s, arith)
+            bv, unit = second
+            s = _forms.side_rpr(first, bv, unit, q_ref[ib]) if sigma is None else sigma[k]
+            out = _forms.rpr(first, bv, unit, w, s, arith)
         else:  # PP
             s = jnp.ones_like(jnp.asarray(w[0]))
-            out = _forms.pp(*first, *second, w)
+            (da, ua), (db, ub) = first, second
+            out = _forms.pp(da, ua, db, ub, w)
         for i, (value, cs) in zip(d.unknowns, out.values):
             name = mech.unknown_names[i]
             env[name] = value

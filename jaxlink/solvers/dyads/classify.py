@@ -67,7 +67,7 @@ class Dyad:
     parts: tuple
     rest: tuple
 
-    def slot(self, turn: int) -> tuple:
+    def slot(self, turn: int | None) -> tuple:
         """The parts turned by slot `turn`'s angle (None: the parts that do not turn)."""
         return tuple(pt for pt in self.parts if pt.turn == turn)
 
@@ -166,7 +166,9 @@ def _part(term, index: int, names: tuple, kinds: tuple) -> Part | bool | None:
     turn = angles[0] if angles else None
     slide = lengths[0] if lengths else None
     if term.polar:
-        if (turn is not None and _has(term.length, names[turn])) or (slide is not None and _has(term.angle, names[slide])):
+        if turn is not None and _has(term.length, names[turn]):
+            return None
+        if slide is not None and _has(term.angle, names[slide]):
             return None
         angle = term.angle if turn is None else angle_offset(term.angle, names[turn])
         if angle is None:
@@ -177,7 +179,7 @@ def _part(term, index: int, names: tuple, kinds: tuple) -> Part | bool | None:
         if km is None or km[0] is None:
             return None
         return Part(index, term.sign, turn, angle, slide, (km[0],), (km[1],))
-    if turn is not None:
+    if turn is not None or slide is None:
         return None
     kx, ky = affine(term.x, names[slide]), affine(term.y, names[slide])
     if kx is None or ky is None:
@@ -193,15 +195,16 @@ def _dyad(mech: Mechanism, li: int, unk: tuple) -> Dyad | None:
     unk = tuple(unk[i] for i in order)
     kinds = tuple(kinds[i] for i in order)
     names = tuple(mech.unknown_names[i] for i in unk)
-    parts, rest = [], []
+    parts: list[Part] = []
+    rest: list[int] = []
     for ti, t in enumerate(terms):
         pt = _part(t, ti, names, kinds)
         if pt is None:
             return None
-        if pt is False:
-            rest.append(ti)
-        else:
+        if isinstance(pt, Part):
             parts.append(pt)
+        else:
+            rest.append(ti)
     for j in range(2):  # each unknown must be held somewhere
         if not any(pt.turn == j or pt.slide == j for pt in parts):
             return None
