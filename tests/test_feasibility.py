@@ -164,12 +164,12 @@ def test_optimize_exits_1_when_no_design_turns_fully(tmp_path, capsys):
 
 
 def test_a_newton_block_design_is_checked_at_ten_times_the_samples():
-    """The same four-bar with its coupler written as two half vectors: th3 is in two terms, so
-    the loop is a Newton block, not a dyad, and there is no reach margin. Its reported design is
+    """The same four-bar with its coupler's angle written as 2 th3 − th3: not of the form th3 + c,
+    so the loop is a Newton block, not a dyad, and there is no reach margin. Its reported design is
     re-solved at 10 × the search's 72 samples: the window of l3 = 64.99 (178.31°…181.69°, between
     two checked positions) is found there, and a design without one passes."""
     src = text(GAP_L3, targets=[[40.0, 20.0], [30.0, 40.0], [10.0, 30.0]])
-    mech = loads(src.replace('"l3 @ th3"', '"0.5 * l3 @ th3", "0.5 * l3 @ th3"'), file="newton.toml")
+    mech = loads(src.replace('"l3 @ th3"', '"l3 @ 2 * th3 - th3"'), file="newton.toml")
     assert _dyads.classify(mech) is None
     ev = Evaluator(problem_from(mech, {"report_samples": 72}), chunk=4)
     pr = ev.problem

@@ -54,6 +54,11 @@ def test_crank_rocker_turns_fully_and_its_transmission_angle_is_exact(four_bar):
     assert abs(t["min"] - mu_min) < 1e-9 and abs(t["max"] - mu_max) < 1e-9
     assert abs(math.remainder(t["min_at"], 2 * math.pi)) < 1e-6 and abs(t["max_at"] - math.pi) < 1e-6
     assert t["worst"] == pytest.approx(min(mu_min, math.pi - mu_max), abs=1e-12)
+    # the rocker's swing: its extremes where crank and coupler are in line, |B − O| = b ± a,
+    # the angle at the rocker pivot by the law of cosines
+    (o,) = m.outputs
+    gamma = [math.acos((d * d + c * c - x * x) / (2 * d * c)) for x in (b - a, b + a)]
+    assert o["name"] == "phi4" and o["kind"] == "rocker" and abs(o["stroke"] - (gamma[1] - gamma[0])) < 1e-9
 
 
 LIMITS = r"""

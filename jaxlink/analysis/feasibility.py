@@ -23,7 +23,7 @@ input, so its minimum between samples can be found:
    toggle, a margin negative by rounding, is assembled, as in the solver).
 
 Everything is pure and jittable (`vmap` over designs); the margins are evaluated by the dyads'
-closed form on the design's branches σ, so only mechanisms made of dyads (RRR, RRP, PP blocks)
+closed form on the design's branches σ, so only mechanisms made of dyads (RRR, RRP, RPR, PP blocks)
 have a certificate.
 """
 

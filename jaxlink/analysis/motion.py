@@ -46,23 +46,23 @@ class Motion:
     - `transmission`: per RRR dyad (solve order), a dict `loop`, `unknowns`, `min`, `min_at`,
       `max`, `max_at` (μ in rad, where in the input's SI unit) and `worst` (rad, the angle
       farthest from 90°).
+    - `outputs`: with a full turn, per slider or rocker the stroke or swing, its dead centres, the
+      time ratio and the velocity ratio (`jaxlink.analysis.stroke.outputs`); else empty.
     """
 
     full_turn: bool
     lower: float | None
     upper: float | None
     transmission: list
+    outputs: list = dataclasses.field(default_factory=list)
 
 
 def _cos_mu(mech, dyads, j, sigma, q_ref, phi, p):
     """cos μ of RRR dyad j at input φ (the dyads before it on their sides σ)."""
     q, _, _, _, _, trig = _dyads._solve(mech, dyads[:j], sigma[:j], q_ref, phi, p, None, with_trig=True)
     env = mech.env(q, phi, p)
-    d = dyads[j]
-    terms = mech.loops[d.loop][1]
-    wx, wy = _dyads._known_parts(mech, d, env, trig)
-    La, _ = _dyads._radius_and_offset(mech, terms[d.terms[0]], d.offsets[0], env, trig)
-    Lb, _ = _dyads._radius_and_offset(mech, terms[d.terms[1]], d.offsets[1], env, trig)
+    (wx, wy), a, b = _dyads.geometry(mech, dyads[j], env, trig)
+    La, Lb = a.L, b.L
     return (La * La + Lb * Lb - (wx * wx + wy * wy)) / (2.0 * jnp.abs(La) * jnp.abs(Lb))
 
 
@@ -164,4 +164,9 @@ def motion(mech: Mechanism, p=None, *, samples: int = 3600) -> Motion | None:
         trans.append({"loop": mech.loops[d.loop][0], "unknowns": tuple(mech.unknown_names[i] for i in d.unknowns),
                       "min": mu_min, "min_at": ext["min"][1], "max": mu_max, "max_at": ext["max"][1],
                       "worst": min(mu_min, np.pi - mu_max)})
-    return Motion(full, lower, upper, trans)
+    outs = []
+    if full:
+        from .stroke import outputs
+
+        outs = outputs(mech, dyads, sigma, q0, phis, p)
+    return Motion(full, lower, upper, trans, outs)

@@ -339,6 +339,25 @@ def _print_designer_numbers(mech, lu: str) -> None:
         label = f"loop '{t['loop']}' ({', '.join(t['unknowns'])})"
         print(f"{'transmission' if i == 0 else '':<13}{label}: {ang(t['min'])} at {name} = {where(t['min_at'])} … "
               f"{ang(t['max'])} at {where(t['max_at'])}; worst (farthest from 90°) {ang(t['worst'])}")
+    for i, o in enumerate(m.outputs):
+        print(f"{'outputs' if i == 0 else '':<12}" + _output_line(o, name, ang, where, mech.units.length, lu))
+
+
+def _output_line(o, name, ang, where, length_factor, lu) -> str:
+    """One output's stroke or swing, dead centres, time ratio and velocity ratio, in file units."""
+    def val(x, digits=10):
+        return ang(x, digits) if o["kind"] == "rocker" else f"{x / length_factor:.{digits}g} {lu}"
+
+    vunit = "" if o["kind"] == "rocker" else f" {lu}/rad"
+    vel = (f"velocity ratio d{o['name']}/d{name} {o['velocity_min'] / (1 if vunit == '' else length_factor):.6g} at "
+           f"{where(o['velocity_min_at'])} … {o['velocity_max'] / (1 if vunit == '' else length_factor):.6g}{vunit} at "
+           f"{where(o['velocity_max_at'])}")
+    what = "swing" if o["kind"] == "rocker" else "stroke"
+    head = f"{o['kind']} {o['name']}: {what} {val(o['stroke'])} ({val(o['min'], 8)} … {val(o['max'], 8)})"
+    if o["time_ratio"] is None:
+        return f"{head}, no dead centre; {vel}"
+    return (f"{head}, dead centres at {name} = {where(o['min_at'])} and {where(o['max_at'])}; "
+            f"rise {ang(o['rise'], 8)}, fall {ang(o['fall'], 8)}: time ratio {o['time_ratio']:.10g}; {vel}")
 
 
 def _sum_text(terms) -> str:

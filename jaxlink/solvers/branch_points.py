@@ -5,7 +5,8 @@ that meet where the two links are collinear. How its margin
 
     S(φ) = sin² of the angle between the two links, signed (`jaxlink.solvers.dyads.reach_margins`):
     RRR: ((L_a + L_b)² − |w|²)(|w|² − (L_a − L_b)²) / (4 L_a² L_b²);
-    RRP: 1 − (w × e_b)² / L_a² (the link against the slider's normal); PP: (e_a × e_b)²,
+    RRP: 1 − (w × e_b)² / L_a² (the link against the slider's normal); RPR: 1 − e² / |w|² (the
+    slot against the line from its pivot, e the slot's offset); PP: (e_a × e_b)²,
 
 a smooth (polynomial) function of the input along a path, meets zero tells what lies there:
 

@@ -1,0 +1,193 @@
+"""The outputs of a linkage whose input turns fully: each slider's stroke and each rocker's swing,
+their dead-centre positions, the time ratio and the velocity ratio (mechanical advantage).
+
+**Outputs.** Every unknown that is a length (a slider, a slot's block, a ram) and every angle
+unknown of a *rocker*: a link pivoted to the frame — its term is next to a frame vector (no
+unknown, no input) in some loop — that does not turn fully while the input does (its angle comes
+back to where it started, not ±2π, after the input's turn).
+
+**Dead centres** (limit positions of the output) are the inputs where its velocity dq/dφ is zero.
+On the equally spaced samples of the turn (the closed form, `jaxlink.solvers.dyads`, and its
+derivatives by forward-mode AD: q, q′ = dq/dφ, q″) every interval where q′ changes sign holds one;
+it is located by Newton's method on q′ (q″ its derivative), safeguarded by bisection in the
+bracket, until the step is at the rounding of the input (measured within 1e-15 rad of the closed
+forms, tests/test_dyad_kinds.py). The *stroke* (slider, m) or *swing* (rocker, rad) is the
+largest minus the least value of q over the turn, both taken at dead centres.
+
+**Time ratio.** Between its least value (at input φ₋) and its largest (at φ₊) the output rises
+while the input turns by (φ₊ − φ₋) mod 2π and falls back during the rest of the turn:
+`rise` + `fall` = 2π. The time ratio is the slower stroke's input angle over the quicker's, ≥ 1
+(at a constant input speed, the ratio of their durations: a shaper's quick return).
+
+**Velocity ratio** dq/dφ (m/rad for a slider, dimensionless for a rocker; its inverse is the
+mechanical advantage of an ideal linkage): its least and largest values over the turn, from the
+samples refined by golden-section search (60 reductions of a two-sample bracket).
+"""
+
+from __future__ import annotations
+
+import functools
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from ..files import expr as _expr
+from ..model.mechanism import Mechanism
+from ..solvers import dyads as _dyads
+
+_GOLD = 0.6180339887498949
+_PAD = 8  # refinement batches are padded to a multiple of this (few shapes, few compiles)
+
+
+def rockers(mech: Mechanism) -> tuple:
+    """The angle unknowns whose term lies next to a frame vector in some loop (pivoted to the
+    frame), in unknown order (candidates: `outputs` keeps those that do not turn fully)."""
+    unknowns = set(mech.unknown_names) | {mech.input_name}
+    angles = {n for n, k in zip(mech.unknown_names, mech.unknown_kinds) if k == "angle"}
+    found = set()
+    for _, terms in mech.loops:
+        def names(t):
+            return {n.name for nd in t.nodes() for n in _expr.names_in(nd)}
+
+        frame = [not (names(t) & unknowns) for t in terms]
+        for j, t in enumerate(terms):
+            if not t.polar or not (frame[j - 1] or frame[(j + 1) % len(terms)]):
+                continue
+            held = {n.name for n in _expr.names_in(t.angle)} & angles
+            if len(held) == 1:
+                found |= held
+    return tuple(n for n in mech.unknown_names if n in found)
+
+
+@functools.partial(jax.jit, static_argnums=(0, 1))
+def _jets(structure, idx, sigma, q_ref, phis, p):
+    """(q, q′, q″) of the unknowns `idx` at the inputs `phis` (M,): (M, len(idx)) each."""
+    dyads = _dyads.classify(structure)
+
+    def q_of(phi):
+        return _dyads.solve(structure, dyads, sigma, q_ref, phi, p)[0][jnp.asarray(idx)]
+
+    def one(phi):
+        t = jnp.ones_like(phi)
+        (v, d1), (_, d2) = jax.jvp(lambda y: jax.jvp(q_of, (y,), (t,)), (phi,), (t,))
+        return v, d1, d2
+
+    return jax.vmap(one)(phis)
+
+
+class _Eval:
+    """The jets at batches of inputs, one column per (output, point), padded to few shapes."""
+
+    def __init__(self, mech, idx, sigma, q_ref, p):
+        self.args = (mech.structure, idx, sigma, q_ref)
+        self.p = p
+
+    def __call__(self, x, col):
+        """(q, q′, q″) of output column `col[i]` at input `x[i]`."""
+        n = x.shape[0]
+        m = max(_PAD, -(-n // _PAD) * _PAD)
+        xs = np.concatenate([x, np.full(m - n, x[0] if n else 0.0)])
+        q, d1, d2 = (np.asarray(a)[:n] for a in _jets(*self.args, jnp.asarray(xs), self.p))
+        r = np.arange(n)
+        return q[r, col], d1[r, col], d2[r, col]
+
+
+def _zeros(ev, lo, hi, col, iterations: int = 60):
+    """The roots of q′ of output `col[i]` in the brackets [lo[i], hi[i]] (q′ of opposite signs at
+    the ends): Newton's method on q′, each step kept inside the bracket, else bisection."""
+    _, flo, _ = ev(lo, col)
+    x = 0.5 * (lo + hi)
+    lo, hi = lo.copy(), hi.copy()
+    s = np.where(flo <= 0, 1.0, -1.0)  # s q′(lo) ≤ 0
+    done = np.zeros(lo.shape, bool)
+    for _ in range(iterations):
+        _, v, dv = ev(x, col)
+        neg = s * v < 0
+        lo, hi = np.where(neg & ~done, x, lo), np.where(~neg & ~done, x, hi)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            newton = x - v / dv
+        inside = np.isfinite(newton) & (newton > lo) & (newton < hi)
+        x_new = np.where(v == 0, x, np.where(inside, newton, 0.5 * (lo + hi)))
+        tiny = 4 * np.finfo(float).eps * np.maximum(np.abs(x), 1.0)
+        done |= (np.abs(x_new - x) <= tiny) | (hi - lo <= tiny)
+        x = np.where(done, x, x_new)
+        if done.all():
+            break
+    return x
+
+
+def _extremes(ev, grid, v, col, sign):
+    """The least (sign 1) or largest (sign −1) q′ of each output, refined by golden section."""
+    k = np.argmin(sign * v, axis=0)
+    n = grid.shape[0] - 1
+    a, b = grid[np.maximum(k - 1, 0)], grid[np.minimum(k + 1, n)]
+    x1, x2 = b - _GOLD * (b - a), a + _GOLD * (b - a)
+    f1, f2 = sign * ev(x1, col)[1], sign * ev(x2, col)[1]
+    for _ in range(60):
+        left = f1 <= f2
+        b = np.where(left, x2, b)
+        a = np.where(left, a, x1)
+        nx1 = np.where(left, b - _GOLD * (b - a), x2)
+        nx2 = np.where(left, x1, a + _GOLD * (b - a))
+        fn = sign * ev(np.where(left, nx1, nx2), col)[1]
+        f1, f2 = np.where(left, fn, f2), np.where(left, f1, fn)
+        x1, x2 = nx1, nx2
+    best_x = np.where(f1 <= f2, x1, x2)
+    best = np.minimum(f1, f2)
+    samp = sign * v[k, col]
+    return np.where(samp < best, samp, best) * sign, np.where(samp < best, grid[k], best_x)
+
+
+def outputs(mech: Mechanism, dyads, sigma, q0, phis, p) -> list:
+    """The outputs' numbers over the full turn sampled by `phis` (N + 1,: the start again at the
+    end) on the branches σ (the closed form with reference `q0`), design `p` (SI). One dict per
+    output, in unknown order: `name`, `kind` ("slider" | "rocker"), `min`, `max`, `stroke`
+    (SI), `dead_centres` (a list of (input, value) in input order), `min_at`, `max_at` (the dead
+    centres of the least and largest value), `rise`, `fall` (input angles, rad), `time_ratio`,
+    `velocity_min`, `velocity_min_at`, `velocity_max`, `velocity_max_at`."""
+    del dyads  # unused (the jets classify the structure themselves)
+    rock = rockers(mech)
+    names = [n for n, k in zip(mech.unknown_names, mech.unknown_kinds) if k != "angle" or n in rock]
+    if not names:
+        return []
+    idx = tuple(mech.unknown_names.index(n) for n in names)
+    ev = _Eval(mech, idx, jnp.asarray(sigma), jnp.asarray(q0), jnp.asarray(p))
+    grid = np.asarray(phis, float)
+    m = len(idx)
+    cols = np.arange(m)
+    q, v, _ = (np.asarray(a) for a in _jets(mech.structure, idx, jnp.asarray(sigma), jnp.asarray(q0),
+                                              jnp.asarray(grid), jnp.asarray(p)))
+    angle = np.array([mech.unknown_kinds[i] == "angle" for i in idx])
+    q = np.where(angle, np.unwrap(q, axis=0), q)
+    keep = ~angle | (np.abs(q[-1] - q[0]) < np.pi)  # a rocker comes back; a crank turns
+    # dead centres: q′ changes sign on an interval (or is zero at a sample)
+    ks, cs = np.nonzero((v[:-1] * v[1:] < 0) | ((v[:-1] == 0) & (v[1:] != 0)))
+    roots = _zeros(ev, grid[ks], grid[ks + 1], cs) if ks.size else np.zeros(0)
+    vals = ev(roots, cs)[0] if ks.size else np.zeros(0)
+    vmin, vmin_at = _extremes(ev, grid, v, cols, 1.0)
+    vmax, vmax_at = _extremes(ev, grid, v, cols, -1.0)
+    out = []
+    for j, name in enumerate(names):
+        if not keep[j]:
+            continue
+        mine = cs == j
+        at, val = roots[mine], vals[mine]
+        if angle[j]:  # the refined values near the unwrapped samples
+            near = q[ks[mine], j]
+            val = val + 2 * np.pi * np.round((near - val) / (2 * np.pi))
+        entry = {"name": name, "kind": "rocker" if angle[j] else "slider", "dead_centres": list(zip(at, val)),
+                 "velocity_min": float(vmin[j]), "velocity_min_at": float(vmin_at[j]),
+                 "velocity_max": float(vmax[j]), "velocity_max_at": float(vmax_at[j])}
+        if at.size >= 2:
+            lo, hi = int(np.argmin(val)), int(np.argmax(val))
+            rise = float(np.mod(at[hi] - at[lo], 2 * np.pi))
+            fall = 2 * np.pi - rise
+            entry.update(min=float(val[lo]), max=float(val[hi]), stroke=float(val[hi] - val[lo]),
+                         min_at=float(at[lo]), max_at=float(at[hi]), rise=rise, fall=fall,
+                         time_ratio=max(rise, fall) / min(rise, fall))
+        else:  # no dead centre: a constant output (no stroke)
+            entry.update(min=float(q[:, j].min()), max=float(q[:, j].max()), stroke=float(np.ptp(q[:, j])),
+                         min_at=None, max_at=None, rise=None, fall=None, time_ratio=None)
+        out.append(entry)
+    return out
