@@ -366,3 +366,19 @@ def test_sketch_masses_give_the_reactions_of_the_loop_file():
         fscale = float(np.abs(a).max())
         # the same joint may be written with its two bodies the other way round: force or its opposite
         assert min(np.abs(a - b).max(), np.abs(a + b).max()) < 1e-11 * fscale, (na, nb)
+
+
+def test_whitworth_sketch_equals_loop_form():
+    """The Whitworth quick-return as a sketch: the crank pin A slides in the lever's slot through
+    its pivot O2 (an RPR dyad), the ram C on a horizontal guide (RRP); both in closed form."""
+    loop = jl.load("whitworth")
+    j = _joints_of("whitworth", {"A": ["(0, d)", "r @ phi"], "B": ["l @ theta"], "C": ["(0, H)", "x @ 0"]}, 0.0)
+    sk = (jl.Sketch("whitworth", length_unit="mm", angle_unit="deg")
+          .frame("O2", 0, 0).frame("O1", 0, 300)
+          .joint("A", *j["A"]).joint("B", *j["B"]).joint("C", *j["C"])
+          .link("crank", "O1", "A").link("lever", "O2", "B").link("rod", "B", "C")
+          .slider("A", on="lever", through="O2").slider("C", on="frame", along=(1, 0))
+          .crank("crank", name="phi"))
+    mech = sk.mechanism()
+    assert _closed_form(mech) and [d.kind for d in dyads.classify(mech)] == ["RPR", "RRP"]
+    _compare(loop, mech, ["A", "B", "C"])
