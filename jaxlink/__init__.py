@@ -7,6 +7,8 @@ The public API (everything else is internal and may change):
 - positions: `solve`, `solve_path`, `NewtonOptions`, `Solution`, `SolveStats`, `RESULTS`;
 - branch points between samples (change points, toggles): `branch_points`, `BranchPoints`;
 - the whole closed curve of a linkage whose input cannot turn fully: `whole_curve`, `WholeCurve`;
+- the designer's numbers: `four_bars`, `FourBar` (Grashof), `motion`, `Motion` (range of motion,
+  transmission angles, strokes, dead centres, time ratio, velocity ratio);
 - kinematics: `transfer`, `Transfer`, `time_derivatives`;
 - kinetostatics: `reactions`, `solve_reactions`, `Reactions`, `body_motion`, `BodyMotion`;
 - dwell (a slider that stands still): `dwell_metrics`, `solve_stroke`, `dwell_roles`, `StrokeScale`, `DwellRoles`;
@@ -21,11 +23,15 @@ from .analysis.dwell import StrokeScale as StrokeScale
 from .analysis.dwell import dwell_metrics as dwell_metrics
 from .analysis.dwell import dwell_roles as dwell_roles
 from .analysis.dwell import solve_stroke as solve_stroke
+from .analysis.grashof import FourBar as FourBar
+from .analysis.grashof import four_bars as four_bars
 from .analysis.kinetostatics import BodyMotion as BodyMotion
 from .analysis.kinetostatics import Reactions as Reactions
 from .analysis.kinetostatics import body_motion as body_motion
 from .analysis.kinetostatics import reactions as reactions
 from .analysis.kinetostatics import solve_reactions as solve_reactions
+from .analysis.motion import Motion as Motion
+from .analysis.motion import motion as motion
 from .analysis.transfer import Transfer as Transfer
 from .analysis.transfer import time_derivatives as time_derivatives
 from .analysis.transfer import transfer as transfer
