@@ -17,6 +17,7 @@ from .mechanism import (
     branch_point_warnings,
     check_output,
     enable_dtype,
+    grid_text,
     input_grid,
     load_from_args,
     omega_from_args,
@@ -54,11 +55,12 @@ def cmd_reactions(args) -> int:
     mech = load_from_args(args)
     _bodies.model(mech)  # a file without bodies is refused before the solve
     phis, values = input_grid(mech, args)  # the input column exactly as asked (no rad round trip)
-    omega = omega_from_args(args)
+    omega = omega_from_args(args, mech)
     table = reactions_table(mech, phis, omega=omega, dtype=dtype, input_values=values,
                             rpm=getattr(args, "rpm", None), change_points=args.change_points)
     branch_point_warnings(table)
     info = sys.stderr if args.csv == "-" else sys.stdout  # `--csv -`: the table alone on standard output
+    print(grid_text(mech, args), file=info)
     if args.csv:
         with writing("--csv", args.csv):
             write_csv(args.csv, table)

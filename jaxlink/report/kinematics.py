@@ -82,11 +82,12 @@ class KinematicsTable:
         return self.data[:, 0]
 
     def speed_text(self) -> str:
-        """`600 rpm (ω = 62.83 rad/s)` or `ω = 1 rad/s`."""
-        unit = "rad/s" if self.input_kind == "angle" else "m/s"
+        """`600 rpm (ω = 62.83 rad/s)`, `ω = 1 rad/s`, or for a length input `v = 0.05 m/s`."""
+        if self.input_kind != "angle":
+            return f"v = {self.omega:g} m/s"
         if self.rpm is not None:
-            return f"{self.rpm:g} rpm (ω = {self.omega:.4g} {unit})"
-        return f"ω = {self.omega:g} {unit}"
+            return f"{self.rpm:g} rpm (ω = {self.omega:.4g} rad/s)"
+        return f"ω = {self.omega:g} rad/s"
 
 
 def kinematics_table(mech: Mechanism, phis, *, omega: float = 1.0, outputs=OUTPUTS[:3], p=None,

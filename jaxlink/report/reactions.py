@@ -47,6 +47,8 @@ class ReactionsTable:
         return np.hypot(f[..., 0], f[..., 1])
 
     def speed_text(self) -> str:
+        if self.input_kind != "angle":
+            return f"v = {self.omega:g} m/s"
         if self.rpm is not None:
             return f"{self.rpm:g} rpm (ω = {self.omega:.4g} rad/s)"
         return f"ω = {self.omega:g} rad/s"
