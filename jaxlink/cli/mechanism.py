@@ -435,8 +435,10 @@ def cmd_check(args) -> int:
     if mech.bodies is not None:
         mdl = mech.bodies
         names = ("ground", *mdl.body_names)
+        drive = (f"with a force along [input] axis, from {names[mdl.input_base + 1]}" if mdl.drive_force
+                 else "with a torque")
         print(f"bodies      {len(mdl.bodies)} moving: {', '.join(mdl.body_names)}; the input drives "
-              f"{mdl.body_names[mdl.input_body]}")
+              f"{mdl.body_names[mdl.input_body]} {drive}")
         print(f"joints      {len(mdl.joints)}: " + ", ".join(
             f"{j.name} ({j.kind} {names[j.a + 1]}–{names[j.b + 1]})" for j in mdl.joints))
         loads = [*(f.name for f in mdl.forces), *(t.name for t in mdl.torques), *(s.name for s in mdl.springs)]

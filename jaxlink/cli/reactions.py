@@ -1,4 +1,5 @@
-"""Command `jaxlink reactions`: joint reactions and driving torque over the input positions.
+"""Command `jaxlink reactions`: joint reactions and the drive (a torque, or a length input's force)
+over the input positions.
 
 The table, CSV and plot are made by `jaxlink/report/reactions.py` (its docstring lists the CSV
 columns). Rows where the kinematics did not converge or the kinetostatic system is singular hold
@@ -27,22 +28,24 @@ from .mechanism import (
 
 def register(sub) -> None:
     p = sub.add_parser(
-        "reactions", help="joint reactions and driving torque over a revolution",
+        "reactions", help="joint reactions and the drive torque (a length input: the drive force)",
         description=(
             "Kinetostatics (d'Alembert): solve the positions, then at every position the linear system of "
             "force and moment balances of all moving bodies (from the file's [bodies], [joints], [loads], "
-            "[environment]) for the joint reactions and the drive torque, at constant input speed. CSV "
-            "columns: input_deg; for each joint J: J_Fx_N, J_Fy_N (force on the second listed body from the "
-            "first); drive_torque_N_m (on the input body, counter-clockwise +); result (converged, or why "
-            "not: the position solve's code such as cannot_assemble, or singular). Rows that cannot be "
-            "solved hold nan and make the exit status 1. Give the speed with --rpm or --omega (default "
-            "1 rad/s)."
+            "[environment]) for the joint reactions and the drive, at constant input speed. The drive is a "
+            "torque for an angle input (a crank), a force along [input] axis for a length input (a "
+            "cylinder, a driven slider). CSV columns: input_deg (input_m for a length input); for each joint "
+            "J: J_Fx_N, J_Fy_N (force on the second listed body from the first); drive_torque_N_m (on the "
+            "input body, counter-clockwise +) or, for a length input, drive_force_N (+ pushes towards a "
+            "larger input); result (converged, or why not: the position solve's code such as "
+            "cannot_assemble, or singular). Rows that cannot be solved hold nan and make the exit status 1. "
+            "Give the speed with --rpm or --omega (default 1 rad/s; a length input: --omega in m/s)."
         ),
     )
     add_mechanism_arguments(p)
     p.add_argument("--csv", metavar="OUT", help="write the table to this CSV file (default: print a summary)")
     add_change_points_argument(p)
-    p.add_argument("--plot", metavar="OUT.png", help="plot the reaction magnitudes and the drive torque")
+    p.add_argument("--plot", metavar="OUT.png", help="plot the reaction magnitudes and the drive torque (or force)")
     p.set_defaults(func=cmd_reactions)
 
 
