@@ -124,8 +124,8 @@ def test_cylinder_force_against_virtual_work_and_the_power_balance(boom):
         F = np.asarray(r.drive)
         np.testing.assert_allclose(F, cylinder_force(S, v), rtol=1e-9)
         if v == 0.0:  # the pivot O holds the boom against the cylinder, its weight and the payload
-            O = np.asarray(r.force)[:, 0]
-            np.testing.assert_allclose(O + F[:, None] * u + [0.0, -M * GRAV - W], 0.0, atol=1e-9 * np.abs(F).max())
+            pivot = np.asarray(r.force)[:, 0]
+            np.testing.assert_allclose(pivot + F[:, None] * u + [0.0, -M * GRAV - W], 0.0, atol=1e-9 * np.abs(F).max())
 
 
 BARREL_ROD = """

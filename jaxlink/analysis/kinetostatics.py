@@ -186,9 +186,9 @@ def system(mech: Mechanism, mdl: _bodies.Model, q, phi, p, omega, alpha=0.0):
     if mdl.drive_force:  # F along u at P_d on the input body, −F u on its base (the ground: dropped)
         pd, ad = drive_line(mech, mdl, q, phi, p)
         u = jnp.stack([jnp.cos(ad), jnp.sin(ad)])
-        for body, sign in ((mdl.input_body, 1.0), (mdl.input_base, -1.0)):
+        for body, side in ((mdl.input_body, 1.0), (mdl.input_base, -1.0)):
             if body >= 0:
-                col = sign * jnp.stack([u[0], u[1], _cross(pd - ref[body], u) / L])
+                col = side * jnp.stack([u[0], u[1], _cross(pd - ref[body], u) / L])
                 A = A.at[3 * body + jnp.arange(3), n - 1].add(col)
     else:
         A = A.at[3 * mdl.input_body + 2, n - 1].add(1.0)  # τ/L on the input body

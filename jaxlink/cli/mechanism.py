@@ -218,8 +218,8 @@ def grid_values(mech, args) -> np.ndarray:
                                      f"of the other sign")
             n = int(span / Decimal(repr(float(step)))) + 1  # the last position at or before --stop
             if n > MAX_POSITIONS:
-                raise MechanismError(f"--start {start:g} to --stop {stop:g} in steps of {step:g} would be {n} positions, "
-                                     f"more than {MAX_POSITIONS}; use a larger step")
+                raise MechanismError(f"--start {start:g} to --stop {stop:g} in steps of {step:g} would be {n} "
+                                     f"positions, more than {MAX_POSITIONS}; use a larger step")
             vals = exact_grid(start, step, n)
         else:
             n = LENGTH_COUNT if count is None else count

@@ -341,7 +341,8 @@ def read_bodies(
                 if n_eq < n_unk else "under-constrained: the joints do not hold every body")
         raise MechanismError(
             f"{len(bodies)} moving bodies give {n_eq} equilibrium equations but {len(joints)} joints and the drive "
-            f"{'force' if length_input else 'torque'} give {n_unk} unknowns (Grübler mobility 3·{len(bodies)} − {removed} = {n_eq - removed}, "
+            f"{'force' if length_input else 'torque'} "
+            f"give {n_unk} unknowns (Grübler mobility 3·{len(bodies)} − {removed} = {n_eq - removed}, "
             f"kinetostatics needs 1): {what}", file=file, key="joints")
 
     return Model(tuple(bodies), tuple(joints), tuple(forces), tuple(torques), tuple(springs),
