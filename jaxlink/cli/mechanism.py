@@ -195,7 +195,8 @@ def grid_values(mech, args) -> np.ndarray:
     start, step, count = args.start, args.step, args.count
     stop = getattr(args, "stop", None)
     if start is None:
-        start = 0.0 if angle else float(mech.from_si(mech.input_name, mech.input_start))
+        # a length input from the file's [input] start, as written (12 digits: no SI round-trip noise)
+        start = 0.0 if angle else float(f"{float(mech.from_si(mech.input_name, mech.input_start)):.12g}")
     for option, value in (("--start", start), ("--step", step), ("--stop", stop)):
         if value is not None and not math.isfinite(value):
             raise MechanismError(f"{option} {value}: must be a finite number")
