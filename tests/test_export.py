@@ -60,7 +60,8 @@ def test_kinematics_in_file_units_is_si_converted(tmp_path, capsys):
         factor = 1.0 if a == "input_deg" else (deg if "_rad" in a else 1000.0)
         np.testing.assert_allclose(numbers(r_mm, j), numbers(r_si, j) * factor, rtol=1e-15, atol=0, err_msg=b)
     # the summary in the same units
-    assert "at 60 rpm (ω = 360 deg/s)" in stdout and " mm\n" in stdout.splitlines()[0] + "\n"
+    head = next(x for x in stdout.splitlines() if " positions at " in x)
+    assert "at 60 rpm (ω = 360 deg/s)" in head and head.endswith(" mm")
     line = next(x for x in stdout.splitlines() if x.startswith("P_x_mm "))
     lo, hi = map(float, line.split()[1:])
     j = h_si.index("P_x_m")

@@ -330,7 +330,7 @@ def test_reactions_table_results_and_reduced_peaks(tmp_path, capsys):
     code, stdout, _ = run_cli(capsys, "reactions", "slider-crank-mass", "--rpm", "600", "--start", "200", "--step",
                               "5")
     assert code == 0
-    lines = [x for x in stdout.splitlines()[2:] if x and not x.startswith("(")]
+    lines = [x for x in stdout.splitlines()[3:] if x and not x.startswith("(")]  # after the input line and the header
     angles = [float(x.split()[-1]) if "N·m" not in x else float(x.split()[-4]) for x in lines]
     assert len(angles) == 5 and all(0 <= a < 360 for a in angles)
 

@@ -12,14 +12,19 @@ moments about a reference point r_b of the body — its centroid, or its first j
 with, per joint j between bodies (A, B), the unknown force F_j on B from A (−F_j on A): two
 components (F_x, F_y) for a revolute joint at P_j; for a prismatic joint, a normal force N along
 the left normal n = (−sin a, cos a) of its axis a, at P_j, and a moment M. The drive torque τ acts
-on the input body (from the ground). Unknowns F_S = (F_1x, F_1y, …, τ) number 2·joints + 1, equations
+on the input body (from the ground) for an angle input; for a length input s (a cylinder, a driven
+slider) the drive is a force F along u = (cos a_d, sin a_d) at the point P_d (`[input] axis`, `at`):
++F u on the input body, −F u on its base (`[input] base`, the ground by default), F > 0 pushing
+towards a larger s, so that its power is F ṡ when u·(v_body(P_d) − v_base(P_d)) = ṡ (checked by
+`drive_errors`). Unknowns F_S = (F_1x, F_1y, …, τ or F) number 2·joints + 1, equations
 3·bodies; they agree when Grübler's mobility is 1 (checked when the file is read). The accelerations
 come from the transfer functions μ = dq/dφ, ν = d²q/dφ² (`analysis/transfer.py`): c̈ = c'' ω² + c' α with
 c' = dc/dφ, c'' = d²c/dφ² by forward AD along the solution curve, likewise θ̈. Moment rows and
 moment unknowns are scaled by the mechanism's length
 scale so that A_S is O(1) in any unit.
 
-Power balance (a check, `tests/test_kinetostatics.py`): τ ω + Σ P_loads = d(T + V_gravity + V_springs)/dt.
+Power balance (a check, `tests/test_kinetostatics.py`, `tests/test_length_input.py`): τ ω (F v for a
+length input at speed v) + Σ P_loads = d(T + V_gravity + V_springs)/dt.
 
 The linear solve is unrolled for n ≤ 8 (`_linalg.solve_small`) and an LU factorization with partial
 pivoting otherwise (`jax.scipy.linalg.lu_factor`, what `jnp.linalg.solve` does, keeping the pivots);
@@ -54,7 +59,9 @@ class Reactions(NamedTuple):
 
     - `force`: (…, J, 2) N, the force on each joint's second body from its first (x, y).
     - `moment`: (…, J) N·m, the reaction moment of each prismatic joint (0 for revolute joints).
-    - `torque`: (…,) N·m, the drive torque on the input body from the ground (counter-clockwise +).
+    - `torque`: (…,) the drive: for an angle input the torque on the input body from the ground, N·m
+      (counter-clockwise +); for a length input the force along `[input] axis`, N (+ pushes the
+      input body towards a larger input). Also as `drive`.
     - `result`: (…,) int8 code (`RESULTS`); where not ok, the values are 0.
     - `ratio`: (…,) min |pivot| / max |entry| of the scaled system, a singularity indicator (≈ 1/condition).
     """
@@ -64,6 +71,11 @@ class Reactions(NamedTuple):
     torque: jax.Array
     result: jax.Array
     ratio: jax.Array
+
+    @property
+    def drive(self) -> jax.Array:
+        """The drive: a torque (N·m, angle input) or a force (N, length input); `torque`."""
+        return self.torque
 
 
 # ----------------------------------------------------------------------------- geometry
@@ -107,6 +119,14 @@ def _geometry(mech: Mechanism, mdl: _bodies.Model, q, phi, p):
     return pts, axes, fpts, spts
 
 
+def drive_line(mech: Mechanism, mdl: _bodies.Model, q, phi, p):
+    """A length input's drive force: its point P_d (2,) and its direction's angle a_d (`[input] at`,
+    `axis`)."""
+    dtype = jnp.result_type(q)
+    env = mech.env(q, phi, p)
+    return vector_sum(mech, mdl.input_at, env, dtype), angle_value(mech, mdl.input_axis, env, dtype)
+
+
 def body_kinematics(mech: Mechanism, mdl: _bodies.Model, q, phi, p):
     """Centroids and angles with their first and second derivatives with respect to the input:
     `((c, c', c''), (θ, θ', θ''))`, shapes (nb, 2) and (nb,)."""
@@ -127,7 +147,8 @@ def _cross(r, f):
 def system(mech: Mechanism, mdl: _bodies.Model, q, phi, p, omega, alpha=0.0):
     """The scaled kinetostatic system of one position: `(A, Q, L, axes)` with A (n, n), Q (n,), the
     length scale L by which moment rows were divided and moment unknowns multiplied (the unknowns
-    are (F_1x, F_1y, …, N_j, M_j/L, …, τ/L)), and the joint axes (nj,) (0 for revolute joints)."""
+    are (F_1x, F_1y, …, N_j, M_j/L, …, τ/L), or F in N last for a length input), and the joint axes
+    (nj,) (0 for revolute joints)."""
     dtype = jnp.result_type(q)
     (c, c1, c2), (th, th1, th2) = body_kinematics(mech, mdl, q, phi, p)
     acc_c = c2 * omega**2 + c1 * alpha
@@ -162,7 +183,15 @@ def system(mech: Mechanism, mdl: _bodies.Model, q, phi, p, omega, alpha=0.0):
         A = jnp.zeros((3 * nb, n), dtype).at[st.rows, st.cols].add(vals.reshape(-1))
     else:
         A = jnp.zeros((3 * nb, n), dtype)
-    A = A.at[3 * mdl.input_body + 2, n - 1].add(1.0)  # τ/L on the input body
+    if mdl.drive_force:  # F along u at P_d on the input body, −F u on its base (the ground: dropped)
+        pd, ad = drive_line(mech, mdl, q, phi, p)
+        u = jnp.stack([jnp.cos(ad), jnp.sin(ad)])
+        for body, side in ((mdl.input_body, 1.0), (mdl.input_base, -1.0)):
+            if body >= 0:
+                col = side * jnp.stack([u[0], u[1], _cross(pd - ref[body], u) / L])
+                A = A.at[3 * body + jnp.arange(3), n - 1].add(col)
+    else:
+        A = A.at[3 * mdl.input_body + 2, n - 1].add(1.0)  # τ/L on the input body
 
     # right-hand side: Q = m c̈ − m g − F_ext;  J θ̈ − (c − r) × (m g − m c̈) − Σ (P − r) × F_ext − T_ext
     ext_f = jnp.zeros((nb + 1, 2), dtype)  # row nb collects what acts on the ground (dropped)
@@ -268,7 +297,8 @@ def reactions_one(mech: Mechanism, mdl: _bodies.Model, q, phi, p, omega, alpha=0
         else:
             forces.append(f[k, 0] * jnp.stack([-jnp.sin(axes[k]), jnp.cos(axes[k])]))
             moments.append(f[k, 1] * L)
-    return Reactions(jnp.stack(forces), jnp.stack(moments), x[-1] * L, code.astype(jnp.int8), ratio)
+    drive = x[-1] if mdl.drive_force else x[-1] * L  # F in N, or τ/L × L
+    return Reactions(jnp.stack(forces), jnp.stack(moments), drive, code.astype(jnp.int8), ratio)
 
 
 # ----------------------------------------------------------------------------- batched entry points
@@ -317,14 +347,16 @@ def _reactions(mech, phis, p, q, converged, omega, alpha, singular_ratio):
 
 def reactions(mech: Mechanism, phis, p=None, *, omega, alpha=0.0, q=None, converged=None,
               singular_ratio: float | None = None) -> Reactions:
-    """Joint reactions and drive torque along a sequence of inputs (one jitted function).
+    """Joint reactions and the drive (torque, or force for a length input) along a sequence of
+    inputs (one jitted function).
 
     **Arguments:**
 
     - `mech`: a mechanism whose file has `[bodies]` and `[joints]`.
-    - `phis`: (N,) inputs, SI (rad), or (B, N) for a batch of designs.
+    - `phis`: (N,) inputs, SI (rad, or m for a length input), or (B, N) for a batch of designs.
     - `p`: (P,) parameters SI (default `mech.parameters`), or (B, P).
-    - `omega`, `alpha` (keyword-only): input speed (rad/s) and acceleration (rad/s²); traced.
+    - `omega`, `alpha` (keyword-only): input speed (rad/s) and acceleration (rad/s²), for a length
+      input m/s and m/s²; traced.
     - `q`: (N, n) or (B, N, n) solved positions (`Solution.q`); default: solved here by `solve`
       (from the file's guesses), with their `converged` flags.
     - `converged`: (…, N) bool of the position solve; positions that did not converge get
@@ -411,6 +443,58 @@ def _jitted_velocities(mech, mdl, q, phis, p):
     return jax.vmap(one, in_axes=(0, 0, None))(q, phis, p)
 
 
+@functools.partial(jax.jit, static_argnums=(1,))
+def _jitted_drive(mech, mdl, q, phis, p):
+    """Per position: a length input's drive point P_d, its input derivative and its axis."""
+    def one(q, phi, p):
+        mu, _ = rates(mech, q, phi, p, order=1)
+        (pd, ad), (dpd, _) = jax.jvp(lambda qq, ph: drive_line(mech, mdl, qq, ph, p), (q, phi),
+                                     (mu, jnp.ones_like(phi)))
+        return pd, dpd, ad
+
+    return jax.vmap(one, in_axes=(0, 0, None))(q, phis, p)
+
+
+def drive_errors(mech: Mechanism, q, phis, p=None, *, rtol: float = 1e-6) -> list:
+    """Check a length input's drive force against the kinematics: its direction u = (cos a_d,
+    sin a_d) (`[input] axis`) must be the one in which the input s grows at its point P_d (`[input]
+    at`), u·(dP_d/ds − v_base(P_d)/ṡ) = 1 at every position (the base's velocity at P_d: 0 for
+    the ground; a moving base needs an `angle` and a centroid or a revolute joint, else the check
+    is skipped), so that the drive's power is F ṡ and F is the force the actuator exerts. An axis
+    reversed (pointing from the driven body to the base) gives −1; a point not on the actuator's
+    line, something else. Returns messages (empty if all is well or for an angle input); `rtol`
+    on that dimensionless rate. `q` (N, n) converged."""
+    mdl = _bodies.model(mech)
+    if not mdl.drive_force or len(q) == 0:
+        return []
+    q = jnp.asarray(q)
+    pa = jnp.asarray(np.asarray(mech.parameters if p is None else p, dtype=q.dtype))
+    ph = jnp.asarray(phis, dtype=q.dtype)
+    pd, dpd, ad = (np.asarray(x, dtype=float) for x in _jitted_drive(mech, mdl, q, ph, pa))
+    rel = dpd
+    base = mdl.input_base
+    if base >= 0:
+        b = mdl.bodies[base]
+        c, dc, a, da, pts, dpts, _, _ = (np.asarray(x, dtype=float) for x in _jitted_velocities(mech, mdl, q, ph, pa))
+        rev = [k for k, j in enumerate(mdl.joints) if j.kind == "revolute" and base in (j.a, j.b)]
+        if b.angle is None or (b.centroid is None and not rev):
+            return []
+        ref, dref = (c[:, base], dc[:, base]) if b.centroid is not None else (pts[:, rev[0]], dpts[:, rev[0]])
+        r = pd - ref
+        w = da[:, base]
+        rel = dpd - (dref + np.stack([-w * r[:, 1], w * r[:, 0]], axis=1))
+    rate = np.cos(ad) * rel[:, 0] + np.sin(ad) * rel[:, 1]
+    err = np.abs(rate - 1.0)
+    if not np.max(err) > rtol:
+        return []
+    i = int(np.argmax(err))
+    at = mech.from_si(mech.input_name, float(np.asarray(phis)[i]))
+    return [f"[input] axis: the drive force is not along the direction in which '{mech.input_name}' grows: at "
+            f"{mech.input_name} = {at:g}, (cos axis, sin axis)·(the velocity of [input] at relative to the base, per "
+            f"unit of {mech.input_name}) = {rate[i]:.6g}, not 1 (give `axis` as the actuator's direction from its base "
+            "towards the driven body, and `at` a point of the driven body on its line)"]
+
+
 def prismatic_errors(mech: Mechanism, q, phis, p=None, *, rtol: float = 1e-6) -> list:
     """Check the `axis` of every prismatic joint against the kinematics: the joint's two bodies must
     turn with the axis (its input derivative equals each body's angular rate; 0 for the ground), and
@@ -483,7 +567,9 @@ def rigidity_errors(mech: Mechanism, q, phis, p=None, *, rtol: float | None = No
     well) naming the body, the point and how much it drifts; tolerance `rtol` × the length scale
     (default max(1e-7, 1000 eps) of the dtype of `q`).
     A prismatic joint's point slides on one of its bodies and is not checked here; its axis is
-    (`prismatic_errors`, whose messages are appended). `q` (N, n) converged."""
+    (`prismatic_errors`, whose messages are appended), and so is a length input's drive direction
+    (`drive_errors`; its point `[input] at` is checked here as a point of the input body). `q` (N, n)
+    converged."""
     mdl = _bodies.model(mech)
     q = jnp.asarray(q)
     if rtol is None:
@@ -495,11 +581,17 @@ def rigidity_errors(mech: Mechanism, q, phis, p=None, *, rtol: float | None = No
     unit = mech.units.length
     lu = {1.0: "m", 1e-3: "mm", 1e-2: "cm"}.get(unit, "m")
     out = []
+    drive = None
+    if mdl.drive_force:
+        drive = np.asarray(_jitted_drive(mech, mdl, jnp.asarray(q), jnp.asarray(phis, dtype=jnp.asarray(q).dtype),
+                                         jnp.asarray(p))[0])
     for i, b in enumerate(mdl.bodies):
         named = []
         for k, j in enumerate(mdl.joints):
             if j.kind == "revolute" and i in (j.a, j.b):
                 named.append((f"joint {j.name}", pts[:, k]))
+        if drive is not None and i == mdl.input_body:
+            named.append(("the drive point [input] at", drive))
         if b.centroid is not None:
             named.append(("the centroid", c[:, i]))
         for k, f in enumerate(mdl.forces):
@@ -526,4 +618,4 @@ def rigidity_errors(mech: Mechanism, q, phis, p=None, *, rtol: float | None = No
             if drift > rtol * scale:
                 out.append(f"{name} is not fixed in body '{b.name}': {what} by {drift / unit:.4g} {lu} over the "
                            "positions (check its vector sum, and the body's angle)")
-    return out + prismatic_errors(mech, q, phis, p)
+    return out + prismatic_errors(mech, q, phis, p) + drive_errors(mech, q, phis, p)

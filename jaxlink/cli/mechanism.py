@@ -116,16 +116,26 @@ def add_mechanism_arguments(parser: argparse.ArgumentParser, *, positions: bool 
                         help="floating-point precision of the solve (default float64)")
     if positions:
         speed = parser.add_mutually_exclusive_group()
-        speed.add_argument("--rpm", type=finite, help="input speed in revolutions per minute")
+        speed.add_argument("--rpm", type=finite,
+                           help="input speed in revolutions per minute (an angle input only: refused for a "
+                                "length input, whose speed is --omega in m/s)")
         speed.add_argument("--omega", type=finite,
-                           help="input speed in rad/s (default 1 rad/s: velocities and accelerations "
-                                "are then the transfer functions d/dφ, d²/dφ²)")
-        parser.add_argument("--start", type=finite, default=0.0,
-                            help="first input angle, degrees (default 0)")
-        parser.add_argument("--step", type=finite, default=5.0,
-                            help="input step, degrees (default 5)")
+                           help="input speed, SI: rad/s for an angle input, m/s for a length input (default 1: "
+                                "velocities and accelerations are then the transfer functions d/dφ, d²/dφ², "
+                                "or d/ds, d²/ds²)")
+        parser.add_argument("--start", type=finite, default=None,
+                            help="first input value: in degrees for an angle input (default 0), in the file's length "
+                                 "unit (length_unit) for a length input (default the file's [input] start)")
+        parser.add_argument("--step", type=finite, default=None,
+                            help="input step, same unit as --start: degrees for an angle input (default 5), the file's "
+                                 "length unit for a length input (no default: give --stop, or --step and --count)")
+        parser.add_argument("--stop", type=finite, default=None,
+                            help="last input value (same unit as --start): with --step it fixes the number of "
+                                 "positions (the last one at or before --stop), with --count the spacing; a length "
+                                 "input with --stop alone gets 73 positions from --start to --stop")
         parser.add_argument("--count", type=int, default=None,
-                            help="number of positions (default: a full revolution, 360/step)")
+                            help="number of positions (default: an angle input a full revolution, 360/step; "
+                                 "a length input has no default range: give --stop or --count)")
 
 
 def add_change_points_argument(parser: argparse.ArgumentParser) -> None:
@@ -174,44 +184,101 @@ def load_from_args(args):
 
 
 def inputs_from_args(mech, args) -> np.ndarray:
-    """Input values (SI) from --start/--step/--count (degrees for an angle input, file length unit
-    for a length input)."""
+    """Input values (SI) from --start/--step/--stop/--count (degrees for an angle input, the file's
+    length unit for a length input)."""
     return input_grid(mech, args)[0]
 
 
-def input_grid(mech, args) -> tuple:
-    """`(phis, values)`: the inputs from --start/--step/--count in SI, and as a table prints them
-    (degrees for an angle input, metres for a length input), computed in decimal from the numbers
-    given so that they print as asked (15.0, not 14.999999999999998)."""
+#: positions of a length input given --stop alone (72 equal steps, as a revolution in 5° steps)
+LENGTH_COUNT = 73
+
+
+def length_unit_name(mech) -> str:
+    """The file's length unit as written (m, cm, mm)."""
+    return {1.0: "m", 1e-2: "cm", 1e-3: "mm"}.get(mech.units.length, "m")
+
+
+def grid_values(mech, args) -> np.ndarray:
+    """The input values --start/--step/--stop/--count ask for, in the options' unit (degrees for
+    an angle input, the file's length unit for a length input), computed in decimal so that they
+    print as asked (15.0, not 14.999999999999998). Raises `MechanismError` for a grid that is
+    not one: a zero step, a step away from --stop, all three of --step, --count, --stop, a length
+    input without a range (it has no default: give --stop, or --step and --count)."""
+    from decimal import Decimal
+
     from ..report.grid import exact_grid
 
-    if args.step == 0 or not math.isfinite(args.step):
+    angle = mech.input_kind == "angle"
+    start, step, count = args.start, args.step, args.count
+    stop = getattr(args, "stop", None)
+    if start is None:
+        # a length input from the file's [input] start, as written (12 digits: no SI round-trip noise)
+        start = 0.0 if angle else float(f"{float(mech.from_si(mech.input_name, mech.input_start)):.12g}")
+    for option, value in (("--start", start), ("--step", step), ("--stop", stop)):
+        if value is not None and not math.isfinite(value):
+            raise MechanismError(f"{option} {value}: must be a finite number")
+    if step is not None and step == 0:
         raise MechanismError("--step must be a non-zero finite number")
-    if not math.isfinite(args.start):
-        raise MechanismError(f"--start {args.start}: must be a finite number")
-    count = args.count
-    if count is None:
-        turn = 360.0 / abs(args.step)
-        if mech.input_kind == "angle" and turn > MAX_POSITIONS:
-            raise MechanismError(f"--step {args.step:g}: a revolution would be {turn:.3g} positions, more than "
-                                 f"{MAX_POSITIONS}; use a larger step or give --count")
-        count = max(1, int(round(turn))) if mech.input_kind == "angle" else 73
-    if count < 1:
+    if count is not None and count < 1:
         raise MechanismError(f"--count {count}: must be at least 1")
-    if count > MAX_POSITIONS:
+    if count is not None and count > MAX_POSITIONS:
         raise MechanismError(f"--count {count}: at most {MAX_POSITIONS} positions in one command")
+    unit = "°" if angle else " " + length_unit_name(mech)
+    if stop is not None:
+        if step is not None and count is not None:
+            raise MechanismError("--step, --count and --stop: give two of them (with --start), not all three")
+        span = Decimal(repr(float(stop))) - Decimal(repr(float(start)))
+        if step is None and (count is None and angle):
+            step = 5.0 if span >= 0 else -5.0
+        if step is not None:
+            if span != 0 and (span > 0) != (step > 0):
+                raise MechanismError(f"--step {step:g} runs away from --stop {stop:g} (--start {start:g}): give a step "
+                                     f"of the other sign")
+            n = int(span / Decimal(repr(float(step)))) + 1  # the last position at or before --stop
+            if n > MAX_POSITIONS:
+                raise MechanismError(f"--start {start:g} to --stop {stop:g} in steps of {step:g} would be {n} "
+                                     f"positions, more than {MAX_POSITIONS}; use a larger step")
+            vals = exact_grid(start, step, n)
+        else:
+            n = LENGTH_COUNT if count is None else count
+            if n == 1 and span != 0:
+                raise MechanismError(f"--count 1 with --stop {stop:g}: one position cannot span --start {start:g} to "
+                                     "--stop; give --count 2 or more, or leave out --stop")
+            first = Decimal(repr(float(start)))
+            vals = np.array([float(first + span * k / max(n - 1, 1)) for k in range(n)])
+    elif angle:
+        step = 5.0 if step is None else step
+        if count is None:
+            turn = 360.0 / abs(step)
+            if turn > MAX_POSITIONS:
+                raise MechanismError(f"--step {step:g}: a revolution would be {turn:.3g} positions, more than "
+                                     f"{MAX_POSITIONS}; use a larger step or give --count")
+            count = max(1, int(round(turn)))
+        vals = exact_grid(start, step, count)
+    else:
+        if step is None or count is None:
+            raise MechanismError(
+                f"the input '{mech.input_name}' is a length (a driven slider or cylinder): it has no default range; "
+                f"give --stop (the last value, in {length_unit_name(mech)}; {LENGTH_COUNT} positions from --start, "
+                f"default the file's [input] start {start:g}), or --step and --count")
+        vals = exact_grid(start, step, count)
     from ..files.reader import DOMAINS
 
     # the inputs in SI within the domain of their kind (the file format's limits)
-    limit = DOMAINS[mech.input_kind][1] / (math.pi / 180.0 if mech.input_kind == "angle" else mech.units.length)
-    unit = "°" if mech.input_kind == "angle" else " (file length unit)"
-    last = args.start + (count - 1) * args.step
-    for option, value in (("--start", args.start), ("--step", last)):
+    limit = DOMAINS[mech.input_kind][1] / (math.pi / 180.0 if angle else mech.units.length)
+    for option, value, what in (("--start", vals[0], "the first input"), ("--stop", vals[-1], "the last input")):
         if not abs(value) <= limit:
-            what = "the first input" if option == "--start" else f"the last input ({last:g})"
-            raise MechanismError(f"{option} {getattr(args, option[2:]):g}: {what} is out of range: inputs are "
-                                 f"within ±{limit:g}{unit}")
-    vals = exact_grid(args.start, args.step, count)
+            given = {"--start": start, "--stop": stop if stop is not None else step}.get(option)
+            shown = option if option == "--start" or stop is not None else "--step"
+            raise MechanismError(f"{shown} {given:g}: {what} ({value:g}) is out of range: inputs are within "
+                                 f"±{limit:g}{unit}")
+    return vals
+
+
+def input_grid(mech, args) -> tuple:
+    """`(phis, values)`: the inputs of `grid_values` in SI, and as a table prints them (degrees for
+    an angle input, metres for a length input)."""
+    vals = grid_values(mech, args)
     if mech.input_kind == "angle":
         return np.deg2rad(vals), vals
     unit = mech.units.length
@@ -220,15 +287,34 @@ def input_grid(mech, args) -> tuple:
     return si, si
 
 
-def omega_from_args(args) -> float:
-    """The input speed ω (rad/s) of --rpm or --omega (1 by default), finite and within ±`MAX_OMEGA`."""
+def grid_text(mech, args) -> str:
+    """One line saying which inputs a command solves, in the unit of its options:
+    `input       s (length) from 40 to 120 mm, step 1 mm: 81 positions`."""
+    vals = grid_values(mech, args)
+    angle = mech.input_kind == "angle"
+    u = "°" if angle else " " + length_unit_name(mech)
+    text = f"input       {mech.input_name} ({mech.input_kind}) from {vals[0]:g}{u}"
+    if len(vals) > 1:
+        step = float(np.round(vals[1] - vals[0], 12))
+        text += f" to {vals[-1]:g}{u}, step {step:g}{u}"
+    return text + f": {len(vals)} position{'s' if len(vals) != 1 else ''}"
+
+
+def omega_from_args(args, mech=None) -> float:
+    """The input speed (SI) of --rpm or --omega (1 by default), finite and within ±`MAX_OMEGA`:
+    rad/s for an angle input, m/s for a length input (`mech` given: --rpm is refused for a length
+    input, whose speed is not a number of revolutions)."""
+    if mech is not None and mech.input_kind != "angle" and getattr(args, "rpm", None) is not None:
+        raise MechanismError(f"--rpm {args.rpm:g}: the input '{mech.input_name}' is a length (a driven slider or "
+                             "cylinder), not a crank; give its speed with --omega in m/s")
     for option, value, scale in (("--rpm", getattr(args, "rpm", None), 2.0 * math.pi / 60.0),
                                  ("--omega", getattr(args, "omega", None), 1.0)):
         if value is not None:
             if not (math.isfinite(value) and abs(value * scale) <= MAX_OMEGA):
                 limit = MAX_OMEGA / scale
+                speed = "rad/s" if mech is None or mech.input_kind == "angle" else "m/s"
                 raise MechanismError(f"{option} {value:g}: the input speed must be finite and within ±{limit:.6g}"
-                                     + (" rpm" if option == "--rpm" else " rad/s"))
+                                     + (" rpm" if option == "--rpm" else f" {speed}"))
             return float(value) * scale
     return 1.0
 
@@ -427,8 +513,10 @@ def cmd_check(args) -> int:
     if mech.bodies is not None:
         mdl = mech.bodies
         names = ("ground", *mdl.body_names)
+        drive = (f"with a force along [input] axis, from {names[mdl.input_base + 1]}" if mdl.drive_force
+                 else "with a torque")
         print(f"bodies      {len(mdl.bodies)} moving: {', '.join(mdl.body_names)}; the input drives "
-              f"{mdl.body_names[mdl.input_body]}")
+              f"{mdl.body_names[mdl.input_body]} {drive}")
         print(f"joints      {len(mdl.joints)}: " + ", ".join(
             f"{j.name} ({j.kind} {names[j.a + 1]}–{names[j.b + 1]})" for j in mdl.joints))
         loads = [*(f.name for f in mdl.forces), *(t.name for t in mdl.torques), *(s.name for s in mdl.springs)]
@@ -475,7 +563,7 @@ def cmd_kinematics(args) -> int:
             raise MechanismError(f"{option} -: give a file name (a drawing is not written to standard output)")
     mech = load_from_args(args)
     phis, values = input_grid(mech, args)
-    omega = omega_from_args(args)
+    omega = omega_from_args(args, mech)
     units = units_from_args(mech, args)
     from ..report import kinematics as _report
 
@@ -484,6 +572,7 @@ def cmd_kinematics(args) -> int:
     branch_point_warnings(table)
     bad = int((~table.converged).sum())
     info = sys.stderr if args.csv == "-" else sys.stdout  # `--csv -`: the table alone on standard output
+    print(grid_text(mech, args), file=info)
     _report.print_summary(table, info, every_row_hint=not args.csv, units=units)
     if args.csv:
         with writing("--csv", args.csv):

@@ -1,4 +1,5 @@
-"""Command `jaxlink reactions`: joint reactions and driving torque over the input positions.
+"""Command `jaxlink reactions`: joint reactions and the drive (a torque, or a length input's force)
+over the input positions.
 
 The table, CSV and plot are made by `jaxlink/report/reactions.py` (its docstring lists the CSV
 columns). Rows where the kinematics did not converge or the kinetostatic system is singular hold
@@ -18,6 +19,7 @@ from .mechanism import (
     branch_point_warnings,
     check_output,
     enable_dtype,
+    grid_text,
     input_grid,
     load_from_args,
     omega_from_args,
@@ -28,23 +30,25 @@ from .mechanism import (
 
 def register(sub) -> None:
     p = sub.add_parser(
-        "reactions", help="joint reactions and driving torque over a revolution",
+        "reactions", help="joint reactions and the drive torque (a length input: the drive force)",
         description=(
             "Kinetostatics (d'Alembert): solve the positions, then at every position the linear system of "
             "force and moment balances of all moving bodies (from the file's [bodies], [joints], [loads], "
-            "[environment]) for the joint reactions and the drive torque, at constant input speed. CSV "
-            "columns: input_deg; for each joint J: J_Fx_N, J_Fy_N (force on the second listed body from the "
-            "first); drive_torque_N_m (on the input body, counter-clockwise +); result (converged, or why "
-            "not: the position solve's code such as cannot_assemble, or singular). Rows that cannot be "
-            "solved hold nan and make the exit status 1. Give the speed with --rpm or --omega (default "
-            "1 rad/s)."
+            "[environment]) for the joint reactions and the drive, at constant input speed. The drive is a "
+            "torque for an angle input (a crank), a force along [input] axis for a length input (a "
+            "cylinder, a driven slider). CSV columns: input_deg (input_m for a length input); for each joint "
+            "J: J_Fx_N, J_Fy_N (force on the second listed body from the first); drive_torque_N_m (on the "
+            "input body, counter-clockwise +) or, for a length input, drive_force_N (+ pushes towards a "
+            "larger input); result (converged, or why not: the position solve's code such as "
+            "cannot_assemble, or singular). Rows that cannot be solved hold nan and make the exit status 1. "
+            "Give the speed with --rpm or --omega (default 1 rad/s; a length input: --omega in m/s)."
         ),
     )
     add_mechanism_arguments(p)
     p.add_argument("--csv", metavar="OUT", help="write the table to this CSV file (default: print a summary)")
     add_units_argument(p)
     add_change_points_argument(p)
-    p.add_argument("--plot", metavar="OUT.png", help="plot the reaction magnitudes and the drive torque")
+    p.add_argument("--plot", metavar="OUT.png", help="plot the reaction magnitudes and the drive torque (or force)")
     p.set_defaults(func=cmd_reactions)
 
 
@@ -57,12 +61,13 @@ def cmd_reactions(args) -> int:
     mech = load_from_args(args)
     _bodies.model(mech)  # a file without bodies is refused before the solve
     phis, values = input_grid(mech, args)  # the input column exactly as asked (no rad round trip)
-    omega = omega_from_args(args)
+    omega = omega_from_args(args, mech)
     units = units_from_args(mech, args)
     table = reactions_table(mech, phis, omega=omega, dtype=dtype, input_values=values,
                             rpm=getattr(args, "rpm", None), change_points=args.change_points)
     branch_point_warnings(table)
     info = sys.stderr if args.csv == "-" else sys.stdout  # `--csv -`: the table alone on standard output
+    print(grid_text(mech, args), file=info)
     if args.csv:
         with writing("--csv", args.csv):
             write_csv(args.csv, table, units)

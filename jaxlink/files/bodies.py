@@ -40,8 +40,17 @@ kg·m², forces in N, stiffness in N/m)::
     gravity = [0.0, -9.81]                 # m/s²
 
 The spring law and the joint unknowns are in `jaxlink/model/bodies.py`. A file that declares
-bodies, joints or loads declares them for kinetostatics, so all of it is checked at load: the
-input must be an angle and `[input] body` must name the body its torque drives.
+bodies, joints or loads declares them for kinetostatics, so all of it is checked at load:
+`[input] body` must name the body the drive acts on. An angle input drives it with a torque; a
+length input (a cylinder, a driven slider) with a force, which needs where it acts and its
+direction::
+
+    [input]
+    name = "s"                             # the cylinder's length
+    body = "rocker"                        # the body the drive force acts on
+    at = ["r @ theta"]                     # where (a vector sum, a point of the body)
+    axis = "psi"                           # its direction: the one in which s grows
+    base = "ground"                        # the body taking the reaction (default the ground)
 """
 
 from __future__ import annotations
@@ -291,14 +300,40 @@ def read_bodies(
                                   length, number(ld, "preload", table, default=0.0)))
 
     # ------------------------------------------------------------------ input and statics count
-    if kinds[input_name] != "angle":
-        raise err("bodies need an angle input (a crank driven by a torque); a driven slider is not supported "
-                  "by kinetostatics", "input", "name")
+    length_input = kinds[input_name] == "length"
+    if kinds[input_name] not in ("angle", "length"):
+        raise err("bodies need an angle input (a crank driven by a torque) or a length input (a cylinder or a "
+                  "slider driven by a force)", "input", "name")
+    what = "the driving force" if length_input else "the driving torque"
     if not input_body:
-        raise err("a file with bodies needs [input] body = \"NAME\": the body the driving torque acts on", "input")
+        raise err(f"a file with bodies needs [input] body = \"NAME\": the body {what} acts on", "input")
     if input_body not in index:
         raise err(f"[input] body '{input_body}' is not a declared body{_expr.suggest(str(input_body), index)}; "
                   "bodies: " + ", ".join(index), "input", "body")
+    inp = data.get("input", {})
+    drive_at = drive_axis = None
+    drive_base = -1
+    if length_input:
+        for k in ("at", "axis"):
+            if k not in inp:
+                raise err(f"the length input '{input_name}' is driven by a force on body '{input_body}': [input] needs "
+                          "'at' (where it acts, a vector sum) and 'axis' (its direction, an angle expression: the "
+                          "direction in which the input grows, e.g. a cylinder's angle)", "input")
+        drive_at = vector_sum(inp["at"], "input", "at")
+        drive_axis = angle_expr(inp["axis"], "input", "axis")
+        if "base" in inp:
+            if not isinstance(inp["base"], str):
+                raise err("'base' must name the body that takes the drive's reaction (default \"ground\")",
+                          "input", "base")
+            drive_base = body_index(inp["base"], "input", "base")
+            if drive_base == index[input_body]:
+                raise err(f"[input] base '{inp['base']}' is the driven body itself: the drive acts between two "
+                          "bodies", "input", "base")
+    else:
+        for k in ("at", "axis", "base"):
+            if k in inp:
+                raise err(f"[input] '{k}' is for a length input (a drive force); an angle input's drive is a torque "
+                          f"on body '{input_body}'", "input", k)
     # each joint of class t has t unknowns; with the drive torque they must match 3 balances per body
     removed = sum(JOINT_CLASS[j.kind] for j in joints)
     n_eq, n_unk = 3 * len(bodies), removed + 1
@@ -307,11 +342,12 @@ def read_bodies(
                 if n_eq < n_unk else "under-constrained: the joints do not hold every body")
         raise MechanismError(
             f"{len(bodies)} moving bodies give {n_eq} equilibrium equations but {len(joints)} joints and the drive "
-            f"torque give {n_unk} unknowns (Grübler mobility 3·{len(bodies)} − {removed} = {n_eq - removed}, "
+            f"{'force' if length_input else 'torque'} "
+            f"give {n_unk} unknowns (Grübler mobility 3·{len(bodies)} − {removed} = {n_eq - removed}, "
             f"kinetostatics needs 1): {what}", file=file, key="joints")
 
     return Model(tuple(bodies), tuple(joints), tuple(forces), tuple(torques), tuple(springs),
-                 (float(g[0]), float(g[1])), index[input_body])
+                 (float(g[0]), float(g[1])), index[input_body], drive_at, drive_axis, drive_base)
 
 
 def joint_members(j: Mapping, jname: str, table: str, err, body_index) -> tuple[str, int, int]:

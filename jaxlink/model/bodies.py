@@ -5,7 +5,8 @@
 
 A spring's tension is T = preload + stiffness·(L − length) (it pulls its two ends together when
 T > 0); its potential energy is preload·(L − length) + ½ stiffness (L − length)².
-The input drives the body named by `[input] body` with the unknown torque.
+The input drives the body named by `[input] body` with the unknown torque (an angle input), or with
+the unknown force along `[input] axis` at `[input] at` (a length input: a cylinder, a driven slider).
 """
 
 from __future__ import annotations
@@ -90,7 +91,14 @@ class Model:
     - `joints`: in file order; unknowns of joint j are columns 2j, 2j+1 of the kinetostatic system.
     - `forces`, `torques`, `springs`: the loads.
     - `gravity`: (gx, gy) m/s².
-    - `input_body`: index of the body the drive torque acts on.
+    - `input_body`: index of the body the drive acts on: the drive torque (an angle input), or the
+      drive force (a length input).
+    - `input_at`, `input_axis`: a length input's drive force acts on `input_body` at the point
+      `input_at` (terms) along the direction `input_axis` (an angle expression node): F > 0 pushes
+      the body along (cos axis, sin axis), the direction in which the input grows; None for an
+      angle input.
+    - `input_base`: the body that takes the drive force's reaction (−F at the same point; −1 =
+      the ground): a cylinder's barrel, the frame.
     """
 
     bodies: tuple
@@ -100,6 +108,14 @@ class Model:
     springs: tuple
     gravity: tuple
     input_body: int
+    input_at: tuple | None = None
+    input_axis: object = None
+    input_base: int = -1
+
+    @property
+    def drive_force(self) -> bool:
+        """Whether the drive is a force (a length input) rather than a torque."""
+        return self.input_at is not None
 
     @property
     def body_names(self) -> tuple:

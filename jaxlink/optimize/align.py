@@ -108,6 +108,9 @@ def placement_of(problem, ev=None):
     `placement` key, found from the structure when `ev` (the problem's `Evaluator`) is given
     (`detect_placement`)."""
     pl = problem.option("placement")
+    if pl is not None and problem.mech.input_kind != "angle":
+        raise problem.error("'placement' needs an angle input: a similarity would scale a length input's stroke "
+                            "too", "placement")
     if pl is None:
         # found once per evaluator (it solves and compiles two small batches)
         return ev.compiled(("align.detect_placement",), lambda: detect_placement(ev)) if ev is not None else None
@@ -159,14 +162,16 @@ def detect_placement(ev):
     on the file's design at 8 inputs with one batched path solve (s = 1.3, θ = 0.7 rad, a shift of
     (0.3, −0.2) × the path's size): the first whose path matches to 10⁻⁷ of its size is the
     placement. None if no candidate matches, or if some length is not a variable (a similarity
-    scales them all), or for a mechanism solved by continuation (its start needs no placement)."""
+    scales them all), or for a mechanism solved by continuation (its start needs no placement), or
+    for a length input (its stroke would have to scale too)."""
     pr = ev.problem
     mech = pr.mech
     names = list(pr.names)
     lengths = [i for i, n in enumerate(names) if mech.kinds[n] == "length"]
     angles = [i for i, n in enumerate(names) if mech.kinds[n] == "angle"]
     all_lengths = [n for n in mech.parameter_names if mech.kinds[n] == "length"]
-    if ev.start_method != "closed_form" or not angles or len(lengths) < 2 or any(n not in names for n in all_lengths):
+    if (ev.start_method != "closed_form" or not angles or len(lengths) < 2 or any(n not in names for n in all_lengths)
+            or mech.input_kind != "angle"):  # a similarity would scale a length input's stroke too
         return None
     cands = [(ix, iy, ia) for ix in lengths for iy in lengths if ix != iy for ia in angles]
     x0 = pr.file_design()

@@ -58,7 +58,9 @@ def design_configuration(ev, u, c: int):
     gap = float(mech.input_start) - float(ev.phi0)
     if gap == 0.0 or not bool(ok):
         return p, q0
-    n = max(2, int(math.ceil(abs(gap) / math.radians(5.0))) + 1)
+    # steps of at most 5°, or for a length input 5 % of the length scale (the solver's lead-in)
+    h = math.radians(5.0) if mech.input_kind == "angle" else 0.05 * float(mech.length_scale(jnp.asarray(p)))
+    n = max(2, int(math.ceil(abs(gap) / h)) + 1)
     phis = float(ev.phi0) + np.linspace(0.0, gap, n)
     sol = solve(mech, phis, p, q0, points=False)
     return p, np.asarray(sol.q[-1])

@@ -18,7 +18,8 @@ units) and a circuit index c (which branch signs of the dyads; 0 = the file's). 
 
 The design a search reports is *certified* (`Evaluator.report`): for a mechanism of dyads, the
 reach margin's minimum over the whole revolution, refined between the samples
-(`feasibility.certify`), is ≥ 0; for other mechanisms, every position of the dense re-solve
+(`feasibility.certify`), is ≥ 0; for other mechanisms, and for a length input (whose samples run
+from `start` to `stop`, not around a revolution), every position of the dense re-solve
 (`report_samples`) converged.
 
 One *mechanism evaluation* = one design solved over its revolution (on one circuit: with
@@ -77,6 +78,9 @@ class Evaluator:
         self.circuits = problem.circuits
         if self.circuits == "auto":
             self.circuits = "all" if problem.objective == "points" and method == "closed_form" else "file"
+        # the reach margin between samples (screen, certificate) is for a revolution; a length
+        # input's design is certified by the dense re-solve
+        self.between = self.dyads is not None and problem.periodic
         if self.dyads is not None:
             self.sigmas = circuit_signs(mech, self.q_file, phi0, all_circuits=self.circuits == "all")
         else:
@@ -134,7 +138,7 @@ class Evaluator:
         q0 = jax.lax.stop_gradient(q0)
         sol = solve_path(self.mech, phis, p, q0, options=self.options)
         feasible = ok0 & jnp.all(sol.converged)
-        if screen and self.dyads is not None:  # no window opening between two checked positions
+        if screen and self.between:  # no window opening between two checked positions
             feasible = feasible & self._screened(jax.lax.stop_gradient(p), q0, phis)
         lf = self.mech.units.length
         k = self.problem.point
@@ -314,7 +318,7 @@ class Evaluator:
         converged — finer sampling, not a proof between them), `certified` (bool), and for the
         reach margin `margin` (the smallest, dimensionless) and `margin_at` (its input value, file
         units)."""
-        if self.dyads is None:
+        if not self.between:
             n = max(self.report_samples, DENSE_FACTOR * len(self.problem.phis))
             ok = bool(dense_feasible)
             if ok and n != self.report_samples:
@@ -330,7 +334,7 @@ class Evaluator:
     def _report_fn(self, samples: int, order: int):
         """Jitted (u, circuit) → (feasible, value, metrics) at `samples` inputs; the circuit is
         an argument (one compilation for every circuit)."""
-        phis = self.problem.phis[0] + 2 * np.pi * np.arange(samples) / samples
+        phis = self.problem.inputs(samples)
 
         def one(uu, c):
             path, feas = self.path(uu, c, jnp.asarray(phis, uu.dtype), order)
@@ -366,7 +370,7 @@ class Evaluator:
         return np.asarray(path.xy)
 
     def _path_fn(self, samples: int, order: int):
-        phis = self.problem.phis[0] + 2 * np.pi * np.arange(samples) / samples
+        phis = self.problem.inputs(samples)
         return self.compiled(("path", samples, order),
                              lambda: jax.jit(lambda uu, c: self.path(uu, c, jnp.asarray(phis, uu.dtype), order)))
 

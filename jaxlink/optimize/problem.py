@@ -7,6 +7,8 @@ variables = { l2 = [0, 4], l22 = [0, 4], gamma = [-30, 30] }   # bounds, file un
 samples = 36                                  # input positions per design (a full revolution)
 objective = "ellipse"                         # a name of the objective registry
 start = 75                                    # first input value (file units; default [input] start)
+stop = 650                                    # a length input only: the last input value (file units);
+                                              # the samples span start … stop (an angle input: a revolution)
 circuits = "auto"                             # "file": keep the file's assembly branch; "all": try
                                               # every circuit of a closed-form (dyad) mechanism;
                                               # "auto" (default): "all" for the path objective
@@ -47,12 +49,14 @@ NUMBER_DOMAINS = {
 #: the string keys of the searches and their values (a search given none of these keys in Python
 #: refuses the value again: `jaxlink/optimize/searches/__init__.py`)
 CHOICES = {"uniform": ("grid", "coordinate"), "gradient_solver": ("lbfgs", "al-lbfgs")}
+#: the objectives that take an open path (a length input's stroke from `start` to `stop`)
+OPEN_PATH_OBJECTIVES = ("points",)
 #: share of the available memory one batch of the evaluator may take (the rest: JAX, the searches)
 MEMORY_SHARE = 0.5
 
 KNOWN_KEYS = {
     # problem
-    "point", "variables", "samples", "objective", "start", "circuits", "start_method",
+    "point", "variables", "samples", "objective", "start", "stop", "circuits", "start_method",
     "report_samples", "placement",
     # searches
     "starts", "presample", "iterations", "uniform", "chunk", "budget", "seed", "time",
@@ -72,7 +76,8 @@ class Problem:
     - `names`: the varied parameters; `index`: their positions in `mech.parameter_names`.
     - `lower`, `upper`: bounds in file units, shape (V,); `factor`: file unit → SI per variable.
     - `point`: index of the point in `mech.point_names`.
-    - `phis`: (samples,) input values (SI), a full revolution from `start` (angle input).
+    - `phis`: (samples,) input values (SI): an angle input's full revolution from `start`, a length
+      input's `samples` equally spaced values from `start` to `stop`, both included (`inputs`).
     - `circuits`: "file" | "all" | "auto" (resolved by the `Evaluator`: "all" for `points` on a
       dyad mechanism, else "file").
     - `options`: the whole `[optimize]` table (objective and search options).
@@ -94,6 +99,19 @@ class Problem:
     @property
     def n_variables(self) -> int:
         return len(self.names)
+
+    @property
+    def periodic(self) -> bool:
+        """Whether the inputs are a revolution (an angle input: the path is closed) rather than a
+        length input's stroke from `start` to `stop` (an open path)."""
+        return self.mech.input_kind == "angle"
+
+    def inputs(self, samples: int) -> np.ndarray:
+        """`samples` input values (SI) over the problem's range: a revolution from the first input
+        (k·2π/samples), or for a length input from the first to the last input, both included."""
+        if self.periodic:
+            return self.phis[0] + 2.0 * np.pi * np.arange(samples) / samples
+        return np.linspace(self.phis[0], self.phis[-1], samples)
 
     def to_file_units(self, u):
         """Normalized u ∈ [0, 1]^V → variables in file units."""
@@ -262,9 +280,25 @@ def _problem_from(mech: Mechanism, overrides: Mapping[str, Any] | None, *, searc
         phi0 = mech.to_si(mech.input_name, start)
         if abs(phi0) > 1e4:
             raise err(f"'start' = {start:g} is out of range: the input is within ±1e4 rad", "start")
-    if search and mech.input_kind != "angle":
-        raise err("design search needs a rotating (angle) input: the path is a full revolution", "samples")
-    phis = phi0 + 2.0 * np.pi * np.arange(samples) / samples
+    stop = table.get("stop")
+    if mech.input_kind == "angle":
+        if stop is not None:
+            raise err("'stop' is for a length input (the last value of its stroke); an angle input's samples are "
+                      "a full revolution from 'start'", "stop")
+        phis = phi0 + 2.0 * np.pi * np.arange(samples) / samples
+    else:
+        if stop is None and search:
+            raise err(f"the input '{mech.input_name}' is a length (a driven slider or cylinder): give 'stop', the "
+                      f"last value of the stroke the path is sampled over (file units; from 'start', default "
+                      "[input] start)", "stop")
+        if stop is not None and _finite(stop) is None:
+            raise err(f"'stop' must be a number (file units of the input), got {stop!r}", "stop")
+        phi1 = phi0 if stop is None else mech.to_si(mech.input_name, stop)
+        if abs(phi1) > 1e4:
+            raise err(f"'stop' = {stop:g} is out of range: the input is within ±1e4 m", "stop")
+        if search and phi1 == phi0:
+            raise err(f"'stop' = {stop:g} is the start: the stroke must have a length", "stop")
+        phis = np.linspace(phi0, phi1, samples)
 
     circuits = table.get("circuits", "auto")
     if circuits not in ("file", "all", "auto"):
@@ -277,6 +311,9 @@ def _problem_from(mech: Mechanism, overrides: Mapping[str, Any] | None, *, searc
     objective = table.get("objective", "points" if search else _objective_reading(table))
     if (search or objective) and (not isinstance(objective, str) or objective not in OBJECTIVES):
         raise err(f"unknown objective '{objective}'; known: {', '.join(OBJECTIVES)}", "objective")
+    if objective and objective not in OPEN_PATH_OBJECTIVES and mech.input_kind != "angle":
+        raise err(f"objective '{objective}' is about a closed path over a revolution; a length input's path is open "
+                  f"(from 'start' to 'stop'): use {', '.join(map(repr, OPEN_PATH_OBJECTIVES))}", "objective")
 
     return Problem(
         mech=mech, names=tuple(names), index=tuple(index), lower=np.asarray(lo), upper=np.asarray(hi),

@@ -86,11 +86,14 @@ class KinematicsTable:
         return self.data[:, 0]
 
     def speed_text(self, units: FileUnits | None = None) -> str:
-        """`600 rpm (ω = 62.83 rad/s)` or `ω = 1 rad/s` (`units`: in the file's units, `ω = 57.3 deg/s`)."""
+        """`600 rpm (ω = 62.83 rad/s)`, `ω = 1 rad/s`, or for a length input `v = 0.05 m/s`
+        (`units`: in the file's units, `ω = 57.3 deg/s`, `v = 50 mm/s`)."""
         unit, factor = ("rad/s" if self.input_kind == "angle" else "m/s"), 1.0
         if units is not None:
             unit, factor = units.speed(self.input_kind)
         omega = self.omega * factor
+        if self.input_kind != "angle":
+            return f"v = {omega:g} {unit}"
         if self.rpm is not None:
             return f"{self.rpm:g} rpm (ω = {omega:.4g} {unit})"
         return f"ω = {omega:g} {unit}"

@@ -2,7 +2,9 @@
 
 CSV columns: `input_deg` (as asked for; `input_m` for a length input); for each joint J (file order)
 `J_Fx_N`, `J_Fy_N`, the force on the joint's second listed body from its first; `drive_torque_N_m`,
-the torque the drive applies to the input body (counter-clockwise positive); `result`, the name of
+the torque the drive applies to the input body (counter-clockwise positive), or for a length input
+`drive_force_N`, the actuator's force along `[input] axis` (positive pushes towards a larger input);
+`result`, the name of
 the code of the row (`converged`; the position solve's code, e.g. `cannot_assemble`, where the
 kinematics did not converge; `singular` where the kinetostatic system is singular). Rows that are
 not `converged` hold `nan`: they are left out of the summary and are gaps in the plot. Where a
@@ -44,13 +46,21 @@ class ReactionsTable:
     def column(self, name: str) -> np.ndarray:
         return self.data[:, self.columns.index(name)]
 
+    @property
+    def drive_column(self) -> str:
+        """`drive_torque_N_m` (an angle input) or `drive_force_N` (a length input)."""
+        return "drive_torque_N_m" if self.input_kind == "angle" else "drive_force_N"
+
     def magnitudes(self) -> np.ndarray:
         """(N, J) |F| of each joint, N."""
         f = self.data[:, 1:1 + 2 * len(self.joint_names)].reshape(len(self.data), -1, 2)
         return np.hypot(f[..., 0], f[..., 1])
 
     def speed_text(self, units: FileUnits | None = None) -> str:
-        unit, factor = ("rad/s", 1.0) if units is None else units.speed(self.input_kind)
+        unit, factor = ("rad/s" if self.input_kind == "angle" else "m/s", 1.0) if units is None \
+            else units.speed(self.input_kind)
+        if self.input_kind != "angle":
+            return f"v = {self.omega * factor:g} {unit}"
         if self.rpm is not None:
             return f"{self.rpm:g} rpm (ω = {self.omega * factor:.4g} {unit})"
         return f"ω = {self.omega * factor:g} {unit}"
@@ -92,7 +102,7 @@ def reactions_table(mech, phis, *, omega: float, p=None, dtype=np.float64, input
     for k, name in enumerate(mdl.joint_names):
         cols += [f"{name}_Fx_N", f"{name}_Fy_N"]
         data += [force[:, k, 0], force[:, k, 1]]
-    cols += ["drive_torque_N_m"]
+    cols += ["drive_torque_N_m" if angle else "drive_force_N"]
     data += [torque]
     located = located_branch_points(mech, np.asarray(phis, dtype=dtype), np.asarray(sol.q), np.asarray(sol.result),
                                     p, np.asarray(input_values, dtype=float))
@@ -128,9 +138,10 @@ def failure_summary(table: ReactionsTable) -> str:
 
 
 def print_summary(table: ReactionsTable, out, units: FileUnits | None = None) -> None:
-    """The largest |F| of every joint and the largest |τ|, with the input where they occur (an
-    angle reduced to [0, 360°) or [0, 2π)), over the solved rows; `units`: the input and the
-    torque in the file's units (default: degrees or metres, N·m)."""
+    """The largest |F| of every joint and the largest |τ| (|F| of the drive force of a length
+    input), with the input where they occur (an angle reduced to [0, 360°) or [0, 2π)), over the
+    solved rows; `units`: the input and the torque in the file's units (default: degrees or
+    metres, N·m)."""
     n = len(table.data)
     out.write(f"{n} positions, {int(table.ok.sum())} solved, {table.speed_text(units)}\n")
     if not table.ok.any():
@@ -143,14 +154,17 @@ def print_summary(table: ReactionsTable, out, units: FileUnits | None = None) ->
     at = (_grid.reduce_deg(ang) if in_unit == "deg" else np.mod(ang, 2 * np.pi)) if angle else ang
     head = f"at input ({in_unit})"
     width = max(len(j) for j in table.joint_names + ("drive torque",))
+    what, unit, sym = ("drive torque", "N·m", "τ") if angle else ("drive force", "N", "F")
     out.write(f"{'joint':<{width}}  {'max |F| (N)':>14} {head:>15}\n")
     for k, name in enumerate(table.joint_names):
         i = int(np.nanargmax(mags[:, k]))
         out.write(f"{name:<{width}}  {mags[i, k]:14.6g} {at[i]:15.6g}\n")
     lu = "m" if units is None else units.length
-    t = data[:, columns.index(f"drive_torque_N_{lu}")]
+    column = f"drive_torque_N_{lu}" if angle else table.drive_column
+    t = data[:, columns.index(column)]
     i = int(np.nanargmax(np.abs(t)))
-    out.write(f"{'drive torque':<{width}}  {t[i]:14.6g} {at[i]:15.6g}   (N·{lu}, largest |τ|)\n")
+    unit = f"N·{lu}" if angle else "N"
+    out.write(f"{what:<{width}}  {t[i]:14.6g} {at[i]:15.6g}   ({unit}, largest |{sym}|)\n")
     from .kinematics import branch_point_text
 
     for line in branch_point_text(table, table.input_kind, table.change_points, units):
@@ -174,11 +188,12 @@ def plot(path: str, mech, table: ReactionsTable) -> None:
         ax.plot(*closed_curve(ang, mags[:, k], table.periodic), styles[k % 4], color=f"C{k % 10}", label=name, lw=1.6)
     ax.set_ylabel("reaction |F| (N)")
     ax.set_title(f"{mech.name}: joint reactions at {table.speed_text()}")
-    torque = table.column("drive_torque_N_m")
-    ax2.plot(*closed_curve(ang, torque, table.periodic), color="k", label="drive torque")
-    ax2.set_ylabel("drive torque (N·m)")
+    angle = table.input_kind == "angle"
+    torque = table.column(table.drive_column)
+    ax2.plot(*closed_curve(ang, torque, table.periodic), color="k", label="drive torque" if angle else "drive force")
+    ax2.set_ylabel("drive torque (N·m)" if angle else "drive force (N)")
     ax2.set_xlabel("input angle (deg)" if table.input_kind == "angle" else "input (m)")
-    for a, arrays, unit in ((ax, [mags], "N"), (ax2, [torque], "N·m")):
+    for a, arrays, unit in ((ax, [mags], "N"), (ax2, [torque], "N·m" if angle else "N")):
         bad = ~table.ok
         h = (ang[1] - ang[0]) if len(ang) > 1 else 1.0
         for i, (lo, hi) in enumerate(_grid.runs(bad)):

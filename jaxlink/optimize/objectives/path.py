@@ -38,35 +38,40 @@ def _offsets(ap, ab):
     return ap - t[..., None] * ab
 
 
-def _all_offsets(xy, targets):
+def _all_offsets(xy, targets, closed: bool = True):
     """(T, N, 2) offsets of every target (T, 2) from every segment of the closed polyline through
-    `xy` (N, 2); segment k runs from xy[k] to xy[k+1] (and N-1 to 0)."""
-    ab = jnp.roll(xy, -1, axis=0) - xy
-    return _offsets(targets[:, None, :] - xy[None, :, :], ab[None])
+    `xy` (N, 2); segment k runs from xy[k] to xy[k+1] (and N-1 to 0). An open polyline (`closed`
+    False: a length input's path from its first to its last input) has no closing segment: the
+    last one is the point xy[N-1]."""
+    nxt = jnp.roll(xy, -1, axis=0) if closed else jnp.concatenate([xy[1:], xy[-1:]])
+    return _offsets(targets[:, None, :] - xy[None, :, :], (nxt - xy)[None])
 
 
-def segment_distances2(xy, targets):
-    """Squared distance of every target (T, 2) to every segment of the closed polyline through
-    `xy` (N, 2): shape (T, N); segment k runs from xy[k] to xy[k+1] (and N-1 to 0)."""
-    d = _all_offsets(xy, targets)
+def segment_distances2(xy, targets, closed: bool = True):
+    """Squared distance of every target (T, 2) to every segment of the closed (or open: `closed`
+    False) polyline through `xy` (N, 2): shape (T, N); segment k runs from xy[k] to xy[k+1] (and
+    N-1 to 0 when closed)."""
+    d = _all_offsets(xy, targets, closed)
     return jnp.sum(d * d, axis=-1)
 
 
 WINDOW = 3  # segments on each side of the nearest path point in the smoothed `points` objective
 
 
-def _window_distances2(xy, targets, idx):
+def _window_distances2(xy, targets, idx, closed: bool = True):
     """Squared distance of every target (T, 2) to the segments `idx` (T, K) of the closed
-    polyline through `xy` (N, 2) (segment k from xy[k] to xy[k+1 mod N]): shape (T, K)."""
+    polyline through `xy` (N, 2) (segment k from xy[k] to xy[k+1 mod N]; open: to xy[min(k+1,
+    N−1)]): shape (T, K)."""
     a = xy[idx]  # (T, K, 2)
-    d = _offsets(targets[:, None, :] - a, xy[(idx + 1) % xy.shape[0]] - a)
+    n = xy.shape[0]
+    d = _offsets(targets[:, None, :] - a, xy[(idx + 1) % n if closed else jnp.minimum(idx + 1, n - 1)] - a)
     return jnp.sum(d * d, axis=-1)
 
 
-def nearest_offsets(xy, targets):
-    """(T, 2) offsets of every target from its nearest point of the closed polyline through `xy`
-    (N, 2): Σ |offset|² is the `points` objective's exact value (`segment_distances2`)."""
-    d = _all_offsets(xy, targets)  # (T, N, 2)
+def nearest_offsets(xy, targets, closed: bool = True):
+    """(T, 2) offsets of every target from its nearest point of the closed (or open) polyline
+    through `xy` (N, 2): Σ |offset|² is the `points` objective's exact value (`segment_distances2`)."""
+    d = _all_offsets(xy, targets, closed)  # (T, N, 2)
     k = jnp.argmin(jnp.sum(d * d, axis=-1), axis=1)
     return jnp.take_along_axis(d, k[:, None, None], axis=1)[:, 0]
 
@@ -75,7 +80,8 @@ def points_objective(problem) -> Objective:
     """Untimed path error: SSE = Σ_t min_{s} |T_t − P(s)|², the squared distance of each target
     point to the nearest point of the traced path.
 
-    Exact value: the path is the closed polyline through the sampled positions (the distance to
+    Exact value: the path is the closed polyline through the sampled positions (for a length
+    input, whose samples run from `start` to `stop`, the open one; the distance to
     each segment by projection), so the error of the true curve is O(h²·curvature) — the report
     re-solves with `report_samples` (default 7200) positions. Residuals (for the gradient
     search's least-squares polish): the offsets of the targets from their nearest path points
@@ -100,9 +106,10 @@ def points_objective(problem) -> Objective:
     diag = float(np.hypot(*(targets.max(0) - targets.min(0)))) or 1.0
     tau = (number(problem, "smoothing", 1e-5, positive=True) * diag) ** 2
     tg = jnp.asarray(targets)
+    closed = getattr(problem, "periodic", True)  # a length input's stroke is an open path
 
     def value(path):
-        return jnp.sum(jnp.min(segment_distances2(path.xy, tg), axis=1))
+        return jnp.sum(jnp.min(segment_distances2(path.xy, tg, closed), axis=1))
 
     def smooth(path):
         # the soft-min over the segments next to each target's nearest path point: with τ this
@@ -115,17 +122,17 @@ def points_objective(problem) -> Objective:
         k = jnp.argmin(jnp.sum(q * q, axis=-1)[None] - 2.0 * tg @ q.T, axis=1)  # (T,)
         w = min(WINDOW, (n - 1) // 2)
         idx = (k[:, None] + jnp.arange(-w, w + 1)[None]) % n  # (T, 2w + 1)
-        d2 = _window_distances2(xy, tg, idx)
+        d2 = _window_distances2(xy, tg, idx, closed)
         m = jax.lax.stop_gradient(jnp.min(d2, axis=1, keepdims=True))
         soft = m[:, 0] - tau * jnp.log(jnp.sum(jnp.exp(-(d2 - m) / tau), axis=1))
         return jnp.sum(soft)
 
     def metrics(path):
-        d2 = jnp.min(segment_distances2(path.xy, tg), axis=1)
+        d2 = jnp.min(segment_distances2(path.xy, tg, closed), axis=1)
         return {"sse": jnp.sum(d2), "rms": jnp.sqrt(jnp.mean(d2)), "max_distance": jnp.sqrt(jnp.max(d2))}
 
     def residuals(path):
-        return nearest_offsets(path.xy, tg).reshape(-1)
+        return nearest_offsets(path.xy, tg, closed).reshape(-1)
 
     return Objective("points", 0, value, smooth, metrics, residuals=residuals)
 
