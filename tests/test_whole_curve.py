@@ -126,3 +126,40 @@ def test_a_crank_turns_fully_in_one_segment():
     assert wc.full_turn and len(wc.segments) == 1
     a, b, _ = wc.segments[0]
     assert b - a == pytest.approx(2 * np.pi)
+
+
+def test_motion_reports_watt_linkage_input_limits_to_the_closed_form():
+    """`jl.motion` (what `jaxlink check` prints as the range of motion) on Watt's linkage driven
+    by one rocker: the limits around the start are the closed-form ones to 1e-9 rad."""
+    r, c, o2 = 50.0, 30.0, np.array([70.0, 30.0])
+    text = f"""
+[mechanism]
+length_unit = "mm"
+angle_unit = "deg"
+[parameters]
+r1 = {r}
+r2 = {r}
+cc = {c}
+[input]
+name = "phi1"
+start = 10.0
+[unknowns]
+phi3 = 90.0
+phi4 = 190.0
+[loops]
+main = ["r1 @ phi1", "cc @ phi3", "-r2 @ phi4", "-({o2[0]}, {o2[1]})"]
+"""
+    m = jl.motion(jl.loads(text), samples=720)
+    assert not m.full_turn
+    alpha, D = np.arctan2(o2[1], o2[0]), np.hypot(*o2)
+    limits = []
+    for L in (c + r, abs(c - r)):
+        cos_ = (r * r + D * D - L * L) / (2 * r * D)
+        if abs(cos_) <= 1:
+            limits += [alpha + np.arccos(cos_), alpha - np.arccos(cos_)]
+    limits = np.asarray(limits)
+    start = np.radians(10.0)
+    # the nearest closed-form limits below and above the start, as the input turns back and forward
+    below = max(x - 2 * np.pi * np.ceil((x - start) / (2 * np.pi)) for x in limits)
+    above = min(x + 2 * np.pi * np.ceil((start - x) / (2 * np.pi)) for x in limits)
+    assert abs(m.lower - below) < 1e-9 and abs(m.upper - above) < 1e-9, (m.lower, m.upper, below, above)

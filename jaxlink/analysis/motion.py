@@ -3,11 +3,12 @@ the file's guesses choose (a mechanism made of dyads: `jaxlink.solvers.dyads`).
 
 **Range of motion.** The positions of one revolution from `[input] start` (`samples` of them)
 are solved in closed form on the file's branches; where some are not assembled, the limit
-positions between an assembled and a not assembled sample are toggles of a dyad and are located
-by `jaxlink.branch_points` (Newton's method on the squared sine between the dyad's links, to a few
-ulp). Where every sample is assembled, the reach margins are still minimized between them
-(`jaxlink.analysis.feasibility.certify`): a window narrower than the samples' spacing is found,
-and its two toggles located. The result is the interval of inputs around
+positions between an assembled and a not assembled sample are toggles of a dyad, found by
+`jaxlink.branch_points` and located by bisection on that dyad's reach margin to the last input
+where it still assembles, the float next to the root (`jaxlink.analysis.whole_curve.limit`: the
+bisection uses only the margin's sign). Where every sample is assembled, the reach margins are
+still minimized between them (`jaxlink.analysis.feasibility.certify`): a window narrower than
+the samples' spacing is found, and its two toggles located. The result is the interval of inputs around
 `start` that the input can reach, or a full turn (certified between the samples).
 
 **Transmission angle** of a dyad of two links L_a, L_b (RRR) over its known diagonal w: the
@@ -125,6 +126,12 @@ def motion(mech: Mechanism, p=None, *, samples: int = 3600) -> Motion | None:
             return Motion(False, lower, upper, [])
     q0 = jnp.asarray(np.asarray(sol.q)[0])
     sigma = _dyads.solve_nearest(mech, dyads, q0, jnp.asarray(start), jnp.asarray(p))[3]
+    if not full:  # each limit to adjacent floats by bisection on the toggling dyad's margin
+        from .whole_curve import limit
+
+        up, down = (limit(mech, dyads, sigma, q0, p, start, d, samples) for d in (1.0, -1.0))
+        upper = upper if up is None else up[0]
+        lower = lower if down is None else down[0]
     if full:  # every sample assembled: certify the whole turn between them too
         window = _window_between_samples(mech, dyads, sigma, q0, phis[:-1], p)
         if window is not None:

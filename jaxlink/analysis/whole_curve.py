@@ -67,6 +67,39 @@ _margins_jit = jax.jit(_margins, static_argnums=(1,))
 _positions_jit = jax.jit(_positions, static_argnums=(1,))
 
 
+def limit(mech: Mechanism, dyads, sigma, q_ref, p, phi0: float, direction: float, samples: int):
+    """Where the branch σ ends going from φ0 in `direction` (±1): `(a, b, j)`, the adjacent
+    floats on either side of the toggle of dyad j (its reach margin > 0 at a, ≤ 0 at b), or None
+    if the branch goes on for a whole turn (`samples` per turn). Bisection on the margin from the
+    last sample where every dyad assembles: it needs only the margin's sign, so it finds the same
+    floats whatever the compiler does with the arithmetic around it."""
+    h = 2 * np.pi / samples
+    sig = jnp.asarray(np.asarray(sigma, dtype=np.float64))
+    pj = jnp.asarray(p)
+
+    def margins(phis):
+        return np.asarray(_margins_jit(mech, dyads, sig, q_ref, jnp.asarray(phis), pj))
+
+    grid = phi0 + direction * h * np.arange(1, samples + 1)
+    m = margins(grid)
+    bad = np.flatnonzero((m <= 0).any(axis=1))
+    if not bad.size:
+        return None
+    k = int(bad[0])
+    j = int(np.argmin(m[k]))
+    a = phi0 if k == 0 else float(grid[k - 1])
+    b = float(grid[k])
+    for _ in range(200):  # to adjacent floats
+        mid = 0.5 * (a + b)
+        if mid in (a, b):
+            break
+        if margins(np.asarray([mid, mid]))[0, j] > 0:
+            a = mid
+        else:
+            b = mid
+    return a, b, j
+
+
 def whole_curve(mech: Mechanism, p=None, *, samples: int = 3600) -> WholeCurve | None:
     """The whole closed curve of `mech` (design `p`, SI, default the file's) from the branch of
     its guesses; None unless its input is an angle and every block is a dyad. `samples` positions
@@ -78,32 +111,9 @@ def whole_curve(mech: Mechanism, p=None, *, samples: int = 3600) -> WholeCurve |
     start = float(mech.input_start)
     q_ref, _, _, sigma0 = _dyads.solve_nearest(mech, dyads, jnp.asarray(mech.guess), jnp.asarray(start), pj)
     sigma0 = np.asarray(sigma0, dtype=np.float64)
-    h = 2 * np.pi / samples
-    steps = np.arange(1, samples + 1)
-
-    def margins(sigma, phis):
-        return np.asarray(_margins_jit(mech, dyads, jnp.asarray(sigma), q_ref, jnp.asarray(phis), pj))
-
     def end(sigma, phi0, d):
-        """Where the branch σ ends going from φ0 in direction d: (φ, dyad) or None (a full turn)."""
-        grid = phi0 + d * h * steps
-        m = margins(sigma, grid)
-        bad = np.flatnonzero((m <= 0).any(axis=1))
-        if not bad.size:
-            return None
-        k = int(bad[0])
-        j = int(np.argmin(m[k]))
-        a = phi0 if k == 0 else float(grid[k - 1])
-        b = float(grid[k])
-        for _ in range(200):  # bisection on dyad j's margin: to adjacent floats
-            mid = 0.5 * (a + b)
-            if mid in (a, b):
-                break
-            if margins(sigma, np.asarray([mid, mid]))[0, j] > 0:
-                a = mid
-            else:
-                b = mid
-        return b, j  # the side where h² ≤ 0: the dyad in line, the same position on both branches
+        e = limit(mech, dyads, sigma, q_ref, pj, phi0, d, samples)
+        return None if e is None else (e[1], e[2])
 
     back = end(sigma0, start, -1.0)
     if back is None:  # the input turns fully on this branch
