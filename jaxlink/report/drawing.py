@@ -1,24 +1,42 @@
-"""Where a drawing of the linkage puts every vector: the geometry of the plots and animations.
+"""Where a drawing of the linkage puts every joint, body and vector: the geometry of the plots,
+animations and the geometry export.
 
-A loop of the file, `Σ_j t_j = 0`, is a closed polygon whose vertices V_j = T + Σ_{i<j} t_i (vertex
-j is where term j starts) are the joints of its links; the loop fixes them only up to the
-translation T. The points of `[points]` are sums from the frame origin, so the vertices of their
-chains (the origin, then each partial sum) are absolute positions, and so are the joints of
-`[joints]` (their `at` sums). Each loop is placed by the translation that puts the most of its
-vertices on such known positions at every sampled position — moving vertices counting first, then
-fixed ones; a loop placed this way adds its vertices to the known positions of the loops placed
-after it. The frame origin is always a known position: a loop that touches nothing else is placed
-with the start of its input vector (the crank) there, else with its first vertex there. So a
-loop may be written starting at any vertex and in either direction and is drawn in the same place.
+**A sketch file** (`mech.sketch`, a `jaxlink.files.sketch.Layout`) is drawn from its joints and
+links, at the positions `mech.joint_positions` gives: a pin at every real joint (a joint of two or
+more bodies, a frame joint, a slider's joint, an actuator's end; the frame's are ground pivots); a
+joint on one body only is a mark (a point of that body, no pin); each body a `Body` (a bar, or a
+plate outlined by its joints' convex hull when three or more are not on one line); each slider a
+block on its guide, the line fixed to its body through the slider's joint, the direction of the
+loop vector whose length is `s_<joint>` (on the frame fixed, on a link turning with it); the crank
+or actuator the `Drive`. The derived loops are not drawn.
+
+**A loop file** is drawn from its loops. A loop of the file, `Σ_j t_j = 0`, is a closed polygon
+whose vertices V_j = T + Σ_{i<j} t_i (vertex j is where term j starts) are the joints of its links;
+the loop fixes them only up to the translation T. The points of `[points]` are sums from the frame
+origin, so the vertices of their chains (the origin, then each partial sum) are absolute positions,
+and so are the joints of `[joints]` (their `at` sums). Each loop is placed by the translation that
+puts the most of its vertices on such known positions at every sampled position — moving vertices
+counting first, then fixed ones; a loop placed this way adds its vertices to the known positions of
+the loops placed after it. The frame origin is always a known position: a loop that touches nothing
+else is placed with the start of its input vector (the crank) there, else with its first vertex
+there. So a loop may be written starting at any vertex and in either direction and is drawn in the
+same place.
 
 What is drawn (metres, per position):
 
 - each term of a loop by its kind: `link` (constant length, moving: a rigid bar), `frame`
   (constant vector: dashed), `slider` (variable length: drawn as a block on its guide line), or
   `variable` (a Cartesian vector with moving components: a thin line);
-- joints: the vertices where a link ends, merged across loops; a joint that does not move is a
-  ground pivot. Names: from `[joints]` (revolute joints at the same place), else a `[points]`
-  point at the same place, else generated (`O1`, `O2`, … for ground pivots, `J1`, … for others);
+- joints: the revolute joints of `[joints]` where the file has them (in its order, with its names;
+  a joint of the ground is a ground pivot; joints at one place are one pin, `A/B`), then the loop
+  vertices that are joints, merged across loops: where a link ends on another body, a frame vector
+  or a slider. Two link vectors of one body (the same moving names in their angles: a coupler
+  point's offsets) meet at a joint only where that vertex does not move (the body's frame pivot),
+  and so does the foot of a slider vector whose angle moves (an oscillating cylinder's trunnion);
+  a vertex joint that does not move is a ground pivot. Its name: a `[points]` point at the same
+  place, else generated (`O1`, `O2`, … for ground pivots, `J1`, … for others);
+- plates: the bodies of `[bodies]` with three or more revolute `[joints]` not on one line;
+- the drive: the link vector whose angle is the input, about its end that does not move;
 - sliders: for each `slider` term, its block sits on the end of the vector that is a joint and
   its guide runs along the vector. When a `[points]` chain contains the same vector (±) the
   placement of that chain is used (a loop may be rewritten with a parallel offset; the point's

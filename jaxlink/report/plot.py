@@ -1,10 +1,13 @@
 """Plots and animations of a kinematics table (`jaxlink kinematics --plot / --animate`).
 
-The linkage is drawn where `jaxlink/report/drawing.py` places it: links as bars labelled with
-their length, frame vectors dashed, joints as circles with their names, ground pivots with a
-ground symbol, sliders as a block on their guide line (the loop's own slider vector dotted), each
-point's arm from its last joint, and the traced point paths. Lengths are shown in the file's
-length unit.
+The linkage is drawn where `jaxlink/report/drawing.py` places it: joints as white pins with their
+names, ground pivots with a ground symbol, a sketch's links as bars and its plates as shaded
+polygons labelled with their names, a sketch's joints on one body as dots; a loop file's links as
+bars labelled with their length, frame vectors dashed, its `[joints]` bodies of three or more
+joints as shaded plates; sliders as a block on their guide line (a loop's own slider vector
+dotted), each point's arm from its last joint, the input marked (an arc arrow about the crank's
+pivot, or an actuator drawn as a cylinder), and the traced point paths. Lengths are shown in the
+file's length unit; the titles give the input as asked for (`grid.format_input`).
 
 Curves over the input: positions, and |v|, |a| (thick, one colour per point) with their x and y
 components (thin: solid x, dashed y). Positions that did not assemble are gaps in every line and
@@ -74,18 +77,20 @@ class LinkageArtist:
         self.bodies = []
         for b in d.bodies:
             if b.plate:
-                self.bodies.append(ax.add_patch(Polygon(np.zeros((len(b.joints), 2)), closed=True, facecolor=(0.79, 0.85, 0.92, 0.6),
-                                                        edgecolor=color, lw=2.0, joinstyle="round",
-                                                        zorder=2.5)))
+                self.bodies.append(ax.add_patch(Polygon(
+                    np.zeros((len(b.joints), 2)), closed=True, facecolor=(0.79, 0.85, 0.92, 0.6), edgecolor=color,
+                    lw=2.0, joinstyle="round", zorder=2.5)))
             else:
                 self.bodies.append(ax.plot([], [], "-", color=color, lw=2.6, solid_capstyle="round", zorder=3)[0])
         self.marks = ax.plot([], [], "o", ms=3.5, color=color, zorder=5)[0]
         self.drive_lines: list = []
         if d.drive is not None and d.drive.kind == "actuator":  # a cylinder: its barrel, its rod
-            self.drive_lines = [ax.plot([], [], "-", color="0.55", lw=8.0, solid_capstyle="butt", zorder=3)[0],
+            self.drive_lines = [ax.plot([], [], "-", color="0.6", lw=8.0, solid_capstyle="butt", zorder=3)[0],
                                 ax.plot([], [], "-", color=color, lw=2.4, solid_capstyle="round", zorder=3.5)[0]]
             lengths = np.linalg.norm(d.drive.ends[:, 1] - d.drive.ends[:, 0], axis=-1)
             self.barrel = 0.6 * float(np.nanmin(lengths[d.shown])) if d.shown.any() else 0.0
+            self.drive_lines.append(ax.annotate("input", (0, 0), xytext=(0, 0), textcoords="offset points",
+                                                fontsize=7, color="C3", ha="center", va="center", zorder=7))
         self.arms = [ax.plot([], [], "-", color=color, lw=1.2, alpha=0.8, zorder=3)[0] for _ in d.arms]
         self.guides = [ax.plot([], [], "-", color="0.55", lw=4.0, alpha=0.45, solid_capstyle="butt", zorder=1)[0]
                        for _ in d.sliders]
@@ -207,6 +212,9 @@ class LinkageArtist:
             barrel = a + self.barrel * s * u
             self.drive_lines[0].set_data([a[0], barrel[0]], [a[1], barrel[1]])
             self.drive_lines[1].set_data([a[0], b[0]], [a[1], b[1]])
+            self.drive_lines[2].xy = tuple(0.5 * (a + barrel))  # beside the barrel, on its right
+            self.drive_lines[2].set_position((14 * u[1], -14 * u[0]))
+            self.drive_lines[2].set_visible(show)
         mk = d.marks[k] * s
         self.marks.set_data(mk[:, 0], mk[:, 1])
         for t, p in zip(self.mark_labels, mk):
