@@ -1,24 +1,42 @@
-"""Where a drawing of the linkage puts every vector: the geometry of the plots and animations.
+"""Where a drawing of the linkage puts every joint, body and vector: the geometry of the plots,
+animations and the geometry export.
 
-A loop of the file, `Σ_j t_j = 0`, is a closed polygon whose vertices V_j = T + Σ_{i<j} t_i (vertex
-j is where term j starts) are the joints of its links; the loop fixes them only up to the
-translation T. The points of `[points]` are sums from the frame origin, so the vertices of their
-chains (the origin, then each partial sum) are absolute positions, and so are the joints of
-`[joints]` (their `at` sums). Each loop is placed by the translation that puts the most of its
-vertices on such known positions at every sampled position — moving vertices counting first, then
-fixed ones; a loop placed this way adds its vertices to the known positions of the loops placed
-after it. The frame origin is always a known position: a loop that touches nothing else is placed
-with the start of its input vector (the crank) there, else with its first vertex there. So a
-loop may be written starting at any vertex and in either direction and is drawn in the same place.
+**A sketch file** (`mech.sketch`, a `jaxlink.files.sketch.Layout`) is drawn from its joints and
+links, at the positions `mech.joint_positions` gives: a pin at every real joint (a joint of two or
+more bodies, a frame joint, a slider's joint, an actuator's end; the frame's are ground pivots); a
+joint on one body only is a mark (a point of that body, no pin); each body a `Body` (a bar, or a
+plate outlined by its joints' convex hull when three or more are not on one line); each slider a
+block on its guide, the line fixed to its body through the slider's joint, the direction of the
+loop vector whose length is `s_<joint>` (on the frame fixed, on a link turning with it); the crank
+or actuator the `Drive`. The derived loops are not drawn.
+
+**A loop file** is drawn from its loops. A loop of the file, `Σ_j t_j = 0`, is a closed polygon
+whose vertices V_j = T + Σ_{i<j} t_i (vertex j is where term j starts) are the joints of its links;
+the loop fixes them only up to the translation T. The points of `[points]` are sums from the frame
+origin, so the vertices of their chains (the origin, then each partial sum) are absolute positions,
+and so are the joints of `[joints]` (their `at` sums). Each loop is placed by the translation that
+puts the most of its vertices on such known positions at every sampled position — moving vertices
+counting first, then fixed ones; a loop placed this way adds its vertices to the known positions of
+the loops placed after it. The frame origin is always a known position: a loop that touches nothing
+else is placed with the start of its input vector (the crank) there, else with its first vertex
+there. So a loop may be written starting at any vertex and in either direction and is drawn in the
+same place.
 
 What is drawn (metres, per position):
 
 - each term of a loop by its kind: `link` (constant length, moving: a rigid bar), `frame`
   (constant vector: dashed), `slider` (variable length: drawn as a block on its guide line), or
   `variable` (a Cartesian vector with moving components: a thin line);
-- joints: the vertices where a link ends, merged across loops; a joint that does not move is a
-  ground pivot. Names: from `[joints]` (revolute joints at the same place), else a `[points]`
-  point at the same place, else generated (`O1`, `O2`, … for ground pivots, `J1`, … for others);
+- joints: the revolute joints of `[joints]` where the file has them (in its order, with its names;
+  a joint of the ground is a ground pivot; joints at one place are one pin, `A/B`), then the loop
+  vertices that are joints, merged across loops: where a link ends on another body, a frame vector
+  or a slider. Two link vectors of one body (the same moving names in their angles: a coupler
+  point's offsets) meet at a joint only where that vertex does not move (the body's frame pivot),
+  and so does the foot of a slider vector whose angle moves (an oscillating cylinder's trunnion);
+  a vertex joint that does not move is a ground pivot. Its name: a `[points]` point at the same
+  place, else generated (`O1`, `O2`, … for ground pivots, `J1`, … for others);
+- plates: the bodies of `[bodies]` with three or more revolute `[joints]` not on one line;
+- the drive: the link vector whose angle is the input, about its end that does not move;
 - sliders: for each `slider` term, its block sits on the end of the vector that is a joint and
   its guide runs along the vector. When a `[points]` chain contains the same vector (±) the
   placement of that chain is used (a loop may be rewritten with a parallel offset; the point's
@@ -52,6 +70,31 @@ class Slider:
 
 
 @dataclasses.dataclass
+class Body:
+    """A rigid body as a designer draws it: `name` (the file's link or body name), `joints` the
+    names of its joints and points (file order), `outline` (N, m, 2) the polygon drawn: a bar's two
+    ends, or a plate's convex hull (counter-clockwise, closed by the drawing); `plate`: whether it is
+    drawn as a shaded plate (three or more joints not on one line)."""
+
+    name: str
+    joints: tuple
+    outline: np.ndarray
+    plate: bool
+
+
+@dataclasses.dataclass
+class Drive:
+    """The input, marked on the drawing: `kind` "crank" (`ends` (N, 2, 2): its frame pivot, then its
+    other joint) or "actuator" (its two joints); `name` the crank's link (or the input's name);
+    `sense` +1 when the input grows over the table (counter-clockwise for a crank), −1 otherwise."""
+
+    kind: str
+    name: str
+    ends: np.ndarray
+    sense: float
+
+
+@dataclasses.dataclass
 class LinkageDrawing:
     """The placed linkage at every position (metres). See the module docstring.
 
@@ -64,6 +107,12 @@ class LinkageDrawing:
     - `points` (N, n_points, 2), `point_names`.
     - `shown` (N,) bool: positions that are drawn (assembled); elsewhere the arrays are NaN.
     - `extent`: the size of the drawing (m), for symbol sizes.
+    - `bodies`: list of `Body` — the links and plates of a sketch file; for a loop file with
+      `[joints]` tables, the bodies with three or more of them (plates; its bars are loop terms).
+    - `marks` (N, K, 2), `mark_names`: the joints of a sketch file on one body only (a point of that
+      body, drawn as a point, not as a pin).
+    - `drive`: the input (`Drive`), or None when it cannot be told.
+    - `source`: "sketch" (drawn from the file's joints and links: `loops` is empty) or "loops".
     """
 
     loops: list
@@ -79,6 +128,27 @@ class LinkageDrawing:
     point_names: tuple
     shown: np.ndarray
     extent: float
+    bodies: list = dataclasses.field(default_factory=list)
+    marks: np.ndarray = dataclasses.field(default_factory=lambda: np.zeros((0, 0, 2)))
+    mark_names: tuple = ()
+    drive: Drive | None = None
+    source: str = "loops"
+
+    def describe(self) -> dict:
+        """What the drawing shows, by name: `joints` (pins), `ground` (the joints with a ground
+        symbol), `points` (the reported points), `marks` (points of one body), `bars` and `plates`
+        (body names; `plates` maps each to its joints), `sliders` (the vector texts, or the slider
+        joints of a sketch), `drive` (kind, name) or None."""
+        return {
+            "joints": list(self.joint_names),
+            "ground": [n for n, g in zip(self.joint_names, self.ground) if g],
+            "points": list(self.point_names),
+            "marks": list(self.mark_names),
+            "bars": [b.name for b in self.bodies if not b.plate],
+            "plates": {b.name: list(b.joints) for b in self.bodies if b.plate},
+            "sliders": [s.term for s in self.sliders],
+            "drive": None if self.drive is None else (self.drive.kind, self.drive.name),
+        }
 
 
 def term_kind(mech, term) -> str:
@@ -121,13 +191,16 @@ def _vectors(mech, q, phis, p):
                 else:
                     axis.append(jnp.zeros(2, qk.dtype))
             out.append((jnp.stack(vec), jnp.stack(axis)))
+        if mech.sketch is not None:  # the sketch's joints: their own vector sums
+            out.append((mech.joint_positions(qk, phik, p), jnp.zeros((0, 2), qk.dtype)))
         return out
 
     q = jnp.asarray(q)
     res = jax.jit(jax.vmap(one))(q, jnp.asarray(phis, dtype=q.dtype))
     res = [(np.asarray(v, dtype=float), np.asarray(a, dtype=float)) for v, a in res]
-    nl, npt = len(mech.loops), len(mech.points)
-    return res[:nl], res[nl:nl + npt], res[nl + npt:]
+    nl, npt, nj = len(mech.loops), len(mech.points), len(joints)
+    sketch = res[nl + npt + nj][0] if mech.sketch is not None else None
+    return res[:nl], res[nl:nl + npt], res[nl + npt:nl + npt + nj], sketch
 
 
 def _partial_sums(vec):
@@ -211,27 +284,34 @@ def drawing(mech, q, phis, p, shown, tol: float | None = None) -> LinkageDrawing
     shown = np.asarray(shown, dtype=bool)
     p = jnp.asarray(p)
     n_rows = len(shown)
-    kinds = [[term_kind(mech, t) for t in terms] for _, terms in mech.loops]
-    labels = [[_length_text(t) for t in terms] for _, terms in mech.loops]
+    sketch = mech.sketch is not None
+    kinds = [] if sketch else [[term_kind(mech, t) for t in terms] for _, terms in mech.loops]
+    labels = [] if sketch else [[_length_text(t) for t in terms] for _, terms in mech.loops]
     if not shown.any():  # nothing assembled: nothing to draw
         nan = np.full((n_rows, 1, 2), np.nan)
-        return LinkageDrawing([np.full((n_rows, len(t), 2), np.nan) for _, t in mech.loops], kinds, labels,
-                              ["not placed: no position assembled"] * len(mech.loops), np.zeros((n_rows, 0, 2)),
-                              [], np.zeros(0, bool), [], [nan for _ in mech.points],
+        loops = [] if sketch else [np.full((n_rows, len(t), 2), np.nan) for _, t in mech.loops]
+        return LinkageDrawing(loops, kinds, labels, ["not placed: no position assembled"] * len(loops),
+                              np.zeros((n_rows, 0, 2)), [], np.zeros(0, bool), [], [nan for _ in mech.points],
                               np.full((n_rows, len(mech.points), 2), np.nan), tuple(mech.point_names), shown,
-                              float(mech.length_scale(p)))
-    loop_vec, point_vec, joint_vec = _vectors(mech, q, phis, p)
+                              float(mech.length_scale(p)), source="sketch" if sketch else "loops")
+    loop_vec, point_vec, joint_vec, sketch_xy = _vectors(mech, q, phis, p)
     rows = np.flatnonzero(shown)
     sample = rows[np.unique(np.linspace(0, len(rows) - 1, min(len(rows), 16)).round().astype(int))]
     scale = float(mech.length_scale(p))
     if tol is None:  # what "the same position" means: rounding of the dtype the positions came in
         tol = max(1e-7, 1000 * float(jnp.finfo(jnp.asarray(q).dtype).eps)) * scale
+    hide = ~shown
+    chains = [_partial_sums(vec) for vec, _ in point_vec]
+    pts = np.stack([ch[:, -1] for ch in chains], axis=1) if chains else np.zeros((n_rows, 0, 2))
+    pts = pts.copy()
+    pts[hide] = np.nan
+    sense = float(np.sign(phis[-1] - phis[0])) if len(phis) > 1 and phis[-1] != phis[0] else 1.0
+    if sketch:
+        return _sketch_drawing(mech, sketch_xy, loop_vec, chains, pts, shown, sample, tol, scale, sense)
+
     known = _Known(sample, tol)
     known.add(np.zeros((n_rows, 2)), "the origin")
-    chains = []
-    for (name, _), (vec, _) in zip(mech.points, point_vec):
-        ch = _partial_sums(vec)
-        chains.append(ch)
+    for (name, _), ch in zip(mech.points, chains):
         for i in range(1, ch.shape[1]):
             known.add(ch[:, i], f"vertex {i} of the chain of point {name}")
     file_joints = []
@@ -268,22 +348,43 @@ def drawing(mech, q, phis, p, shown, tol: float | None = None) -> LinkageDrawing
             for j, idx in enumerate(own[c]):
                 known.arrays[idx] = sc[1] + rel[c][:, j]
 
-    hide = ~shown
     loops = []
     for c in range(len(mech.loops)):
         v = shifts[c][:, None, :] + rel[c]
         v[hide] = np.nan
         loops.append(v)
 
-    # joints: loop vertices at the end of a link, merged across loops
+    # joints: the file's [joints] where it has them, then the loop vertices that are joints
+    # (`_vertex_role`), merged across loops
     joints: list = []
+    ground_of: list = []
+    file_names: list = []
+    for jt, pos in file_joints:
+        if jt.kind != "revolute":
+            continue
+        same = [k for k, other in enumerate(joints) if _close(other, pos, sample, tol)]
+        if same:  # revolute joints at one place: one pin, its names joined
+            file_names[same[0]] += f"/{jt.name}"
+            ground_of[same[0]] = ground_of[same[0]] or -1 in (jt.a, jt.b)
+            continue
+        joints.append(pos)
+        ground_of.append(-1 in (jt.a, jt.b))
+        file_names.append(jt.name)
+    roles = [[_vertex_role(mech, terms, kd, j) for j in range(len(kd))] for (_, terms), kd in zip(mech.loops, kinds)]
     for c, v in enumerate(loops):
         for j in range(v.shape[1]):
-            if is_joint[c][j] and not any(_close(other, v[:, j], sample, tol) for other in joints):
+            role = roles[c][j]
+            if role is None or any(_close(other, v[:, j], sample, tol) for other in joints):
+                continue
+            still = bool(_fixed(v[:, j][:, None], sample, tol)[0])
+            if role == "joint" or still:  # one body's vectors, a turning guide: a joint where it is a pivot
                 joints.append(v[:, j])
+                ground_of.append(None)
     J = np.stack(joints, axis=1) if joints else np.zeros((n_rows, 0, 2))
-    ground = _fixed(J, sample, tol) if joints else np.zeros(0, bool)
-    names = _joint_names(J, ground, file_joints, chains, mech.point_names, sample, tol)
+    fixed = _fixed(J, sample, tol) if joints else np.zeros(0, bool)
+    ground = np.array([bool(f) if g is None else g for g, f in zip(ground_of, fixed)], dtype=bool)
+    names = file_names + _joint_names(J[:, len(file_names):], ground[len(file_names):], file_joints, chains,
+                                      mech.point_names, sample, tol)
 
     # sliders
     sliders: list = []
@@ -312,15 +413,198 @@ def drawing(mech, q, phis, p, shown, tol: float | None = None) -> LinkageDrawing
         arm = ch[:, last:].copy()
         arm[hide] = np.nan
         arms.append(arm)
-    pts = np.stack([ch[:, -1] for ch in chains], axis=1) if chains else np.zeros((n_rows, 0, 2))
-    pts = pts.copy()
-    pts[hide] = np.nan
     J = J.copy()
     J[hide] = np.nan
     allxy = np.concatenate([v[shown].reshape(-1, 2) for v in loops] + [pts[shown].reshape(-1, 2)])
     extent = float(np.ptp(allxy, axis=0).max()) if allxy.size else scale
+    bodies = _file_plates(mech, file_joints, J, names, shown, sample, tol)
+    drive = _loop_drive(mech, loops, kinds, sample, tol, sense)
     return LinkageDrawing(loops, kinds, labels, [how[c] for c in range(len(mech.loops))], J, names, ground,
-                          sliders, arms, pts, tuple(mech.point_names), shown, extent or scale)
+                          sliders, arms, pts, tuple(mech.point_names), shown, extent or scale, bodies,
+                          np.zeros((n_rows, 0, 2)), (), drive, "loops")
+
+
+def _vertex_role(mech, terms, kinds, j) -> str | None:
+    """Whether vertex j of a loop (between terms j − 1 and j) is a joint: "joint" where a link ends
+    on another body, a frame vector or a slider; "pivot" where it is a joint only if it does not
+    move: two link vectors of one body (the same moving names in their angles: a coupler point's
+    offsets meet there, unless it is the body's frame pivot), or the foot of a guide that turns (a
+    slider vector whose angle moves: an oscillating cylinder's trunnion); None otherwise."""
+    a, b = kinds[j - 1], kinds[j]
+    if "link" in (a, b):
+        if a == b == "link" and _angle_names(mech, terms[j - 1]) == _angle_names(mech, terms[j]):
+            return "pivot"
+        return "joint"
+    if any(k == "slider" and _angle_names(mech, t) for k, t in ((a, terms[j - 1]), (b, terms[j]))):
+        return "pivot"
+    return None
+
+
+def _angle_names(mech, term) -> frozenset:
+    """The moving names (unknowns, the input) in a polar term's angle: the body it is fixed to."""
+    if not term.polar:
+        return frozenset()
+    moving = set(mech.unknown_names) | {mech.input_name}
+    return frozenset(n.name for n in _expr.names_in(term.angle) if n.name in moving)
+
+
+def _file_plates(mech, file_joints, J, names, shown, sample, tol) -> list:
+    """The bodies of a loop file's `[joints]` tables that hold three or more revolute joints, as plates
+    (their bars are the loops' link vectors)."""
+    if mech.bodies is None:
+        return []
+    out = []
+    for b, body in enumerate(mech.bodies.bodies):
+        mine = [jt.name for jt, _ in file_joints if jt.kind == "revolute" and b in (jt.a, jt.b)]
+        idx = [names.index(n) for n in mine if n in names]
+        if len(idx) >= 3:
+            body_drawing = _body(body.name, tuple(mine), J[:, idx], shown, tol)
+            if body_drawing.plate:
+                out.append(body_drawing)
+    return out
+
+
+def _loop_drive(mech, loops, kinds, sample, tol, sense) -> Drive | None:
+    """The crank of a loop file: the link vector whose angle is the input, turning about its end
+    that does not move (None for a length input or when no such vector has a fixed end)."""
+    if mech.input_kind != "angle":
+        return None
+    for (_, terms), kd, v in zip(mech.loops, kinds, loops):
+        for j, term in enumerate(terms):
+            if kd[j] != "link" or mech.input_name not in _angle_names(mech, term):
+                continue
+            a, b = v[:, j], v[:, (j + 1) % v.shape[1]]
+            for pivot, tip in ((a, b), (b, a)):
+                if _fixed(pivot[:, None], sample, tol)[0]:
+                    return Drive("crank", mech.input_name, np.stack([pivot, tip], axis=1), sense)
+    return None
+
+
+def _hull(xy, tol) -> list:
+    """Indices of the convex hull of points `xy` (m, 2), counter-clockwise (Andrew's monotone chain);
+    points on an edge are left out."""
+    order = sorted(range(len(xy)), key=lambda i: (xy[i][0], xy[i][1]))
+
+    def cross(o, a, b):
+        return (xy[a][0] - xy[o][0]) * (xy[b][1] - xy[o][1]) - (xy[a][1] - xy[o][1]) * (xy[b][0] - xy[o][0])
+
+    def half(seq):
+        out: list = []
+        for i in seq:
+            while len(out) >= 2 and cross(out[-2], out[-1], i) <= tol:
+                out.pop()
+            out.append(i)
+        return out
+
+    lower, upper = half(order), half(order[::-1])
+    return lower[:-1] + upper[:-1]
+
+
+def _body(name, joints, xy, shown, tol) -> Body:
+    """A body through the positions `xy` (N, m, 2) of its joints: a plate outlined by their convex
+    hull (found at the first shown position: a rigid body keeps it), or a bar between its two
+    farthest joints when they lie on one line."""
+    k0 = int(np.flatnonzero(shown)[0])
+    pose = xy[k0]
+    if len(joints) >= 3:
+        size = max(float(np.ptp(pose, axis=0).max()), 1e-300)
+        hull = _hull(pose, tol * size)
+        if len(hull) >= 3:
+            return Body(name, tuple(joints), xy[:, hull], True)
+    d = np.linalg.norm(pose[:, None] - pose[None], axis=-1)
+    i, k = np.unravel_index(int(np.argmax(d)), d.shape)
+    return Body(name, tuple(joints), xy[:, [i, k]], False)
+
+
+def _sketch_drawing(mech, xy, loop_vec, chains, pts, shown, sample, tol, scale, sense) -> LinkageDrawing:
+    """The drawing of a sketch file, from its layout (`jaxlink.files.sketch.Layout`): joints where
+    two or more bodies meet, the frame's joints (ground pivots), the sliders' joints and the
+    actuator's ends; a joint on one body only is a mark (a point of that body); links as bars,
+    plates as polygons; each slider's block on its guide (the frame's fixed, a body's slot moving
+    with it); the crank or actuator as the drive. `xy` (N, J, 2): the positions of every joint."""
+    lay = mech.sketch
+    n_rows = xy.shape[0]
+    hide = ~shown
+    xy = xy.copy()
+    xy[hide] = np.nan
+    names = [n for n, _ in lay.joints]
+    index = {n: i for i, n in enumerate(names)}
+    frame = set(lay.frame)
+    on_bodies = {n: sum(n in js for _, js in lay.bodies) for n in names}
+    slid = {j for j, _ in lay.sliders}
+    ends = tuple(lay.input[1]) if lay.input[0] == "actuator" else ()
+    real = [n for n in names if n in frame or on_bodies[n] >= 2 or n in slid or n in ends]
+    marks = [n for n in names if n not in real]
+    J = xy[:, [index[n] for n in real]].reshape(n_rows, len(real), 2)
+    M = xy[:, [index[n] for n in marks]].reshape(n_rows, len(marks), 2)
+    ground = np.array([n in frame for n in real], dtype=bool)
+    bodies = [_body(b, js, xy[:, [index[j] for j in js]], shown, tol) for b, js in lay.bodies]
+    allxy = np.concatenate([xy[shown].reshape(-1, 2), pts[shown].reshape(-1, 2)])
+    allxy = allxy[np.isfinite(allxy).all(axis=1)]
+    extent = (float(np.ptp(allxy, axis=0).max()) if allxy.size else scale) or scale
+
+    sliders = []
+    body_joints = {FRAME_BODY: tuple(lay.frame), **dict(lay.bodies)}
+    for j, on in lay.sliders:
+        axis = _slider_axis(mech, loop_vec, f"s_{j}")
+        if axis is None:
+            continue
+        sliders.append(_slot(xy[:, index[j]], axis, [xy[:, index[k]] for k in body_joints[on]], shown, sample, tol,
+                             extent, j))
+    drive = None
+    if lay.input[0] == "crank":
+        js = dict(lay.bodies)[lay.input[1]]
+        drive = Drive("crank", lay.input[1], xy[:, [index[js[0]], index[js[1]]]], sense)
+    else:
+        drive = Drive("actuator", mech.input_name, xy[:, [index[ends[0]], index[ends[1]]]], sense)
+    arms = []
+    for ch in chains:  # a reported point that is no joint of the sketch hangs from nothing: no arm
+        arm = ch[:, -1:].copy()
+        arm[hide] = np.nan
+        arms.append(arm)
+    return LinkageDrawing([], [], [], [], J, real, ground, sliders, arms, pts, tuple(mech.point_names), shown,
+                          extent, bodies, M, tuple(marks), drive, "sketch")
+
+
+FRAME_BODY = "frame"
+
+
+def _slider_axis(mech, loop_vec, unknown: str):
+    """The unit vector (N, 2) of the line of the slider whose position is `unknown`: the angle of the
+    loop vector whose length it is."""
+    for (_, terms), (_, axis) in zip(mech.loops, loop_vec):
+        for j, term in enumerate(terms):
+            if term.polar and any(n.name == unknown for n in _expr.names_in(term.length)):
+                return axis[:, j]
+    return None
+
+
+def _slot(block, axis, body_xy, shown, sample, tol, extent, name) -> Slider:
+    """A slider of a sketch: its block at `block` (N, 2), its guide on the line along `axis` through
+    it, fixed to the body whose joints are at `body_xy` (list of (N, 2)). The guide covers the block's
+    travel along the line (in the body: the line moves with it) and the body's joint on the line, if
+    one is (a slot through the lever's pivot, a cylinder from its trunnion)."""
+    u = axis / np.maximum(np.linalg.norm(axis, axis=-1, keepdims=True), 1e-300)
+    normal = np.stack([-u[:, 1], u[:, 0]], axis=-1)
+    ref, on_line = body_xy[0], False
+    for r in body_xy:
+        off = np.sum((r - block) * normal, axis=-1)
+        if float(np.nanmax(np.abs(off[sample]))) < tol:
+            ref, on_line = r, True
+            break
+    t = np.sum((block - ref) * u, axis=-1)  # the block's place on the line, from the foot of `ref`
+    foot = block - t[:, None] * u
+    ok = shown & np.isfinite(t)
+    lo, hi = float(t[ok].min()), float(t[ok].max())
+    if on_line:
+        lo, hi = min(lo, 0.0), max(hi, 0.0)
+    margin = 0.1 * (hi - lo) + 0.08 * extent
+    guide = np.full(block.shape[:1] + (2, 2), np.nan)
+    guide[ok, 0] = foot[ok] + (lo - margin) * u[ok]
+    guide[ok, 1] = foot[ok] + (hi + margin) * u[ok]
+    block = block.copy()
+    block[~shown] = np.nan
+    return Slider(block, u, guide, name)
 
 
 def _ends_link(kinds, j) -> bool:

@@ -10,13 +10,17 @@ program. `geometry` collects it from the table and the linkage drawing (`jaxlink
 - `JOINT_PATH_<joint>`: the same for each moving joint the drawing knows (not the ground pivots, not
   a joint at a point's place, whose path is the point's);
 - `LINKAGE`: the linkage in one pose, the first converged position (else the first assembled): every
-  link as a line from joint to joint, each point's arm from its last joint as a polyline;
+  link as a line from joint to joint, each plate as a closed polyline (its outline: a sketch's plates,
+  a loop file's bodies with three or more `[joints]`), each point's arm from its last joint as a
+  polyline;
 - `CONSTRUCTION`: the other vectors of the loops in that pose (frame vectors, a slider's vector,
   Cartesian vectors), lines (dashed in the DXF);
 - `SLIDERS`: each slider's guide line and its block (a closed rectangle);
 - `JOINTS`, `GROUND`: a small circle at each moving joint, at each ground pivot;
-- `POINTS`: a small circle at each point in the pose;
-- `LABELS`: the joints' and points' names (DXF TEXT, SVG text).
+- `POINTS`: a small circle at each point in the pose (and at each joint of a sketch on one body
+  only);
+- `LABELS`: the joints' and points' names (DXF TEXT, SVG text): the names the drawing gives
+  (`jaxlink/report/drawing.py`: a sketch's joint names, a loop file's `[joints]`).
 
 A layer name keeps letters, digits, `_` and `-` of a name (other characters become `_`); one that
 equals an earlier one but for case gets `_2`, `_3`, … (DXF layer names ignore case).
@@ -160,7 +164,7 @@ def geometry(mech, table) -> Geometry:
     title = mech.name
     if pose is None:
         return Geometry(units.length, polylines, circles, labels, layers, pose, title + " (no position assembled)")
-    title += f" at input {_grid.format_value(table.input_values[pose], table.input_kind)}"
+    title += f" at input {_grid.format_input(table.input_values[pose], table.input_kind)}"
     size = d.extent * s
     seen: list = []  # a link in two loops is drawn once
     for v_all, kinds in zip(d.loops, d.kinds):
@@ -176,6 +180,10 @@ def geometry(mech, table) -> Geometry:
                 continue
             seen.append(key)
             polylines.append(Polyline(lay, seg))
+    for body in d.bodies:  # a sketch's links (lines) and plates (closed outlines), a loop file's plates
+        xy = body.outline[pose] * s
+        if np.isfinite(xy).all():
+            polylines.append(Polyline("LINKAGE", xy, body.plate))
     for arm in d.arms:
         xy = arm[pose] * s
         if len(xy) >= 2 and np.isfinite(xy).all():
@@ -198,6 +206,11 @@ def geometry(mech, table) -> Geometry:
             circles.append(Circle("GROUND" if d.ground[k] else "JOINTS", c, r))
             labels.append(Label("LABELS", c + np.array([1.5 * r, 1.5 * r]), name, text_h))
     joint_names = set(d.joint_names)
+    for i, name in enumerate(d.mark_names):  # a sketch's joints on one body only: points of it
+        c = d.marks[pose, i] * s
+        if np.isfinite(c).all() and name not in mech.point_names:
+            circles.append(Circle("POINTS", c, 0.6 * r))
+            labels.append(Label("LABELS", c + np.array([1.5 * r, -1.5 * r - text_h]), name, text_h))
     for i, name in enumerate(mech.point_names):
         c = np.asarray(table.points[pose, i], dtype=float) * s
         if np.isfinite(c).all():

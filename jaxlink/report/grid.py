@@ -69,6 +69,14 @@ def format_value(x: float, kind: str) -> str:
     return f"{x:g} m"
 
 
+def format_input(x: float, kind: str) -> str:
+    """One input value as the user gave it (titles of plots and drawings): degrees not reduced (a
+    run from −100° starts at "-100°", not "260°") or metres."""
+    if kind == "angle":
+        return f"{float(x) + 0.0:g}°"
+    return f"{x:g} m"
+
+
 def format_runs(values, index_runs, kind: str, limit: int = 6) -> str:
     """`135°–225°, 340°–10°` (at most `limit` runs, then how many more)."""
     parts = []

@@ -1,10 +1,13 @@
 """Plots and animations of a kinematics table (`jaxlink kinematics --plot / --animate`).
 
-The linkage is drawn where `jaxlink/report/drawing.py` places it: links as bars labelled with
-their length, frame vectors dashed, joints as circles with their names, ground pivots with a
-ground symbol, sliders as a block on their guide line (the loop's own slider vector dotted), each
-point's arm from its last joint, and the traced point paths. Lengths are shown in the file's
-length unit.
+The linkage is drawn where `jaxlink/report/drawing.py` places it: joints as white pins with their
+names, ground pivots with a ground symbol, a sketch's links as bars and its plates as shaded
+polygons labelled with their names, a sketch's joints on one body as dots; a loop file's links as
+bars labelled with their length, frame vectors dashed, its `[joints]` bodies of three or more
+joints as shaded plates; sliders as a block on their guide line (a loop's own slider vector
+dotted), each point's arm from its last joint, the input marked (an arc arrow about the crank's
+pivot, or an actuator drawn as a cylinder), and the traced point paths. Lengths are shown in the
+file's length unit; the titles give the input as asked for (`grid.format_input`).
 
 Curves over the input: positions, and |v|, |a| (thick, one colour per point) with their x and y
 components (thin: solid x, dashed y). Positions that did not assemble are gaps in every line and
@@ -70,6 +73,24 @@ class LinkageArtist:
                     ln, = ax.plot([], [], "-", color="0.5", lw=1.0, zorder=2)
                 row.append(ln)
             self.segments.append(row)
+        # the bodies of a sketch (bars, plates), the plates of a loop file's [joints]
+        self.bodies = []
+        for b in d.bodies:
+            if b.plate:
+                self.bodies.append(ax.add_patch(Polygon(
+                    np.zeros((len(b.joints), 2)), closed=True, facecolor=(0.79, 0.85, 0.92, 0.6), edgecolor=color,
+                    lw=2.0, joinstyle="round", zorder=2.5)))
+            else:
+                self.bodies.append(ax.plot([], [], "-", color=color, lw=2.6, solid_capstyle="round", zorder=3)[0])
+        self.marks = ax.plot([], [], "o", ms=3.5, color=color, zorder=5)[0]
+        self.drive_lines: list = []
+        if d.drive is not None and d.drive.kind == "actuator":  # a cylinder: its barrel, its rod
+            self.drive_lines = [ax.plot([], [], "-", color="0.6", lw=8.0, solid_capstyle="butt", zorder=3)[0],
+                                ax.plot([], [], "-", color=color, lw=2.4, solid_capstyle="round", zorder=3.5)[0]]
+            lengths = np.linalg.norm(d.drive.ends[:, 1] - d.drive.ends[:, 0], axis=-1)
+            self.barrel = 0.6 * float(np.nanmin(lengths[d.shown])) if d.shown.any() else 0.0
+            self.drive_lines.append(ax.annotate("input", (0, 0), xytext=(0, 0), textcoords="offset points",
+                                                fontsize=7, color="C3", ha="center", va="center", zorder=7))
         self.arms = [ax.plot([], [], "-", color=color, lw=1.2, alpha=0.8, zorder=3)[0] for _ in d.arms]
         self.guides = [ax.plot([], [], "-", color="0.55", lw=4.0, alpha=0.45, solid_capstyle="butt", zorder=1)[0]
                        for _ in d.sliders]
@@ -82,13 +103,17 @@ class LinkageArtist:
         g = 0.035 * size
         for x, y in self.ground_xy:
             ax.add_patch(Polygon([[x, y], [x - g, y - 1.5 * g], [x + g, y - 1.5 * g]], closed=True,
-                                 facecolor="0.8", edgecolor="0.3", lw=1.0, zorder=2))
-            ax.plot([x - 1.5 * g, x + 1.5 * g], [y - 1.5 * g] * 2, "-", color="0.3", lw=1.4, zorder=2)
+                                 facecolor="0.8", edgecolor="0.3", lw=1.0, zorder=2.7))
+            ax.plot([x - 1.5 * g, x + 1.5 * g], [y - 1.5 * g] * 2, "-", color="0.3", lw=1.4, zorder=2.7)
             for t in np.linspace(-1.2, 1.2, 5):
                 ax.plot([x + t * g, x + (t - 0.4) * g], [y - 1.5 * g, y - 2.0 * g], "-", color="0.3", lw=0.8,
-                        zorder=2)
+                        zorder=2.7)
+        if d.drive is not None and d.drive.kind == "crank" and d.shown.any():
+            self._crank_arrow(ax, d.drive, k0, scale, 0.08 * size)
         self.joint_marks, = ax.plot([], [], "o", ms=5.5, mfc="white", mec=color, mew=1.4, zorder=5, gid="joints")
-        self.point_marks = [ax.plot([], [], "s", color=f"C{i}", ms=6, zorder=6)[0] for i in range(len(d.point_names))]
+        # a point at a joint: its colour behind the pin; elsewhere a square
+        self.point_marks = [ax.plot([], [], "s", color=f"C{i}", ms=8 if n in d.joint_names else 6,
+                                    zorder=4.9 if n in d.joint_names else 6)[0] for i, n in enumerate(d.point_names)]
         self.labels = []
         self.link_labels = []
         if labels:
@@ -104,18 +129,38 @@ class LinkageArtist:
             self.labels = [ax.annotate(n, (0, 0), xytext=(5, 5), textcoords="offset points", fontsize=8,
                                        color="0.15", zorder=7) for n in d.joint_names]
             taken = set(d.joint_names)
+            self.body_labels = [ax.annotate(b.name, (0, 0), xytext=(0, 0), textcoords="offset points", fontsize=7.5,
+                                            color="0.35", style="italic", ha="center", va="center", zorder=7)
+                                for b in d.bodies]
+            self.mark_labels = [None if n in d.point_names else
+                                ax.annotate(n, (0, 0), xytext=(4, 4), textcoords="offset points", fontsize=8,
+                                            color="0.15", zorder=7) for n in d.mark_names]
             self.point_labels = [None if n in taken else
                                  ax.annotate(n, (0, 0), xytext=(5, -11), textcoords="offset points", fontsize=8,
                                              color=f"C{i}", fontweight="bold", zorder=7)
                                  for i, n in enumerate(d.point_names)]
         else:
             self.point_labels = [None] * len(d.point_names)
+            self.body_labels, self.mark_labels = [], []
+
+    @staticmethod
+    def _crank_arrow(ax, drive, k0: int, scale: float, radius: float) -> None:
+        """The input's mark: an arc arrow about the crank's pivot in the input's sense of turning."""
+        cx, cy = drive.ends[k0, 0] * scale
+        a = np.deg2rad(np.linspace(150.0, 240.0, 24))[:: int(drive.sense) or 1]
+        x, y = cx + radius * np.cos(a), cy + radius * np.sin(a)
+        ax.plot(x[:-1], y[:-1], "-", color="C3", lw=1.3, zorder=4)
+        ax.annotate("", xy=(x[-1], y[-1]), xytext=(x[-3], y[-3]), zorder=4,
+                    arrowprops=dict(arrowstyle="-|>", color="C3", lw=1.3, mutation_scale=10))
+        ax.annotate("input", (cx - radius, cy), xytext=(-4, 0), textcoords="offset points", fontsize=7,
+                    color="C3", ha="right", va="center", zorder=7)
 
     def bounds(self) -> tuple:
         """(xmin, xmax, ymin, ymax) of everything drawn over all shown positions, padded."""
         d, shown = self.d, self.d.shown
         pieces = [v[shown].reshape(-1, 2) for v in d.loops] + [d.points[shown].reshape(-1, 2)]
         pieces += [a[shown].reshape(-1, 2) for a in d.arms] + [sl.guide[shown].reshape(-1, 2) for sl in d.sliders]
+        pieces += [b.outline[shown].reshape(-1, 2) for b in d.bodies] + [d.joints[shown].reshape(-1, 2)]
         xy = np.concatenate(pieces) * self.s if shown.any() else np.zeros((1, 2))
         xy = xy[np.isfinite(xy).all(axis=1)]
         if not xy.size:
@@ -126,8 +171,9 @@ class LinkageArtist:
                 xy[:, 1].max() + pad)
 
     def artists(self) -> list:
-        out = [ln for row in self.segments for ln in row] + self.arms + self.guides + self.blocks
-        out += [self.joint_marks] + self.point_marks + self.labels + [t for t in self.point_labels if t is not None]
+        out = [ln for row in self.segments for ln in row] + self.bodies + self.drive_lines + self.arms + self.guides
+        out += self.blocks + [self.joint_marks, self.marks] + self.point_marks + self.labels + self.body_labels
+        out += [t for t in self.point_labels + self.mark_labels if t is not None]
         out += [t for row in self.link_labels for t in row if t is not None]
         return out
 
@@ -147,6 +193,34 @@ class LinkageArtist:
                     label.xy = tuple(seg.mean(axis=0))
                     label.set_position((-7 * t[1], 7 * t[0]))
                     label.set_visible(show)
+        for b, art, label in zip(d.bodies, self.bodies, self.body_labels or [None] * len(d.bodies)):
+            xy = b.outline[k] * s
+            if b.plate:
+                art.set_xy(xy)
+                art.set_visible(show)
+            else:
+                art.set_data(xy[:, 0], xy[:, 1])
+            if label is not None:  # a plate's name in it, a bar's beside its middle on its left
+                label.xy = tuple(xy.mean(axis=0))
+                t = xy[-1] - xy[0]
+                t = t / max(float(np.hypot(*t)), 1e-300)
+                label.set_position((0, 0) if b.plate else (-8 * t[1], 8 * t[0]))
+                label.set_visible(show)
+        if self.drive_lines and d.drive is not None:
+            a, b = d.drive.ends[k] * s
+            u = (b - a) / max(float(np.hypot(*(b - a))), 1e-300)
+            barrel = a + self.barrel * s * u
+            self.drive_lines[0].set_data([a[0], barrel[0]], [a[1], barrel[1]])
+            self.drive_lines[1].set_data([a[0], b[0]], [a[1], b[1]])
+            self.drive_lines[2].xy = tuple(0.5 * (a + barrel))  # beside the barrel, on its right
+            self.drive_lines[2].set_position((14 * u[1], -14 * u[0]))
+            self.drive_lines[2].set_visible(show)
+        mk = d.marks[k] * s
+        self.marks.set_data(mk[:, 0], mk[:, 1])
+        for t, p in zip(self.mark_labels, mk):
+            if t is not None:
+                t.xy = tuple(p)
+                t.set_visible(show)
         for arm, ln in zip(d.arms, self.arms):
             ln.set_data(arm[k, :, 0] * s, arm[k, :, 1] * s)
         h, w = 0.05 * self.size, 0.032 * self.size
@@ -268,7 +342,7 @@ def plot_kinematics(path: str, mech, table) -> None:
     ax_path.set_aspect("equal", adjustable="box")
     ax_path.set_xlabel(f"x ({lu})")
     ax_path.set_ylabel(f"y ({lu})")
-    at = _grid.format_value(x_in[k0], table.input_kind) if len(x_in) else ""
+    at = _grid.format_input(x_in[k0], table.input_kind) if len(x_in) else ""
     ax_path.set_title(f"{mech.name}: linkage at {at}" + (" and point paths" if npts else ""))
     ax_path.grid(alpha=0.3)
     if (~table.assembled).any():
@@ -357,7 +431,7 @@ def animate(path: str, mech, table, fps: int = 15, progress: bool = True, dpi: i
         for k in range(n):
             canvas.restore_region(background)
             art.update(k)
-            text = f"{mech.name}   input {_grid.format_value(x_in[k], table.input_kind)}"
+            text = f"{mech.name}   input {_grid.format_input(x_in[k], table.input_kind)}"
             if not table.assembled[k]:
                 text += f"   ({RESULTS.name(table.result[k])}: not drawn)"
             title.set_text(text)
