@@ -163,3 +163,29 @@ main = ["r1 @ phi1", "cc @ phi3", "-r2 @ phi4", "-({o2[0]}, {o2[1]})"]
     below = max(x - 2 * np.pi * np.ceil((x - start) / (2 * np.pi)) for x in limits)
     above = min(x + 2 * np.pi * np.ceil((start - x) / (2 * np.pi)) for x in limits)
     assert abs(m.lower - below) < 1e-9 and abs(m.upper - above) < 1e-9, (m.lower, m.upper, below, above)
+
+
+def test_kinematics_json_holds_the_designer_numbers(tmp_path, capsys):
+    """`kinematics --json`: the columns' extremes are the CSV's, and the designer's numbers are
+    there in SI: the Whitworth ram's time ratio against its closed form (π + 2β)/(π − 2β),
+    sin β = r/d (crank r = 100, pivots d = 300 apart)."""
+    import csv
+    import json
+
+    from jaxlink.cli import main
+
+    out, table = tmp_path / "w.json", tmp_path / "w.csv"
+    assert main(["kinematics", "whitworth", "--rpm", "60", "--numbers", "--json", str(out), "--csv", str(table)]) == 0
+    text = capsys.readouterr().out
+    assert "time ratio" in text and "stroke" in text  # the summary prints them too
+    doc = json.loads(out.read_text())
+    with open(table) as fh:
+        rows = list(csv.reader(fh))
+    j = rows[0].index("C_x_m")
+    col = np.asarray([float(r[j]) for r in rows[1:]])
+    assert doc["columns"]["C_x_m"] == {"min": col.min(), "max": col.max()}
+    assert doc["positions"] == {"count": 72, "converged": 72, "results": {"converged": 72}}
+    beta = np.arcsin(100.0 / 300.0)
+    ram = [o for o in doc["designer"]["motion"]["outputs"] if o["name"] == "x"][0]
+    assert abs(ram["time_ratio"] - (np.pi + 2 * beta) / (np.pi - 2 * beta)) < 1e-9
+    assert doc["designer"]["motion"]["full_turn"] is True

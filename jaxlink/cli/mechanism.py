@@ -377,6 +377,13 @@ def register(sub) -> None:
                         "joints and the linkage at its first position, as layers of a DXF file (.dxf) or groups of "
                         "an SVG file (.svg)")
     p.add_argument("--animate", metavar="OUT.gif", help="animated GIF of the moving linkage")
+    p.add_argument("--json", metavar="OUT.json",
+                   help="write the summary as JSON: the run, every column's least and largest value (in the CSV's "
+                        "units), and with --numbers the designer's numbers (SI)")
+    p.add_argument("--numbers", action="store_true",
+                   help="add the designer's numbers to the summary and the JSON, as `check` prints them (Grashof, "
+                        "range of motion, transmission angles, strokes, dead centres, time ratio, velocity ratio): "
+                        "a full turn's analysis, one to two seconds more")
     p.set_defaults(func=cmd_kinematics)
 
 
@@ -390,60 +397,13 @@ def cmd_scenes(args) -> int:
     return 0
 
 
-def _print_designer_numbers(mech, lu: str) -> None:
-    """The numbers a designer judges a linkage by: the Grashof class of every four-bar loop, the
-    input's range of motion and the dyads' transmission angles (float64, on the file's branch)."""
-    from ..analysis.grashof import describe, four_bars
-    from ..analysis.motion import motion
+def _print_designer_numbers(mech, lu: str, out=None) -> None:
+    """The numbers a designer judges a linkage by (`jaxlink.report.designer`)."""
+    from ..report import designer
 
-    for i, fb in enumerate(four_bars(mech)):
-        print(f"{'four-bar' if i == 0 else '':<12}{describe(fb, mech.units.length, lu)}")
-    m = motion(mech)
-    if m is None:
-        return
-    deg = mech.units.angle != 1.0
-    name = mech.input_name
-
-    def ang(x, digits=10):
-        x = 0.0 if abs(x) < 1e-12 else x  # a limit at 0 found to rounding
-        return f"{np.degrees(x):.{digits}g}°" if deg else f"{x:.{digits}g} rad"
-
-    if m.full_turn:
-        print(f"motion      {name} turns fully (on the guesses' branch)")
-    elif m.lower is not None and m.upper is not None:
-        print(f"motion      {name} from {ang(m.lower)} to {ang(m.upper)} (limit positions: toggles), a range of "
-              f"{ang(m.upper - m.lower)}")
-    else:
-        print(f"motion      {name}: the start does not assemble on a whole turn")
-    def where(x):  # over a full turn, within one revolution [0, 360°)
-        if m.full_turn:
-            x = float(np.mod(x, 2 * np.pi))
-            x = 0.0 if x > 2 * np.pi - 1e-12 else x
-        return ang(x, 6)
-
-    for i, t in enumerate(m.transmission):
-        label = f"loop '{t['loop']}' ({', '.join(t['unknowns'])})"
-        print(f"{'transmission' if i == 0 else '':<13}{label}: {ang(t['min'])} at {name} = {where(t['min_at'])} … "
-              f"{ang(t['max'])} at {where(t['max_at'])}; worst (farthest from 90°) {ang(t['worst'])}")
-    for i, o in enumerate(m.outputs):
-        print(f"{'outputs' if i == 0 else '':<12}" + _output_line(o, name, ang, where, mech.units.length, lu))
-
-
-def _output_line(o, name, ang, where, length_factor, lu) -> str:
-    """One output's stroke or swing, dead centres, time ratio and velocity ratio, in file units."""
-    def val(x, digits=10):
-        return ang(x, digits) if o["kind"] == "rocker" else f"{x / length_factor:.{digits}g} {lu}"
-
-    vunit = "" if o["kind"] == "rocker" else f" {lu}/rad"
-    vel = (f"velocity ratio d{o['name']}/d{name} {o['velocity_min'] / (1 if vunit == '' else length_factor):.6g} at "
-           f"{where(o['velocity_min_at'])} … {o['velocity_max'] / (1 if vunit == '' else length_factor):.6g}{vunit} at "
-           f"{where(o['velocity_max_at'])}")
-    what = "swing" if o["kind"] == "rocker" else "stroke"
-    head = f"{o['kind']} {o['name']}: {what} {val(o['stroke'])} ({val(o['min'], 8)} … {val(o['max'], 8)})"
-    if o["time_ratio"] is None:
-        return f"{head}, no dead centre; {vel}"
-    return (f"{head}, dead centres at {name} = {where(o['min_at'])} and {where(o['max_at'])}; "
-            f"rise {ang(o['rise'], 8)}, fall {ang(o['fall'], 8)}: time ratio {o['time_ratio']:.10g}; {vel}")
+    fbs, m = designer.compute(mech)
+    for line in designer.lines(mech, fbs, m, lu):
+        print(line, file=out or sys.stdout)
 
 
 def _sum_text(terms) -> str:
@@ -558,6 +518,7 @@ def cmd_kinematics(args) -> int:
     check_output("--plot", args.plot, PLOT_FORMATS + ("dxf",))
     check_output("--export", args.export, EXPORT_FORMATS)
     check_output("--animate", args.animate, ("gif",))
+    check_output("--json", args.json, ("json",))
     for option in ("--plot", "--export"):
         if getattr(args, option[2:]) == "-":
             raise MechanismError(f"{option} -: give a file name (a drawing is not written to standard output)")
@@ -574,6 +535,21 @@ def cmd_kinematics(args) -> int:
     info = sys.stderr if args.csv == "-" else sys.stdout  # `--csv -`: the table alone on standard output
     print(grid_text(mech, args), file=info)
     _report.print_summary(table, info, every_row_hint=not args.csv, units=units)
+    numbers = None
+    if args.numbers:
+        from ..report import designer
+
+        numbers = designer.compute(mech)
+        lu = {1.0: "m", 1e-3: "mm", 1e-2: "cm"}.get(mech.units.length, "m")
+        for line in designer.lines(mech, numbers[0], numbers[1], lu):
+            print(line, file=info)
+    if args.json:
+        from ..report import designer
+
+        doc = None if numbers is None else designer.to_json(mech, numbers[0], numbers[1])
+        with writing("--json", args.json):
+            _report.write_json(args.json, mech, table, units, doc)
+        print(f"wrote {args.json}", file=info)
     if args.csv:
         with writing("--csv", args.csv):
             _report.write_csv(args.csv, table, units)

@@ -369,6 +369,45 @@ def _write_rows(fh: TextIO, table: KinematicsTable, units: FileUnits | None = No
         w.writerow(out)
 
 
+def write_json(path: str, mech: Mechanism, table: KinematicsTable, units: FileUnits | None = None,
+               designer: dict | None = None) -> None:
+    """The run's summary as JSON to `path` (`-`: standard output): the input and speed, how many
+    positions converged (per result code), every column's least and largest value over the
+    assembled rows (named and valued as in the CSV: `units`), and `designer` (the designer's
+    numbers, `jaxlink.report.designer.to_json`, or null)."""
+    import json
+
+    columns, data = convert(table.columns, table.data, units)
+    rows = table.assembled
+    cols = {}
+    for j, name in enumerate(columns):
+        if name in ("converged", "result"):
+            continue
+        col = data[rows, j]
+        col = col[np.isfinite(col)]
+        cols[name] = {"min": float(col.min()) if col.size else None, "max": float(col.max()) if col.size else None}
+    codes, counts = np.unique(table.result, return_counts=True)
+    doc = {
+        "mechanism": mech.name,
+        "file": mech.file,
+        "units": "si" if units is None else "file",
+        "input": {"name": mech.input_name, "kind": table.input_kind, "column": columns[0],
+                  "first": float(data[0, 0]), "last": float(data[-1, 0]), "count": int(len(data))},
+        "speed": {"omega_rad_s" if table.input_kind == "angle" else "speed_m_s": float(table.omega),
+                  "rpm": None if table.rpm is None else float(table.rpm)},
+        "positions": {"count": int(len(data)), "converged": int(table.converged.sum()),
+                      "results": {RESULTS.name(int(c)): int(n) for c, n in zip(codes, counts)}},
+        "columns": cols,
+        "designer": designer,
+    }
+    text = json.dumps(doc, indent=2, allow_nan=False) + "\n"
+    if path == "-":
+        sys.stdout.write(text)
+        return
+    with open(path, "w") as fh:
+        fh.write(text)
+
+
 def failure_summary(table: KinematicsTable) -> str:
     """`19 × cannot_assemble at 135°–225°: <what to do>` for every code other than converged."""
     return _grid.failure_text(table.result, table.input_values, table.input_kind, table.periodic)
