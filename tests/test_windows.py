@@ -32,8 +32,9 @@ jax.config.update("jax_enable_x64", True)
 
 ROOT = Path(__file__).resolve().parents[1]
 FOUR_BAR = (ROOT / "jaxlink" / "scenes" / "four-bar.toml").read_text()
+# the coupler's angle written so that no dyad form applies (the same geometry): Newton
 TWO_VECTORS = FOUR_BAR.replace('main = ["a @ phi2", "b @ phi3"',
-                               'main = ["a @ phi2", "0.5 * b @ phi3", "0.5 * b @ phi3"')
+                               'main = ["a @ phi2", "b @ 2 * phi3 - phi3"')
 
 # a Chebyshev-like linkage (crank 1, frame 2, coupler 2.5 with the point P on its extension),
 # with the rocker shortened to 1.2 so that it is not Grashof: windows where it cannot close

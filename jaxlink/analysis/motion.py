@@ -107,7 +107,8 @@ def motion(mech: Mechanism, p=None, *, samples: int = 3600) -> Motion | None:
     dyads = _dyads.classify(mech)
     if dyads is None or mech.input_kind != "angle":
         return None
-    p = np.asarray(mech.parameters if p is None else p, dtype=float)
+    # float64 where JAX computes in it (the command line); JAX's float (float32) otherwise
+    p = np.asarray(mech.parameters if p is None else p, dtype=jax.dtypes.canonicalize_dtype(np.float64))
     start = float(mech.input_start)
     h = 2 * np.pi / samples
     phis = start + h * np.arange(samples + 1)  # one turn, the start again at the end
