@@ -86,7 +86,8 @@ def _circles(p0, r0, p1, r1, side):
     d = p1 - p0
     dd = np.hypot(d[..., 0], d[..., 1])
     a = (r0 * r0 - r1 * r1 + dd * dd) / (2 * dd)
-    h = np.sqrt(r0 * r0 - a * a)
+    with np.errstate(invalid="ignore"):  # NaN where the circles do not meet
+        h = np.sqrt(r0 * r0 - a * a)
     e = d / dd[..., None]
     m = p0 + a[..., None] * e
     n = np.stack([-e[..., 1], e[..., 0]], -1)
