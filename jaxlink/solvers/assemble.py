@@ -137,6 +137,9 @@ CHANGE_POINTS = ("keep", "smooth")
 EXTRA_STEPS = 32  # more Newton steps allowed while converging linearly (double roots)
 REFINE_TRIES = 24  # sub-steps tried when the continuation lands on another circuit
 MAX_LEAD_IN = 4096  # lead-in positions at most (a longer way takes longer steps)
+#: store the closed form's result codes once (`_closed_form_path`); False only for the differential
+#: test (the same answers either way, bit for bit)
+MATERIALIZE_CODES = True
 
 
 def default_rtol(dtype) -> float:
@@ -406,7 +409,16 @@ def _closed_form_path(mech, p, phis, tol, trig_in, trig_p, thr, reference, point
 
     ang = [n for n, k in zip(mech.unknown_names, mech.unknown_kinds) if k == "angle"]
     packed = jax.vmap(one, in_axes=(0, 0, 0 if per_position else None))(phis, trig_in, sigma_all)
-    return packed if trig_out else _unpack_closed_form(mech, packed, points)
+    if trig_out:
+        return packed
+    q, rn, code, steps, pts = _unpack_closed_form(mech, packed, points)
+    if MATERIALIZE_CODES:
+        # the result codes computed once and stored: every element of the points' and the unknowns'
+        # outputs (the masks of `_batch`) reads them. Fused, XLA recomputed each position's residual
+        # and transmission sines for each of them (the Strider, 4 dyads and 7 points: 1000 designs ×
+        # 360 positions 1.2× faster, one design 1.1×; benchmarks/strider_vs_pylinkage.py)
+        code = materialize(code)
+    return q, rn, code, steps, pts
 
 
 def _unpack_closed_form(mech, packed, points: bool):
