@@ -189,3 +189,25 @@ def test_kinematics_json_holds_the_designer_numbers(tmp_path, capsys):
     ram = [o for o in doc["designer"]["motion"]["outputs"] if o["name"] == "x"][0]
     assert abs(ram["time_ratio"] - (np.pi + 2 * beta) / (np.pi - 2 * beta)) < 1e-9
     assert doc["designer"]["motion"]["full_turn"] is True
+
+
+def test_kinematics_whole_curve_command(tmp_path, capsys):
+    """`kinematics --whole-curve`: the CSV's rows are the curve (segments 0 and 1, the input
+    turning back at the closed-form limit), in the file's units with --units file."""
+    import csv
+
+    from jaxlink.cli import main
+
+    path, out = tmp_path / "tr.toml", tmp_path / "tr.csv"
+    path.write_text(TRIPLE_ROCKER)
+    assert main(["kinematics", str(path), "--whole-curve", "--count", "360", "--csv", str(out), "--units", "file"]) == 0
+    text = capsys.readouterr().out
+    assert "2 segments" in text and "-137.8735842° to 137.8735842°" in text
+    with open(out) as fh:
+        rows = list(csv.reader(fh))
+    assert rows[0][:4] == ["segment", "input_deg", "phi3_deg", "phi4_deg"] and rows[0][4:] == ["B_x_mm", "B_y_mm"]
+    seg = np.asarray([int(r[0]) for r in rows[1:]])
+    inp = np.asarray([float(r[1]) for r in rows[1:]])
+    limit = np.degrees(np.arccos((30.0**2 + 50.0**2 - 75.0**2) / (2 * 30.0 * 50.0)))
+    assert set(seg) == {0, 1} and abs(inp.max() - limit) < 1e-9 and abs(inp.min() + limit) < 1e-9
+    assert main(["kinematics", str(path), "--whole-curve", "--step", "3"]) == 2  # no grid in this mode

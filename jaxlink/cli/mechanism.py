@@ -380,11 +380,48 @@ def register(sub) -> None:
     p.add_argument("--json", metavar="OUT.json",
                    help="write the summary as JSON: the run, every column's least and largest value (in the CSV's "
                         "units), and with --numbers the designer's numbers (SI)")
+    p.add_argument("--whole-curve", action="store_true",
+                   help="trace the whole closed curve instead of the input positions: a linkage of dyads whose "
+                        "input cannot turn fully runs to a limit position, turns back on the toggling dyad's other "
+                        "side, and so on until the curve closes (positions only; --count positions per turn, "
+                        "default 720; --csv, --plot, --units apply)")
     p.add_argument("--numbers", action="store_true",
                    help="add the designer's numbers to the summary and the JSON, as `check` prints them (Grashof, "
                         "range of motion, transmission angles, strokes, dead centres, time ratio, velocity ratio): "
                         "a full turn's analysis, one to two seconds more")
     p.set_defaults(func=cmd_kinematics)
+
+
+def _whole_curve(mech, args) -> int:
+    """`kinematics --whole-curve`: the closed curve through the limit positions."""
+    for option in ("start", "step", "stop", "rpm", "omega", "export", "animate", "json"):
+        if getattr(args, option, None) not in (None, False):
+            raise MechanismError(f"--whole-curve traces positions along the whole curve: --{option} does not apply")
+    if args.plot and args.plot.lower().endswith(".dxf"):
+        raise MechanismError("--plot: --whole-curve draws a picture (.png, .pdf, .svg, …), not a DXF")
+    if args.count is not None and not 8 <= args.count <= MAX_POSITIONS:
+        raise MechanismError(f"--count {args.count}: positions per turn of the whole curve, 8 to {MAX_POSITIONS}")
+    from ..analysis.whole_curve import whole_curve
+    from ..report import whole_curve as _report
+
+    wc = whole_curve(mech, samples=args.count or 720)
+    if wc is None:
+        raise MechanismError("--whole-curve needs a linkage made of dyads (every loop closed in closed form) driven "
+                             f"by an angle; '{mech.name}' is not (`jaxlink check` says how it is solved)")
+    units = units_from_args(mech, args)
+    info = sys.stderr if args.csv == "-" else sys.stdout
+    for line in _report.summary(mech, wc):
+        print(line, file=info)
+    if args.csv:
+        with writing("--csv", args.csv):
+            _report.write_csv(args.csv, mech, wc, units)
+        if args.csv != "-":
+            print(f"wrote {args.csv}: {len(wc.input)} rows", file=info)
+    if args.plot:
+        with writing("--plot", args.plot):
+            _report.plot(args.plot, mech, wc)
+        print(f"wrote {args.plot}", file=info)
+    return 0
 
 
 def cmd_scenes(args) -> int:
@@ -523,6 +560,8 @@ def cmd_kinematics(args) -> int:
         if getattr(args, option[2:]) == "-":
             raise MechanismError(f"{option} -: give a file name (a drawing is not written to standard output)")
     mech = load_from_args(args)
+    if args.whole_curve:
+        return _whole_curve(mech, args)
     phis, values = input_grid(mech, args)
     omega = omega_from_args(args, mech)
     units = units_from_args(mech, args)
