@@ -382,3 +382,41 @@ def test_whitworth_sketch_equals_loop_form():
     mech = sk.mechanism()
     assert _closed_form(mech) and [d.kind for d in dyads.classify(mech)] == ["RPR", "RRP"]
     _compare(loop, mech, ["A", "B", "C"])
+
+
+def test_a_triad_is_closed_by_newton_and_matches_scipy():
+    """A class-III group (a ternary link held by three binary links: no dyad to split off): the
+    sketch closes it by the fundamental cycles of what is left, Newton solves it, and its joints
+    match scipy's fsolve on the joints' distance equations, continued from the sketch's pose."""
+    from scipy.optimize import fsolve
+
+    pos = {"O": (0.0, 0.0), "E": (3.0, 2.5), "F": (4.0, -0.5), "A": (1.0, 0.0), "B": (2.0, 1.2),
+           "C": (2.6, 1.6), "D": (3.0, 0.6)}
+    sk = jl.Sketch("triad").frame("O", *pos["O"]).frame("E", *pos["E"]).frame("F", *pos["F"])
+    for n in "ABCD":
+        sk.joint(n, *pos[n])
+    sk.link("crank", "O", "A").link("ab", "A", "B").link("tri", "B", "C", "D").link("ec", "E", "C")
+    sk.link("fd", "F", "D").crank("crank")
+    mech = sk.mechanism()
+    assert dyads.classify(mech) is None and len(mech.loops) == 2
+    p = {k: np.asarray(v) for k, v in pos.items()}
+    bars = [("A", "B"), ("B", "C"), ("B", "D"), ("C", "D"), ("E", "C"), ("F", "D")]
+    length = {b: np.linalg.norm(p[b[0]] - p[b[1]]) for b in bars}
+    r = np.linalg.norm(p["A"])
+    phis = np.arctan2(p["A"][1], p["A"][0]) + np.linspace(0.0, 0.8, 9)
+
+    def equations(x, phi):
+        at = {"A": r * np.array([np.cos(phi), np.sin(phi)]), "E": p["E"], "F": p["F"],
+              "B": x[0:2], "C": x[2:4], "D": x[4:6]}
+        return [np.linalg.norm(at[u] - at[v]) - length[(u, v)] for u, v in bars]
+
+    x = np.concatenate([p["B"], p["C"], p["D"]])
+    ref = []
+    for phi in phis:
+        x = fsolve(equations, x, args=(phi,), xtol=1e-12)
+        assert np.abs(equations(x, phi)).max() < 1e-12
+        ref.append(x.copy())
+    sol = jl.solve(mech, phis)
+    assert bool(np.all(sol.converged))
+    got = np.asarray(sol.points)[:, [mech.point_names.index(n) for n in "BCD"]].reshape(len(phis), 6)
+    assert np.abs(got - np.asarray(ref)).max() < 1e-10

@@ -580,7 +580,13 @@ def _body_tables(masses, loads, err, *, bodies, frame, sliders, theta, crank, ac
 def _cycles(edges, pos, known_vars, all_vars, loops, terms_of, close, err) -> None:
     """Close the unknowns left by a spanning tree over the joints not yet placed (the placed
     ones are its root): one loop per edge outside the tree."""
-    rest = [e for e in edges if not e.vars <= known_vars]
+    # a plate's joints as a star from its first joint (the other pairs are not independent)
+    first = {}
+    for e in edges:
+        if e.terms and e.terms[0] == "lazy":
+            first.setdefault(e.body, e.u)
+    rest = [e for e in edges if not e.vars <= known_vars
+            and not (e.terms and e.terms[0] == "lazy" and first[e.body] not in (e.u, e.v))]
     tree: dict[str, tuple] = {}
     chords = []
     frontier = [n for n in pos]
