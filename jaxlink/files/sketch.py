@@ -581,7 +581,7 @@ def _cycles(edges, pos, known_vars, all_vars, loops, terms_of, close, err) -> No
     """Close the unknowns left by a spanning tree over the joints not yet placed (the placed
     ones are its root): one loop per edge outside the tree."""
     # a plate's joints as a star from its first joint (the other pairs are not independent)
-    first = {}
+    first: dict[str, str] = {}
     for e in edges:
         if e.terms and e.terms[0] == "lazy":
             first.setdefault(e.body, e.u)
