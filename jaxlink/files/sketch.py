@@ -49,15 +49,18 @@ import re
 from typing import Any, Callable
 
 from ..errors import MechanismError
-from ..model.bodies import GROUND
+from .sketch_bodies import body_tables
+from .sketch_loops import ORIGIN as _ORIGIN
+from .sketch_loops import Edge as _Edge
+from .sketch_loops import close_loops
+from .sketch_loops import neg as _neg
+from .sketch_loops import text as _text
 
 FRAME = "frame"
-_ORIGIN = "@origin"
 _NAME = re.compile(r"[A-Za-z_][A-Za-z0-9_]*")
 _SKETCH_KEYS = {"frame", "points", "input", "joints", "links", "sliders", "masses"}
 #: tables a sketch file may not have: the sketch derives them
 DERIVED_TABLES = ("parameters", "input", "unknowns", "loops", "points", "bodies", "joints")
-_MASS_KEYS = {"mass", "inertia", "centroid"}
 
 
 @dataclasses.dataclass(frozen=True)
@@ -77,23 +80,6 @@ class Layout:
     bodies: tuple
     sliders: tuple
     input: tuple
-
-
-@dataclasses.dataclass(frozen=True)
-class _Edge:
-    u: str
-    v: str
-    terms: tuple  # of (sign, text): the vector from u to v
-    vars: frozenset  # the unknowns (and the input) its terms use
-    body: str
-
-
-def _neg(terms):
-    return tuple((-s, t) for s, t in terms)
-
-
-def _text(sign: int, text: str) -> str:
-    return text if sign > 0 else f"-{text}" if not text.startswith("(") else f"-{text}"
 
 
 def derive(data: dict, err: Callable[..., MechanismError], file: str) -> tuple[dict, Layout]:
@@ -370,79 +356,7 @@ def derive(data: dict, err: Callable[..., MechanismError], file: str) -> tuple[d
         return ts if forward else _neg(ts)
 
     # ------------------------------------------------------------------ loops, dyad by dyad
-    adj: dict[str, list] = {}
-    for e in edges:
-        adj.setdefault(e.u, []).append((e, True))
-        adj.setdefault(e.v, []).append((e, False))
-    pos: dict[str, tuple] = {_ORIGIN: ()}
-    known_vars = {input_name}
-    loops: dict[str, list[str]] = {}
-
-    def propagate():
-        grew = True
-        while grew:
-            grew = False
-            for u in sorted(pos, key=lambda n: len(pos[n])):
-                for e, fwd in adj.get(u, ()):
-                    w = e.v if fwd else e.u
-                    if w not in pos and e.vars <= known_vars:
-                        pos[w] = pos[u] + terms_of(e, fwd)
-                        grew = True
-
-    def close(u: str, path: list, v: str) -> list[str]:
-        ts = list(pos[u])
-        for e, fwd in path:
-            ts.extend(terms_of(e, fwd))
-        ts.extend(_neg(pos[v]))
-        out: list = []
-        for s, t in ts:  # cancel a vector and its opposite (a shared chain from the origin)
-            if (-s, t) in out:
-                out.remove((-s, t))
-            else:
-                out.append((s, t))
-        return [_text(s, t) for s, t in out]
-
-    def best_dyad():
-        best = None
-        for u in sorted(pos):
-            stack = [(u, [], frozenset(), (u,))]
-            while stack:
-                x, path, new, seen = stack.pop()
-                for e, fwd in adj.get(x, ()):
-                    w = e.v if fwd else e.u
-                    if any(e is pe for pe, _ in path):
-                        continue
-                    nv = new | (e.vars - known_vars)
-                    if len(nv) > 2:
-                        continue
-                    p2 = [*path, (e, fwd)]
-                    if w in pos:
-                        if len(nv) == 2:
-                            score = (len(p2), u, w)
-                            if best is None or score < best[0]:
-                                best = (score, u, p2, w, nv)
-                        continue
-                    if w in seen or len(p2) >= 4:
-                        continue
-                    stack.append((w, p2, nv, (*seen, w)))
-        return best
-
-    propagate()
-    all_vars = set(unknowns)
-    while not all_vars <= known_vars:
-        found = best_dyad()
-        if found is None:
-            break
-        _, u, path, v, nv = found
-        name = "_".join(dict.fromkeys([u, *[(e.v if f else e.u) for e, f in path]])).replace(_ORIGIN, "O")
-        loops[_unique(f"loop_{name}", loops)] = close(u, path, v)
-        known_vars |= nv
-        propagate()
-    if not all_vars <= known_vars:
-        # a group of higher class: the fundamental cycles of what is left (solved by Newton)
-        _cycles(edges, pos, known_vars, all_vars, loops, terms_of, close, err)
-        known_vars |= all_vars
-        propagate()
+    loops, pos = close_loops(edges, input_name, set(unknowns), terms_of, err)
     missing = [j for j in xy if j not in pos]
     if missing:
         raise err(f"joint(s) {', '.join(missing)} cannot be placed from the frame through the links", "sketch")
@@ -459,7 +373,7 @@ def derive(data: dict, err: Callable[..., MechanismError], file: str) -> tuple[d
 
     out = {k: v for k, v in data.items() if k != "sketch"}
     if "masses" in sk or "loads" in data or "environment" in data:
-        bodies_t, joints_t, loads_t = _body_tables(
+        bodies_t, joints_t, loads_t = body_tables(
             sk.get("masses", {}), data.get("loads", {}), err, bodies=bodies, frame=frame, sliders=sliders,
             theta=theta, crank=crank, actuator=actuator, chain=chain, xy=xy, body_angle=body_angle, ang=ang,
             lu_factor={"m": 1.0, "mm": 1e-3, "cm": 1e-2}.get(lu, 1.0))
@@ -483,154 +397,6 @@ def derive(data: dict, err: Callable[..., MechanismError], file: str) -> tuple[d
         input=("crank", crank) if crank is not None else ("actuator", actuator),
     )
     return out, layout
-
-
-def _body_tables(masses, loads, err, *, bodies, frame, sliders, theta, crank, actuator, chain, xy, body_angle, ang,
-                 lu_factor) -> tuple[dict, dict, dict]:
-    """The reaction tables (`[bodies.*]`, `[joints.*]`, the loads with joint names replaced by
-    their vector sums) of a sketch with masses or loads: a body per link (its angle, mass,
-    centroid and inertia), a revolute joint per pair of bodies a joint pins together (the frame
-    counts), and per slider a massless block that slides on its body (prismatic) and turns on the
-    joint (revolute)."""
-    if actuator is not None:
-        raise err("reactions of a sketch driven by an actuator are not derived yet: drive it by a crank, or "
-                  "write the loop form with [bodies] and [joints]", "sketch", "masses")
-    if not isinstance(masses, dict):
-        raise err("[sketch.masses] must be a table: LINK = { mass = kg, inertia = kg·m², centroid = [x, y] }",
-                  "sketch", "masses")
-    out_b: dict = {}
-    for b, js in bodies.items():
-        spec = masses.get(b, {})
-        if not isinstance(spec, dict):
-            raise err(f"masses of '{b}' must be {{ mass = kg, inertia = kg·m², centroid = [x, y] }}",
-                      "sketch.masses", b)
-        for k in spec:
-            if k not in _MASS_KEYS:
-                raise err(f"unknown key '{k}' in the masses of '{b}'; known: {', '.join(sorted(_MASS_KEYS))}",
-                          "sketch.masses", b)
-        table: dict = {"angle": theta[b]}
-        m = spec.get("mass", 0.0)
-        if isinstance(m, bool) or not isinstance(m, (int, float)) or not math.isfinite(m) or m < 0:
-            raise err(f"the mass of '{b}' must be a number ≥ 0 (kg), got {m!r}", "sketch.masses", b)
-        if m:
-            r = js[0]
-            c = spec.get("centroid")
-            if c is None:  # the middle of a link; the mean of a plate's joints
-                c = [sum(xy[j][0] for j in js) / len(js), sum(xy[j][1] for j in js) / len(js)]
-            if not isinstance(c, list) or len(c) != 2 or not all(
-                    isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) for v in c):
-                raise err(f"the centroid of '{b}' must be [x, y] in the sketch's pose", "sketch.masses", b)
-            dx, dy = c[0] - xy[r][0], c[1] - xy[r][1]
-            dist = math.hypot(dx, dy)
-            off = ang(math.remainder(math.atan2(dy, dx) - body_angle[b], 2 * math.pi))
-            cen = [*chain(r)]
-            if dist > 0:
-                cen.append(f"{float(f'{dist:.15g}')!r} @ {theta[b]} + ({float(f'{off:.15g}')!r})")
-            table["mass"] = float(m)
-            table["centroid"] = cen
-            inertia = spec.get("inertia")
-            if inertia is None:
-                if len(js) != 2 or "centroid" in spec:
-                    raise err(f"'{b}' needs its inertia (kg·m² about its centroid); only a link of two joints "
-                              "with the centroid in its middle defaults to a uniform bar, m L²/12", "sketch.masses", b)
-                length = math.dist(xy[js[0]], xy[js[1]]) * lu_factor
-                inertia = m * length * length / 12.0
-            table["inertia"] = inertia
-        out_b[b] = table
-    for b in masses:
-        if b not in bodies and b not in sliders:
-            raise err(f"'{b}' in [sketch.masses] is neither a link nor a slider{_suggest(b, [*bodies, *sliders])}",
-                      "sketch.masses", b)
-    out_j: dict = {}
-    for j in xy:
-        holders = ([GROUND] if j in frame else []) + [b for b, js in bodies.items() if j in js]
-        if j in sliders:  # the block: slides on its body, turns on the joint
-            sl = sliders[j]
-            block = f"{j}_block"
-            on = GROUND if sl["on"] == FRAME else sl["on"]
-            axis = f"{j}_angle" if sl["on"] == FRAME else f"{theta[sl['on']]} + {j}_angle"
-            out_b[block] = {"angle": axis}
-            spec = masses.get(j, {})
-            if not isinstance(spec, dict) or set(spec) - {"mass", "inertia"}:
-                raise err(f"the slider '{j}''s block takes {{ mass = kg, inertia = kg·m² }} (its centroid is the "
-                          "joint)", "sketch.masses", j)
-            m = spec.get("mass", 0.0)
-            if isinstance(m, bool) or not isinstance(m, (int, float)) or not math.isfinite(m) or m < 0:
-                raise err(f"the mass of '{j}' must be a number ≥ 0 (kg), got {m!r}", "sketch.masses", j)
-            if m:
-                out_b[block].update(mass=float(m), centroid=chain(j), inertia=spec.get("inertia", 0.0))
-            out_j[f"{j}_slide"] = {"bodies": [on, block], "kind": "prismatic", "at": chain(j), "axis": axis}
-            holders = [block, *holders]
-        for k, other in enumerate(holders[1:]):
-            out_j[j if k == 0 else f"{j}_{k + 1}"] = {"bodies": [holders[0], other], "at": chain(j)}
-    loads_out: dict = {}
-    if isinstance(loads, dict):
-        for name, spec in loads.items():
-            if not isinstance(spec, dict):
-                loads_out[name] = spec
-                continue
-            spec = dict(spec)
-            for key in ("at", "from", "to"):
-                if isinstance(spec.get(key), str) and spec[key] in xy:  # a joint's name: its position
-                    spec[key] = chain(spec[key])
-            loads_out[name] = spec
-    return out_b, out_j, loads_out
-
-
-def _cycles(edges, pos, known_vars, all_vars, loops, terms_of, close, err) -> None:
-    """Close the unknowns left by a spanning tree over the joints not yet placed (the placed
-    ones are its root): one loop per edge outside the tree."""
-    # a plate's joints as a star from its first joint (the other pairs are not independent)
-    first: dict[str, str] = {}
-    for e in edges:
-        if e.terms and e.terms[0] == "lazy":
-            first.setdefault(e.body, e.u)
-    rest = [e for e in edges if not e.vars <= known_vars
-            and not (e.terms and e.terms[0] == "lazy" and first[e.body] not in (e.u, e.v))]
-    tree: dict[str, tuple] = {}
-    chords = []
-    frontier = [n for n in pos]
-    placed = set(pos)
-    used: set = set()
-    while frontier:
-        x = frontier.pop(0)
-        for e in rest:
-            if id(e) in used or x not in (e.u, e.v):
-                continue
-            w, fwd = (e.v, True) if e.u == x else (e.u, False)
-            used.add(id(e))
-            if w in placed:
-                chords.append((x, e, fwd, w))
-            else:
-                placed.add(w)
-                tree[w] = (x, e, fwd)
-                frontier.append(w)
-    chords.extend((e.u, e, True, e.v) for e in rest if id(e) not in used)
-    need = len(all_vars - known_vars)
-    if 2 * len(chords) != need:
-        raise err(f"{len(chords)} loop(s) for {need} unknown(s) left: the sketch cannot be closed into loops "
-                  "(check the links and sliders)", "sketch")
-
-    def path_to(n: str) -> tuple:
-        out = []
-        while n in tree:
-            x, e, fwd = tree[n]
-            out.append((e, fwd))
-            n = x
-        return n, out[::-1]
-
-    for x, e, fwd, w in chords:
-        root_x, px = path_to(x)
-        root_w, pw = path_to(w)
-        path = [*px, (e, fwd), *[(pe, not pf) for pe, pf in reversed(pw)]]
-        loops[_unique(f"loop_{x}_{w}", loops)] = close(root_x, path, root_w)
-
-
-def _unique(name: str, taken) -> str:
-    k, out = 2, name
-    while out in taken:
-        out, k = f"{name}_{k}", k + 1
-    return out
 
 
 def _identifier(name: str, err, table: str) -> None:
