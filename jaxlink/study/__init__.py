@@ -6,7 +6,7 @@ Carlo with the tolerances' distributions, streamed; feasibility over the whole c
 
 - inputs: `read_study`, `StudyInputs`, `Tolerance` (the `[study]` table);
 - responses: `Responses` (points' x, y over the cycle, stroke/swing, max speed/acceleration);
-- the analysis: `tolerance`, `Study`, `ToleranceReport`, `FirstOrder`, `MonteCarlo`, `draw`;
+- the analysis: `tolerance`, `Study`, `ToleranceReport`, `FirstOrder`, `MonteCarlo`, `draw`, `draws`;
 - streamed statistics: `Moments`.
 
 docs/methods/tolerance.md gives the formulas; docs/reference/file-format.md §17 the table.
@@ -22,4 +22,5 @@ from .tolerance import MonteCarlo as MonteCarlo
 from .tolerance import Study as Study
 from .tolerance import ToleranceReport as ToleranceReport
 from .tolerance import draw as draw
+from .tolerance import draws as draws
 from .tolerance import tolerance as tolerance

@@ -140,6 +140,13 @@ def draw(inputs: StudyInputs, block: int, size: int = BLOCK) -> np.ndarray:
     return np.stack(cols, axis=1)
 
 
+def draws(inputs: StudyInputs, n: int) -> np.ndarray:
+    """(n, T) the first `n` Monte Carlo deviations of the study (blocks 0, 1, … of `draw`): the
+    samples `Study.monte_carlo` evaluates, whatever its batch size."""
+    blocks = [draw(inputs, b) for b in range(-(-n // BLOCK))]
+    return np.concatenate(blocks)[:n] if blocks else np.zeros((0, len(inputs.parameters)))
+
+
 class Study:
     """A tolerance study of one mechanism, compiled once: `first_order()` and `monte_carlo(n)`
     may be called again (warm) with nothing recompiled.
@@ -170,15 +177,39 @@ class Study:
             self._margin = jax.jit(jax.value_and_grad(self._margin_of))
         self._nominal = None
 
+    def moved(self, x0=None, inputs: StudyInputs | None = None) -> "Study":
+        """The same study around another design `x0` (T,) (the toleranced parameters, file units)
+        and/or with other tolerances `inputs` (the same parameters, positions, points and metrics):
+        the compiled functions are reused (nothing is compiled again)."""
+        import copy
+
+        new = copy.copy(self)
+        if inputs is not None:
+            same = ("parameters", "positions", "points", "metrics", "rpm")
+            if any(getattr(inputs, k) != getattr(self.inputs, k) for k in same):
+                raise ValueError(f"moved: the inputs must keep the {', '.join(same)} of the study")
+            new.inputs = inputs
+            new.sigma = np.asarray([t.sigma for t in inputs.tolerances for _ in t.parameters])
+            new.half_width = np.asarray([t.half_width for t in inputs.tolerances for _ in t.parameters])
+        if x0 is not None:
+            new.x0 = np.asarray(x0, float)
+        new._nominal = None
+        return new
+
     def _margin_of(self, x):
+        """The smallest reach margin over the cycle (`feasibility.certify`), as a function of `x`
+        for its derivative: the margin at the minimum's input held fixed (the minimum's move does not
+        count to first order)."""
         from ..analysis import feasibility as _feasibility
+        from ..solvers import dyads as _dyads
 
         r = self.responses
         p = r.params(x)
-        q0 = jnp.asarray(self._q0, p.dtype)
-        cert = _feasibility.certify(self.mech, r.dyads, jnp.asarray(r.sigma, p.dtype), q0,
-                                    jnp.asarray(r.phis, p.dtype), p)
-        return cert.margin
+        q0 = jnp.asarray(r.q_file, p.dtype)  # the angles' reference (the branches are σ)
+        sig = jnp.asarray(r.sigma, p.dtype)
+        cert = _feasibility.certify(self.mech, r.dyads, sig, q0, jnp.asarray(r.phis, p.dtype), jax.lax.stop_gradient(p))
+        where = jax.lax.stop_gradient(cert.where)
+        return jnp.min(_dyads.reach_margins(self.mech, r.dyads, sig, q0, where, p))
 
     def nominal(self):
         """(responses (M,), feasible, margin) of the nominal design."""
@@ -196,16 +227,10 @@ class Study:
         """(margin, its linear worst-case drop) of the nominal (dyad mechanisms), else (None, None)."""
         if self._margin is None:
             return None, None
-        from ..optimize.start import closed_form_start
-        from ..solvers.assemble import default_rtol
-
-        r = self.responses
-        p = jnp.asarray(self.mech.parameters)
-        tol = default_rtol(p.dtype) * self.mech.length_scale(p)
-        self._q0 = np.asarray(closed_form_start(self.mech, r.dyads, r.q_file, r.phi0, p,
-                                                jnp.asarray(r.sigma, p.dtype), tol)[0])
         m, g = self._margin(jnp.asarray(self.x0))
         g = np.asarray(g)
+        if not np.all(np.isfinite(g)):  # a margin not differentiable there (exactly at a toggle)
+            return float(m), math.inf
         return float(m), float(_group_norms(g[None], self.inputs)[0] @ _group_half_widths(self.inputs))
 
     def _certified(self, x, ok, estimate):
@@ -241,7 +266,7 @@ class Study:
         per = self.chunk // BLOCK
         for b0 in range(0, blocks, per):
             bs = range(b0, min(blocks, b0 + per))
-            dx = np.concatenate([draw(self.inputs, b) for b in bs])
+            dx = np.concatenate([draw(self.inputs, b) for b in bs])  # as `draws`
             take = min(n - b0 * BLOCK, len(dx))
             dx = dx[:take]
             x = np.empty((self.chunk, len(self.x0)))
