@@ -95,7 +95,8 @@ def test_first_order_against_the_closed_form(setup):
     # σ_RSS, worst case and importance from those derivatives (uniform: σ = t/√3; the zone: σ = r/2 per axis)
     sig = np.asarray([0.01 / math.sqrt(3), 0.01 / math.sqrt(3), 0.005, 0.005])
     Jb = rep.first_order.jacobian[_rows(rep, "B.x")]
-    np.testing.assert_allclose(rep.first_order.sigma_rss[_rows(rep, "B.x")], np.sqrt(((Jb * sig) ** 2).sum(1)), rtol=1e-12)
+    np.testing.assert_allclose(rep.first_order.sigma_rss[_rows(rep, "B.x")], np.sqrt(((Jb * sig) ** 2).sum(1)),
+                               rtol=1e-12)
     wc = 0.01 * (np.abs(Jb[:, 0]) + np.abs(Jb[:, 1]) + np.hypot(Jb[:, 2], Jb[:, 3]))
     np.testing.assert_allclose(rep.first_order.worst_case[_rows(rep, "B.x")], wc, rtol=1e-12)
     np.testing.assert_allclose(rep.first_order.importance.sum(1)[_rows(rep, "B.x")], 1.0, rtol=1e-12)
@@ -142,7 +143,8 @@ def test_infeasible_samples_are_counted_near_a_toggle(setup):
     assert 200 < expected < 2000
     assert mc.infeasible == expected and mc.feasible == 4096 - expected
     assert any("do not assemble" in w for w in rep.warnings)
-    assert any("toggle" in w for w in rep.warnings), (rep.margin, rep.margin_drop, rep.warnings)  # the margin's linear drop reaches it
+    # the margin's linear drop reaches it
+    assert any("toggle" in w for w in rep.warnings), (rep.margin, rep.margin_drop, rep.warnings)
     for v in (mc.mean_shift, mc.std, mc.low, mc.high, mc.max_abs):
         assert np.all(np.isfinite(v))
 

@@ -66,7 +66,8 @@ def cmd_study(args) -> int:
         if bar is not None:
             bar.close()
     print(f"tolerance study of {mech.name}: {len(inputs.parameters)} toleranced parameters, "
-          f"{inputs.positions} positions, {len(rep.labels)} responses; first order in {rep.timings['first_order']:.3g} s"
+          f"{inputs.positions} positions, {len(rep.labels)} responses; "
+          f"first order in {rep.timings['first_order']:.3g} s"
           + (f", Monte Carlo in {rep.timings['monte_carlo']:.3g} s" if "monte_carlo" in rep.timings else ""))
     print(_report.summary(mech, rep))
     for w in rep.warnings:

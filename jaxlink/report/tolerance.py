@@ -99,7 +99,8 @@ def manifest(mech, rep: ToleranceReport, *, wall_time: float, files: list) -> di
                         "zone": "circle" if t.zone else None} for t in inp.tolerances],
         "certificate": rep.certificate,
         "margin": rep.margin,
-        "margin_drop_linear": rep.margin_drop if rep.margin_drop is not None and math.isfinite(rep.margin_drop) else None,
+        "margin_drop_linear": (rep.margin_drop if rep.margin_drop is not None and math.isfinite(rep.margin_drop)
+                               else None),
         "monte_carlo": None if mc is None else {"samples": mc.samples, "feasible": mc.feasible,
                                                 "infeasible": mc.infeasible,
                                                 "disagree": int(np.count_nonzero(~mc.agree))},

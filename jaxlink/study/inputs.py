@@ -47,7 +47,7 @@ METRICS = ("stroke", "speed", "acceleration", "deviation")
 KNOWN_KEYS = {"method", "positions", "points", "metrics", "samples", "seed", "distribution", "k", "chunk",
               "rpm", "tolerances"}
 TOLERANCE_KEYS = {"tol", "sigma", "radius", "distribution", "k"}
-DEFAULTS = {"method": "tolerance", "positions": 360, "metrics": ("stroke", "deviation"), "samples": 10000,
+DEFAULTS: dict = {"method": "tolerance", "positions": 360, "metrics": ("stroke", "deviation"), "samples": 10000,
             "seed": 0, "distribution": "normal", "k": 3.0}
 
 
@@ -126,7 +126,7 @@ def _read_study(mech, table, overrides) -> StudyInputs:
     if default_dist not in DISTRIBUTIONS:
         raise _err(mech, f"'distribution' must be one of {', '.join(map(repr, DISTRIBUTIONS))}, got {default_dist!r}",
                    "distribution")
-    default_k = _number(mech, t, "k") if "k" in t else DEFAULTS["k"]
+    default_k = _number(mech, t, "k") if "k" in t else float(DEFAULTS["k"])
     if not default_k > 0:
         raise _err(mech, f"'k' must be > 0, got {default_k:g}", "k")
 

@@ -95,7 +95,8 @@ class Responses:
         lu, au = unit_names(mech)
         lf, af = mech.units.length, mech.units.angle
         deg = mech.from_si(mech.input_name, self.phis)
-        labels, scales = [], []
+        labels: list = []
+        scales: list = []
         for p in inputs.points:
             for c in ("x", "y"):
                 labels += [(f"{p}.{c}", lu, k) for k in range(n)]
@@ -186,6 +187,7 @@ class Responses:
             else:
                 margin = jnp.min(_feasibility.screen(mech, self.dyads, sig, q0, phis, ps))
         parts = []
+        assert sol.points is not None
         pts = sol.points[:, jnp.asarray(self.point_index, int)]  # (N, K, 2)
         parts.append(jnp.transpose(pts, (1, 2, 0)).reshape(-1))  # P.x over the cycle, P.y, next point
         for i in self.outputs:
@@ -196,9 +198,11 @@ class Responses:
         if self.order:
             t = jax.vmap(lambda q, ph: transfer_one(mech, q, ph, p, self.order))(sol.q, phis)
             if "speed" in self.inputs.metrics:
+                assert t.dpoints is not None
                 d = t.dpoints[:, jnp.asarray(self.point_index, int)]
                 parts.append(jnp.sqrt(jax.vmap(_peak, in_axes=1)(jnp.sum(d * d, axis=-1))))
             if "acceleration" in self.inputs.metrics:
+                assert t.ddpoints is not None
                 d = t.ddpoints[:, jnp.asarray(self.point_index, int)]
                 parts.append(jnp.sqrt(jax.vmap(_peak, in_axes=1)(jnp.sum(d * d, axis=-1))))
         values = jnp.concatenate(parts) * jnp.asarray(self.scales, dtype)

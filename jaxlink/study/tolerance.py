@@ -175,7 +175,7 @@ class Study:
         self._margin = None
         if r.dyads is not None:
             self._margin = jax.jit(jax.value_and_grad(self._margin_of))
-        self._nominal = None
+        self._nominal: tuple | None = None
 
     def moved(self, x0=None, inputs: StudyInputs | None = None) -> "Study":
         """The same study around another design `x0` (T,) (the toleranced parameters, file units)
