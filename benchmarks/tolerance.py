@@ -29,6 +29,7 @@ jax.config.update("jax_enable_x64", True)
 import jaxlink as jl  # noqa: E402
 from jaxlink import study as st  # noqa: E402
 
+
 def run_case(name: str, samples: int) -> dict:
     mech = jl.load(name)
     # every parameter (at most 20) made to ±0.05 in its file unit (mm or deg), normal with ±t = 3σ
