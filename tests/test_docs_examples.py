@@ -88,6 +88,10 @@ def _check_file(name: str, text: str):
         from jaxlink.optimize import OBJECTIVES, problem_from
 
         OBJECTIVES.build(problem_from(mech))
+    if "study" in mech.tables:
+        from jaxlink.study import read_study
+
+        read_study(mech)
     return mech
 
 
@@ -206,7 +210,7 @@ def _public(module):
     return sorted(n for n, v in vars(module).items() if not n.startswith("_") and not inspect.ismodule(v))
 
 
-@pytest.mark.parametrize("module", ["jaxlink", "jaxlink.optimize", "jaxlink.cam"])
+@pytest.mark.parametrize("module", ["jaxlink", "jaxlink.optimize", "jaxlink.cam", "jaxlink.study"])
 def test_python_api_names_every_export(module):
     import importlib
 
@@ -229,6 +233,10 @@ def test_file_format_names_every_table_and_key():
     expected |= {f"[{t}" for t in scene._SCHEMA} | {k for keys in scene._SCHEMA.values() for k in keys}
     expected |= set(scene._GEOMETRY_KEYS)
     expected |= set(reader.LENGTH_UNITS) | set(reader.ANGLE_UNITS)
+    from jaxlink.study import inputs as study_inputs
+
+    expected |= set(study_inputs.KNOWN_KEYS) | set(study_inputs.TOLERANCE_KEYS) | set(study_inputs.METRICS)
+    expected |= set(study_inputs.DISTRIBUTIONS) | set(study_inputs.METHODS)
     missing = sorted(k for k in expected if f"`{k}" not in text and f'"{k}"' not in text)
     assert not missing, f"docs/reference/file-format.md does not document {missing}"
 

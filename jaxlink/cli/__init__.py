@@ -27,6 +27,7 @@ COMMAND_MODULES = (
     "jaxlink.cli.cam",
     "jaxlink.cli.reactions",
     "jaxlink.cli.optimize",
+    "jaxlink.cli.study",
 )
 
 

@@ -40,7 +40,7 @@ DOMAINS = {"link length": (1e-9, 1e6), "length": (0.0, 1e6), "angle": (0.0, 1e4)
 _SI_UNIT = {"length": "m", "angle": "rad", "number": ""}
 KNOWN_TABLES = {
     "mechanism", "parameters", "input", "unknowns", "loops", "points",
-    "bodies", "joints", "loads", "environment", "optimize", "dynamics", "sketch",
+    "bodies", "joints", "loads", "environment", "optimize", "dynamics", "sketch", "study",
 }
 
 

@@ -1,0 +1,229 @@
+"""Formatting of a tolerance study (`jaxlink.study.tolerance`): the CSV files, the JSON manifest,
+the printed summary and the tolerance band around the coupler curves. Computes nothing but the
+band's geometry (the 2 × 2 covariance of each point from the first-order Jacobian).
+
+**tolerance.csv** (long form, one row per response and position): `output`, `unit` (the unit of
+every value column of the row, marked `(unit)`: the file's length unit for a point's x, y, the
+angle unit for a rocker's swing, …), `input (<input unit>)` (empty for a scalar metric),
+`nominal (unit)`, `sigma_rss (unit)`, `worst_case_linear (unit)` and with Monte Carlo
+`mc_mean_shift (unit)`, `mc_std (unit)`, `mc_std_error (unit)`, `mc_p0.135 (unit)`,
+`mc_p99.865 (unit)` (deviations from the nominal), `mc_max_abs_deviation (unit)`, `agree` (1, or 0
+where first order and Monte Carlo disagree beyond the sampling error). The rows `deviation(P)`
+(the largest distance of P's path from the nominal over the cycle) give `worst_case_linear` (the
+linear bound) and the Monte Carlo mean and largest value; a cell that has no value is empty.
+
+**importance.csv**: `output`, `input (<input unit>)`, `parameter`, `factor (1)`: (J σ)² / σ_RSS².
+"""
+
+from __future__ import annotations
+
+import csv
+import hashlib
+import json
+import math
+import pathlib
+
+import numpy as np
+
+from ..study.responses import unit_names
+from ..study.tolerance import QUANTILES, ToleranceReport
+
+
+def _g(v) -> str:
+    return "" if v is None else f"{float(v):.10g}"
+
+
+def write_tolerance_csv(path, mech, rep: ToleranceReport) -> None:
+    _, au = unit_names(mech)
+    iu = au if mech.input_kind == "angle" else unit_names(mech)[0]
+    mc = rep.monte_carlo
+    f = rep.first_order
+    head = ["output", "unit", f"input ({iu})", "nominal (unit)", "sigma_rss (unit)", "worst_case_linear (unit)"]
+    if mc is not None:
+        head += ["mc_mean_shift (unit)", "mc_std (unit)", "mc_std_error (unit)",
+                 f"mc_p{100 * QUANTILES[0]:g} (unit)", f"mc_p{100 * QUANTILES[1]:g} (unit)",
+                 "mc_max_abs_deviation (unit)", "agree"]
+    with open(path, "w", newline="", encoding="utf-8") as fh:
+        w = csv.writer(fh)
+        w.writerow(head)
+        for i, (name, unit, k) in enumerate(rep.labels):
+            row = [name, unit, "" if k is None else _g(rep.input_values[k]), _g(rep.nominal[i]),
+                   _g(f.sigma_rss[i]), _g(f.worst_case[i])]
+            if mc is not None:
+                row += [_g(mc.mean_shift[i]), _g(mc.std[i]), _g(mc.std_error[i]), _g(mc.low[i]), _g(mc.high[i]),
+                        _g(mc.max_abs[i]), str(int(mc.agree[i]))]
+            w.writerow(row)
+        lu = unit_names(mech)[0]
+        for j, p in enumerate(rep.inputs.points):
+            row = [f"deviation({p})", lu, "", "0", "", _g(rep.deviation_bound[j])]
+            if mc is not None:
+                row += [_g(mc.deviation_mean[j]), "", "", "", "", _g(mc.deviation_max[j]), ""]
+            w.writerow(row)
+
+
+def write_importance_csv(path, mech, rep: ToleranceReport) -> None:
+    _, au = unit_names(mech)
+    iu = au if mech.input_kind == "angle" else unit_names(mech)[0]
+    imp = rep.first_order.importance
+    with open(path, "w", newline="", encoding="utf-8") as fh:
+        w = csv.writer(fh)
+        w.writerow(["output", f"input ({iu})", "parameter", "factor (1)"])
+        for i, (name, _unit, k) in enumerate(rep.labels):
+            x = "" if k is None else _g(rep.input_values[k])
+            for j, p in enumerate(rep.parameters):
+                w.writerow([name, x, p, _g(imp[i, j])])
+
+
+def manifest(mech, rep: ToleranceReport, *, wall_time: float, files: list) -> dict:
+    """The JSON manifest: what was computed, from what, how long it took."""
+    from .. import __version__
+
+    lu, au = unit_names(mech)
+    src = pathlib.Path(mech.file)
+    digest = hashlib.sha256(src.read_bytes()).hexdigest() if src.is_file() else None
+    mc = rep.monte_carlo
+    inp = rep.inputs
+    out = {
+        "method": "tolerance",
+        "file": str(mech.file),
+        "file_sha256": digest,
+        "jaxlink_version": __version__,
+        "seed": inp.seed,
+        "units": {"length": lu, "angle": au, "input": au if mech.input_kind == "angle" else lu},
+        "positions": inp.positions,
+        "points": list(inp.points),
+        "metrics": list(inp.metrics),
+        "responses": len(rep.labels),
+        "tolerances": [{"name": t.name, "parameters": list(t.parameters), "kind": t.kind,
+                        "distribution": t.distribution, "half_width": t.half_width, "sigma": t.sigma,
+                        "zone": "circle" if t.zone else None} for t in inp.tolerances],
+        "certificate": rep.certificate,
+        "margin": rep.margin,
+        "margin_drop_linear": (rep.margin_drop if rep.margin_drop is not None and math.isfinite(rep.margin_drop)
+                               else None),
+        "monte_carlo": None if mc is None else {"samples": mc.samples, "feasible": mc.feasible,
+                                                "infeasible": mc.infeasible,
+                                                "disagree": int(np.count_nonzero(~mc.agree))},
+        "warnings": list(rep.warnings),
+        "timings_s": {k: round(v, 4) for k, v in rep.timings.items()},
+        "wall_time_s": round(wall_time, 3),
+        "files": files,
+    }
+    return out
+
+
+def summary(mech, rep: ToleranceReport) -> str:
+    """A table per output (the largest value over the cycle for a curve) and the counts."""
+    mc = rep.monte_carlo
+    f = rep.first_order
+    groups: dict = {}
+    for i, (name, unit, _k) in enumerate(rep.labels):
+        groups.setdefault((name, unit), []).append(i)
+    head = f"{'output':<22} {'unit':<8} {'σ_RSS max':>11} {'worst lin.':>11}"
+    head += f" {'MC σ max':>11} {'MC shift':>11}" if mc is not None else ""
+    head += "  most important"
+    lines = [head]
+    for (name, unit), idx in groups.items():
+        idx = np.asarray(idx)
+        j = idx[np.argmax(f.sigma_rss[idx])]
+        top = int(np.argmax(f.importance[j])) if f.sigma_rss[j] > 0 else None
+        row = f"{name:<22} {unit:<8} {f.sigma_rss[j]:11.4g} {f.worst_case[idx].max():11.4g}"
+        if mc is not None:
+            row += f" {mc.std[idx].max():11.4g} {mc.mean_shift[idx][np.argmax(np.abs(mc.mean_shift[idx]))]:11.4g}"
+        if top is not None:
+            row += f"  {rep.parameters[top]} ({100 * f.importance[j, top]:.0f} %)"
+        lines.append(row)
+    lu = unit_names(mech)[0]
+    for j, p in enumerate(rep.inputs.points):
+        row = f"{'deviation(' + p + ')':<22} {lu:<8} {'':>11} {rep.deviation_bound[j]:11.4g}"
+        if mc is not None:
+            row += f" {'max ' + format(mc.deviation_max[j], '.4g'):>11} {'':>11}"
+        lines.append(row)
+    if mc is not None:
+        lines.append(f"Monte Carlo: {mc.samples} samples, {mc.feasible} feasible, {mc.infeasible} infeasible "
+                     f"(feasibility: {rep.certificate})")
+    return "\n".join(lines)
+
+
+def band(rep: ToleranceReport, j: int):
+    """The nominal path (N, 2), the per-position covariance (N, 2, 2) and the normal standard
+    deviation σ_n (N,) of studied point `j` (file units)."""
+    n = rep.inputs.positions
+    a = 2 * n * j
+    J = rep.first_order.jacobian
+    jx, jy = J[a:a + n], J[a + n:a + 2 * n]
+    s2 = rep.first_order.sigma ** 2
+    cov = np.empty((n, 2, 2))
+    cov[:, 0, 0] = (jx * jx * s2).sum(1)
+    cov[:, 1, 1] = (jy * jy * s2).sum(1)
+    cov[:, 0, 1] = cov[:, 1, 0] = (jx * jy * s2).sum(1)
+    xy = np.stack([rep.nominal[a:a + n], rep.nominal[a + n:a + 2 * n]], axis=1)
+    tan = np.roll(xy, -1, 0) - np.roll(xy, 1, 0)
+    norm = np.hypot(tan[:, 0], tan[:, 1])
+    nrm = np.stack([-tan[:, 1], tan[:, 0]], axis=1) / np.where(norm > 0, norm, 1.0)[:, None]
+    sn = np.sqrt(np.maximum(np.einsum("ni,nij,nj->n", nrm, cov, nrm), 0.0))
+    return xy, cov, sn, nrm
+
+
+def plot_band(path, mech, rep: ToleranceReport, *, k: float = 3.0, ellipses: int = 12) -> None:
+    """The tolerance band of every studied point: the nominal path, the ±kσ envelope (along the
+    path's normal, σ_n² = nᵀ C n with C = J Σ Jᵀ the point's first-order covariance) and the kσ
+    ellipses of C at `ellipses` positions."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    lu = unit_names(mech)[0]
+    fig, ax = plt.subplots(figsize=(8, 6.5))
+    t = np.linspace(0, 2 * np.pi, 64)
+    bands = [band(rep, j) for j in range(len(rep.inputs.points))]
+    extent = max(float(np.ptp(b[0], axis=0).max()) for b in bands)
+    widest = max(float(k * b[2].max()) for b in bands)
+    # tolerances are small against the mechanism: magnify the deviations (a round factor, said in the title)
+    mag = 1.0
+    if widest > 0 and widest < 0.005 * extent:
+        mag = 10.0 ** math.floor(math.log10(0.03 * extent / widest))
+    circle = np.stack([np.cos(t), np.sin(t)])
+    for j, p in enumerate(rep.inputs.points):
+        xy, cov, sn, nrm = bands[j]
+        sn, cov = mag * sn, mag * mag * cov
+        line, = ax.plot(xy[:, 0], xy[:, 1], lw=1.2, label=f"{p} nominal")
+        c = line.get_color()
+        for s in (1, -1):
+            e = xy + s * k * sn[:, None] * nrm
+            ax.plot(np.append(e[:, 0], e[0, 0]), np.append(e[:, 1], e[0, 1]), lw=0.7, ls="--", color=c,
+                    label=f"{p} ±{k:g}σ envelope" if s == 1 else None)
+        for i in np.linspace(0, len(xy), ellipses, endpoint=False).astype(int):
+            w, v = np.linalg.eigh(cov[i])
+            pts = v @ (k * np.sqrt(np.maximum(w, 0.0))[:, None] * circle)
+            ax.fill(xy[i, 0] + pts[0], xy[i, 1] + pts[1], color=c, alpha=0.35, lw=0)
+    ax.set_aspect("equal", adjustable="datalim")
+    ax.set_xlabel(f"x ({lu})")
+    ax.set_ylabel(f"y ({lu})")
+    ax.set_title(f"{mech.name}: first-order {k:g}σ tolerance band, ellipses at {ellipses} input positions"
+                 + (f"\n(deviations magnified ×{mag:g})" if mag != 1 else ""), fontsize=10)
+    ax.legend(fontsize=8)
+    ax.grid(True, lw=0.3)
+    fig.tight_layout()
+    fig.savefig(path, dpi=130)
+    plt.close(fig)
+
+
+def write_all(out_dir, mech, rep: ToleranceReport, *, wall_time: float, plot: bool = True) -> list:
+    """Write tolerance.csv, importance.csv, tolerance.png (when there are points) and study.json
+    into `out_dir` (created); returns the paths written."""
+    d = pathlib.Path(out_dir)
+    d.mkdir(parents=True, exist_ok=True)
+    files = [d / "tolerance.csv", d / "importance.csv"]
+    write_tolerance_csv(files[0], mech, rep)
+    write_importance_csv(files[1], mech, rep)
+    if plot and rep.inputs.points:
+        files.append(d / "tolerance.png")
+        plot_band(files[-1], mech, rep)
+    files.append(d / "study.json")
+    data = manifest(mech, rep, wall_time=wall_time, files=[f.name for f in files])
+    files[-1].write_text(json.dumps(data, indent=2, allow_nan=False) + "\n", encoding="utf-8")
+    return [str(f) for f in files]
+
+

@@ -1,0 +1,245 @@
+"""The inputs of a study: which parameters carry a tolerance, with what distribution, and what
+the study computes — the `[study]` table of a mechanism file (or the same keys from Python).
+
+```toml
+[study]
+method = "tolerance"        # the only method of this step
+positions = 360             # input positions over the cycle (a full turn of an angle input)
+points = ["P"]              # the points whose x, y are responses (default: every point)
+metrics = ["stroke", "deviation"]   # scalar cycle metrics (default these two)
+samples = 10000             # Monte Carlo samples (0: first order only)
+seed = 0
+distribution = "normal"     # default distribution of the tolerances
+k = 3                       # default coverage: ±t = k σ for a normal tolerance
+
+[study.tolerances]          # file units
+l2 = 0.05                   # ±0.05, the table's distribution (normal, ±t = 3σ)
+l3 = { tol = 0.05, distribution = "uniform" }   # uniform on [−t, t]: σ = t / √3
+l4 = { sigma = 0.01 }       # normal, σ given (the worst case takes ±k σ)
+B0 = { radius = 0.1 }       # a circular zone of the frame pivot B0: the parameters B0_x, B0_y
+```
+
+**The meaning of ±t** (t in the parameter's file unit):
+
+- `uniform`: the value lies uniformly in [x − t, x + t]; σ = t / √3;
+- `normal` with `tol`: ±t = k σ (k from the entry, else the table's, default 3), σ = t / k;
+- `normal` with `sigma`: σ given, t = k σ (t enters only the linear worst case);
+- `uniform` with `sigma`: t = √3 σ.
+
+**A circular zone** (`radius = r`): the pivot lies in the disc of radius r around its nominal
+position, its coordinates the parameters `NAME_x`, `NAME_y` (a frame joint of a sketch file,
+file-format.md §16; in a loop file any pair so named). `uniform`: uniformly in the disc, each
+coordinate with σ = r / 2 (uncorrelated); `normal`: each coordinate normal with σ = r / k (r is
+k σ per coordinate, not a coverage of the disc). Its linear worst case is r times the length of
+the response's gradient in (x, y): the largest change over the disc, not over its bounding square.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any, Mapping, NamedTuple
+
+from ..errors import MechanismError
+
+METHODS = ("tolerance",)
+DISTRIBUTIONS = ("normal", "uniform")
+METRICS = ("stroke", "speed", "acceleration", "deviation")
+KNOWN_KEYS = {"method", "positions", "points", "metrics", "samples", "seed", "distribution", "k", "chunk",
+              "rpm", "tolerances"}
+TOLERANCE_KEYS = {"tol", "sigma", "radius", "distribution", "k"}
+DEFAULTS: dict = {"method": "tolerance", "positions": 360, "metrics": ("stroke", "deviation"), "samples": 10000,
+            "seed": 0, "distribution": "normal", "k": 3.0}
+
+
+class Tolerance(NamedTuple):
+    """One toleranced input (file units).
+
+    **Fields:** `name` (the parameter, or the frame joint of a zone), `parameters` (`(name,)`, or
+    `(NAME_x, NAME_y)` for a zone), `kind` ("length" | "angle" | "number"), `distribution`
+    ("normal" | "uniform"), `half_width` (t: the value lies in ±t for a uniform tolerance, ±t = kσ
+    for a normal one; a zone's radius), `sigma` (σ of each coordinate), `zone` (a circular zone).
+    """
+
+    name: str
+    parameters: tuple
+    kind: str
+    distribution: str
+    half_width: float
+    sigma: float
+    zone: bool = False
+
+
+class StudyInputs(NamedTuple):
+    """A study's inputs, read from `[study]` (`read_study`): `method`, `tolerances` (tuple of
+    `Tolerance`), `positions` (over the cycle), `points` (names), `metrics`, `samples` (Monte Carlo
+    designs, 0 = none),
+    `seed`, `chunk` (designs per batch, None = default), `rpm` (input speed for the speed and
+    acceleration metrics; None: per radian of the input)."""
+
+    method: str
+    tolerances: tuple
+    positions: int
+    points: tuple
+    metrics: tuple
+    samples: int
+    seed: int
+    chunk: int | None
+    rpm: float | None
+
+    @property
+    def parameters(self) -> tuple:
+        """The toleranced parameters, in order (a zone gives two)."""
+        return tuple(n for t in self.tolerances for n in t.parameters)
+
+
+def read_study(mech, table: Mapping[str, Any] | None = None, **overrides) -> StudyInputs:
+    """The study of `mech`: its `[study]` table (or `table`, the same keys), with keyword
+    `overrides` of the keys (`samples=`, `positions=`, `seed=`, `tolerances=`, …). Raises
+    `MechanismError` naming the file, line and key for anything wrong."""
+    try:
+        return _read_study(mech, table, overrides)
+    except MechanismError as e:
+        raise _located(e) from None
+
+
+def _read_study(mech, table, overrides) -> StudyInputs:
+    raw = mech.tables.get("study") if table is None else table
+    if raw is not None and not isinstance(raw, Mapping):
+        raise _err(mech, f"[study] must be a table of keys, got {raw!r}")
+    t = dict(raw or {})
+    t.update({k: v for k, v in overrides.items() if v is not None})
+    for k in t:
+        if k not in KNOWN_KEYS:
+            raise _err(mech, f"unknown key '{k}'; known keys: {', '.join(sorted(KNOWN_KEYS))}", k)
+    method = t.get("method", DEFAULTS["method"])
+    if method not in METHODS:
+        raise _err(mech, f"'method' must be one of {', '.join(map(repr, METHODS))} (the others are not yet "
+                         f"built), got {method!r}", "method")
+    positions = _integer(mech, t, "positions", 8, 100_000)
+    samples = _integer(mech, t, "samples", 0, 10**10)
+    seed = _integer(mech, t, "seed", 0, 2**32 - 1)
+    chunk = _integer(mech, t, "chunk", 1, 10**7) if "chunk" in t else None
+    rpm = _number(mech, t, "rpm") if "rpm" in t else None
+    if rpm is not None and rpm <= 0:
+        raise _err(mech, f"'rpm' must be > 0, got {rpm:g}", "rpm")
+    default_dist = t.get("distribution", DEFAULTS["distribution"])
+    if default_dist not in DISTRIBUTIONS:
+        raise _err(mech, f"'distribution' must be one of {', '.join(map(repr, DISTRIBUTIONS))}, got {default_dist!r}",
+                   "distribution")
+    default_k = _number(mech, t, "k") if "k" in t else float(DEFAULTS["k"])
+    if not default_k > 0:
+        raise _err(mech, f"'k' must be > 0, got {default_k:g}", "k")
+
+    points = t.get("points", list(mech.point_names))
+    if isinstance(points, str):
+        points = [points]
+    if not isinstance(points, (list, tuple)) or not all(isinstance(p, str) for p in points):
+        raise _err(mech, f"'points' must be a list of point names, got {points!r}", "points")
+    for p in points:
+        if p not in mech.point_names:
+            raise _err(mech, f"unknown point '{p}'; points: {', '.join(mech.point_names) or '(none)'}", "points")
+    metrics = t.get("metrics", DEFAULTS["metrics"])
+    if isinstance(metrics, str):
+        metrics = [metrics]
+    if not isinstance(metrics, (list, tuple)) or any(m not in METRICS for m in metrics):
+        raise _err(mech, f"'metrics' must be a list of {', '.join(map(repr, METRICS))}, got {metrics!r}", "metrics")
+
+    tol_raw = t.get("tolerances")
+    if not isinstance(tol_raw, Mapping) or not tol_raw:
+        raise _err(mech, "[study.tolerances] must give at least one tolerance: NAME = t, or NAME = { tol = t, "
+                         "distribution = \"uniform\" }, { sigma = s } or { radius = r } (a pivot's zone)",
+                   "tolerances")
+    tolerances = []
+    seen: set = set()
+    for name, entry in tol_raw.items():
+        tol = _tolerance(mech, name, entry, default_dist, default_k)
+        for p in tol.parameters:
+            if p in seen:
+                raise _err(mech, f"'{p}' carries two tolerances", f"tolerances.{name}")
+            seen.add(p)
+        tolerances.append(tol)
+    return StudyInputs(method, tuple(tolerances), positions, tuple(points), tuple(dict.fromkeys(metrics)),
+                       samples, seed, chunk, rpm)
+
+
+def _tolerance(mech, name: str, entry, default_dist: str, default_k: float) -> Tolerance:
+    key = f"tolerances.{name}"
+    if isinstance(entry, bool) or not isinstance(entry, (int, float, Mapping)):
+        raise _err(mech, f"a tolerance is a number (±t) or a table {{ tol = t, sigma = s, radius = r, "
+                         f"distribution = ..., k = ... }}, got {entry!r}", key)
+    e = {"tol": entry} if not isinstance(entry, Mapping) else dict(entry)
+    for k in e:
+        if k not in TOLERANCE_KEYS:
+            raise _err(mech, f"unknown key '{k}' of a tolerance; known: {', '.join(sorted(TOLERANCE_KEYS))}", key)
+    dist = e.get("distribution", default_dist)
+    if dist not in DISTRIBUTIONS:
+        raise _err(mech, f"'distribution' must be one of {', '.join(map(repr, DISTRIBUTIONS))}, got {dist!r}", key)
+    k = _number(mech, e, "k", key) if "k" in e else default_k
+    if not k > 0:
+        raise _err(mech, f"'k' must be > 0, got {k:g}", key)
+    given = [g for g in ("tol", "sigma", "radius") if g in e]
+    if len(given) != 1:
+        raise _err(mech, "give exactly one of 'tol' (±t), 'sigma' (σ) or 'radius' (a pivot's circular zone)", key)
+    value = _number(mech, e, given[0], key)
+    if not value > 0:
+        raise _err(mech, f"'{given[0]}' must be > 0, got {value:g}", key)
+    if given[0] == "radius":
+        pair = (f"{name}_x", f"{name}_y")
+        if not all(p in mech.parameter_names for p in pair):
+            raise _err(mech, f"a circular zone needs the pivot's coordinates {pair[0]}, {pair[1]} as parameters "
+                             f"(a frame joint of a sketch file); parameters: {', '.join(mech.parameter_names)}", key)
+        if any(mech.kinds[p] != "length" for p in pair):
+            raise _err(mech, f"{pair[0]}, {pair[1]} must be lengths", key)
+        sigma = value / 2.0 if dist == "uniform" else value / k
+        return Tolerance(name, pair, "length", dist, value, sigma, True)
+    if name not in mech.parameter_names:
+        derived = [d[0] for d in mech.derived]
+        why = " (derived: tolerance the parameters it is computed from)" if name in derived else ""
+        raise _err(mech, f"'{name}' is not a parameter{why}; parameters: {', '.join(mech.parameter_names)}", key)
+    if given[0] == "tol":
+        t = value
+        sigma = t / math.sqrt(3.0) if dist == "uniform" else t / k
+    else:
+        sigma = value
+        t = math.sqrt(3.0) * sigma if dist == "uniform" else k * sigma
+    return Tolerance(name, (name,), mech.kinds[name], dist, t, sigma, False)
+
+
+def _located(e: MechanismError) -> MechanismError:
+    """`e` with the line of its `[study]` key in its file (read again), when it can be found."""
+    if e.line is not None or not e.file or not (e.key or "").startswith("study"):
+        return e
+    from ..files.locator import Locator
+    from ..files.source import read_source
+
+    try:
+        _, text = read_source(e.file)
+    except (MechanismError, OSError):
+        return e
+    loc = Locator(text)
+    parts = (e.key or "").split(".")
+    line = None
+    if len(parts) >= 3:
+        line = loc.line(".".join(parts[:2]), parts[2]) or loc.line(parts[0], parts[1])
+    elif len(parts) == 2:
+        line = loc.line(parts[0], parts[1])
+    line = line or loc.line(parts[0])
+    return MechanismError(e.reason, file=e.file, line=line, key=e.key) if line else e
+
+
+def _err(mech, msg: str, key: str | None = None) -> MechanismError:
+    return MechanismError(msg, file=mech.file, key="study" + (f".{key}" if key else ""))
+
+
+def _integer(mech, t, key: str, lo: int, hi: int) -> int:
+    v = t.get(key, DEFAULTS.get(key))
+    if isinstance(v, bool) or not isinstance(v, int) or not lo <= v <= hi:
+        raise _err(mech, f"'{key}' must be an integer from {lo} to {hi:g}, got {v!r}", key)
+    return int(v)
+
+
+def _number(mech, t, key: str, where: str | None = None) -> float:
+    v = t.get(key)
+    if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(float(v)) or abs(v) > 1e15:
+        raise _err(mech, f"'{key}' must be a finite number, got {v!r}", where or key)
+    return float(v)
