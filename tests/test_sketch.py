@@ -420,3 +420,22 @@ def test_a_triad_is_closed_by_newton_and_matches_scipy():
     assert bool(np.all(sol.converged))
     got = np.asarray(sol.points)[:, [mech.point_names.index(n) for n in "BCD"]].reshape(len(phis), 6)
     assert np.abs(got - np.asarray(ref)).max() < 1e-10
+
+
+def test_a_designs_sketch_file_moves_the_joints_and_reads_back_as_the_design():
+    """The best file of a search on a sketch (`optimize.best_file.file_text`): the joints moved to
+    where the design puts them at the start; read back, the same dimensions and branch."""
+    from jaxlink.optimize.best_file import file_text
+
+    text = (SCENES / "four-bar-sketch.toml").read_text()
+    mech = jl.loads(text, file="fbs.toml")
+    p = np.asarray(mech.with_parameters(coupler=64.0, coupler_P=40.0, coupler_P_angle=20.0, B0_y=3.0))
+    q = np.asarray(jl.solve(mech, np.asarray([mech.input_start]), p).q[0])
+    out = file_text(mech, p, q, text)
+    assert "[parameters]" not in out and "# the coupler point" in out  # joints moved, comments kept
+    back = jl.loads(out)
+    np.testing.assert_allclose(back.parameters, p, rtol=1e-12, atol=1e-15)
+    np.testing.assert_allclose(back.guess, q, rtol=1e-12)
+    phis = np.linspace(0.0, 2 * np.pi, 13)
+    a, b = jl.solve(mech, phis, p).points, jl.solve(back, phis).points
+    assert np.abs(np.asarray(a) - np.asarray(b)).max() < 1e-12 * 0.1

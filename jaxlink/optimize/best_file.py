@@ -14,7 +14,9 @@ guesses at `[input] start`. So the best file is the input file's text with
    start` in steps of at most 5° when the two differ.
 
 Only the numbers are edited, on the lines the reader's `Locator` (`jaxlink/files/locator.py`)
-finds, so comments and layout stay. A value written as `NAME = number` or
+finds, so comments and layout stay. A sketch file (`[sketch]`) has no parameters to edit: its
+joints are moved to where the design puts them at `[input] start` on the search's circuit — the
+sketch's pose carries both its dimensions and its branch. A value written as `NAME = number` or
 `NAME = { value = number, unit = "..." }` on one line is edited; any other layout raises
 `MechanismError` (the file cannot be rewritten without losing its layout).
 """
@@ -110,6 +112,8 @@ def file_text(mech: Mechanism, p, q, text: str | None = None) -> str:
     lines = text.splitlines()
     p = np.asarray(p, dtype=float)
     q = np.asarray(q, dtype=float)
+    if mech.sketch is not None:
+        return _sketch_text(mech, p, q, text, loc, lines)
     p0 = np.asarray(original.parameters, dtype=float)
     for k, name in enumerate(mech.parameter_names):
         if p[k] != p0[original.parameter_index(name)]:
@@ -125,6 +129,33 @@ def file_text(mech: Mechanism, p, q, text: str | None = None) -> str:
     if not (np.allclose(back.parameters, p, rtol=1e-14, atol=0) and np.allclose(back.guess, q, rtol=1e-14,
                                                                                    atol=1e-300)):
         raise MechanismError("the rewritten file does not read back as the design (internal error)",
+                             file=mech.file)
+    return out
+
+
+_JOINT = re.compile(r"^(?P<head>\s*[\"']?(?P<key>[A-Za-z_][A-Za-z0-9_]*)[\"']?\s*=\s*\[\s*)(?P<x>" + _NUMBER
+                    + r")(?P<mid>\s*,\s*)(?P<y>" + _NUMBER + r")(?P<tail>\s*\].*)$")
+
+
+def _sketch_text(mech: Mechanism, p, q, text: str, loc: Locator, lines: list) -> str:
+    """A sketch file with the design: every joint moved to where the design puts it at `[input]
+    start` on the circuit of `q` (the sketch's pose is its dimensions and its branch)."""
+    xy = np.asarray(mech.joint_positions(jnp.asarray(q), jnp.asarray(mech.input_start), jnp.asarray(p)),
+                    dtype=float) / float(mech.units.length)
+    for (name, _), (x, y) in zip(mech.sketch.joints, xy):
+        i = loc.line("sketch.joints", name) or loc.line("sketch", "joints", item=name)
+        m = _JOINT.match(lines[i - 1]) if i is not None else None
+        if m is None or m.group("key") != name:
+            raise MechanismError(f"cannot rewrite joint '{name}': write it as '{name} = [x, y]' on one line",
+                                 file=mech.file, line=i, key=f"sketch.joints.{name}")
+        lines[i - 1] = (m.group("head") + _number(x) + m.group("mid") + _number(y) + m.group("tail"))
+    out = "\n".join(lines) + ("\n" if text.endswith("\n") else "")
+    back = loads(out, file=mech.file or "<string>")
+    # the dimensions come back from the coordinates (hypot, atan2) to the last digits
+    scale = float(np.max(np.abs(p))) if p.size else 1.0
+    if not (np.allclose(back.parameters, p, rtol=1e-12, atol=1e-12 * scale)
+            and np.allclose(back.guess, q, rtol=1e-12, atol=1e-12)):
+        raise MechanismError("the rewritten sketch does not read back as the design (internal error)",
                              file=mech.file)
     return out
 
