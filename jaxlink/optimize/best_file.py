@@ -145,7 +145,7 @@ def _sketch_text(mech: Mechanism, p, q, text: str, loc: Locator, lines: list) ->
     for (name, _), (x, y) in zip(mech.sketch.joints, xy):
         i = loc.line("sketch.joints", name) or loc.line("sketch", "joints", item=name)
         m = _JOINT.match(lines[i - 1]) if i is not None else None
-        if m is None or m.group("key") != name:
+        if i is None or m is None or m.group("key") != name:
             raise MechanismError(f"cannot rewrite joint '{name}': write it as '{name} = [x, y]' on one line",
                                  file=mech.file, line=i, key=f"sketch.joints.{name}")
         lines[i - 1] = (m.group("head") + _number(x) + m.group("mid") + _number(y) + m.group("tail"))
