@@ -126,8 +126,10 @@ def _zeros(ev, lo, hi, col, iterations: int = 60):
 
 
 def _extremes(ev, grid, v, col, sign):
-    """The least (sign 1) or largest (sign −1) q′ of each output, refined by golden section."""
-    k = np.argmin(sign * v, axis=0)
+    """The least (sign 1) or largest (sign −1) q′ of output `col[i]` (`sign[i]`, so that both
+    extremes of every output refine at once), refined by golden section."""
+    vs = sign * v[:, col]
+    k = np.argmin(vs, axis=0)
     n = grid.shape[0] - 1
     a, b = grid[np.maximum(k - 1, 0)], grid[np.minimum(k + 1, n)]
     x1, x2 = b - _GOLD * (b - a), a + _GOLD * (b - a)
@@ -143,7 +145,7 @@ def _extremes(ev, grid, v, col, sign):
         x1, x2 = nx1, nx2
     best_x = np.where(f1 <= f2, x1, x2)
     best = np.minimum(f1, f2)
-    samp = sign * v[k, col]
+    samp = vs[k, np.arange(len(col))]
     return np.where(samp < best, samp, best) * sign, np.where(samp < best, grid[k], best_x)
 
 
@@ -172,8 +174,8 @@ def outputs(mech: Mechanism, dyads, sigma, q0, phis, p) -> list:
     ks, cs = np.nonzero((v[:-1] * v[1:] < 0) | ((v[:-1] == 0) & (v[1:] != 0)))
     roots = _zeros(ev, grid[ks], grid[ks + 1], cs) if ks.size else np.zeros(0)
     vals = ev(roots, cs)[0] if ks.size else np.zeros(0)
-    vmin, vmin_at = _extremes(ev, grid, v, cols, 1.0)
-    vmax, vmax_at = _extremes(ev, grid, v, cols, -1.0)
+    ext, ext_at = _extremes(ev, grid, v, np.concatenate([cols, cols]), np.repeat([1.0, -1.0], m))
+    vmin, vmin_at, vmax, vmax_at = ext[:m], ext_at[:m], ext[m:], ext_at[m:]
     out = []
     for j, name in enumerate(names):
         if not keep[j]:
