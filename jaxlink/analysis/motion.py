@@ -209,11 +209,11 @@ def motion(mech: Mechanism, p=None, *, samples: int = 3600) -> Motion | None:
     trans = []
     js = tuple(j for j, d in enumerate(dyads) if d.kind == "RRR")
     if js:
-        def f(x):
-            return traced("motion_cos_mu", _cos_mus, (_arg(mech, p), sigma, q0, np.asarray(x), p), (js,))
+        def f(x):  # (len(js), len(x)), numpy (indexing a JAX array would dispatch an operation)
+            return np.asarray(traced("motion_cos_mu", _cos_mus, (_arg(mech, p), sigma, q0, np.asarray(x), p), (js,)))
 
         grid = np.linspace(lo_end, hi_end, samples + 1)
-        c = np.asarray(f(grid))  # (len(js), samples + 1)
+        c = f(grid)  # (len(js), samples + 1)
         # the pairs (dyad, extreme): μ max where cos μ is least (sign 1), μ min where it is largest
         row = np.repeat(np.arange(len(js)), 2)
         sign = np.tile([1.0, -1.0], len(js))
