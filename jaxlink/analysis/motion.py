@@ -162,9 +162,12 @@ def _golden(f, a, b, c0, x0, sign, iterations: int = 60):
     best, best_x = [], []
     for i in rows:  # the least of the sample and the two refined points (the first on a tie)
         cands = [(c0[i], x0[i]), (f1[i] * sign[i], x1[i]), (f2[i] * sign[i], x2[i])]
-        v, x = min(cands, key=lambda t, s=sign[i]: s * t[0])
-        best.append(v)
-        best_x.append(x)
+        k = 0
+        for n in (1, 2):
+            if sign[i] * cands[n][0] < sign[i] * cands[k][0]:
+                k = n
+        best.append(cands[k][0])
+        best_x.append(cands[k][1])
     return np.asarray(best), np.asarray(best_x)
 
 

@@ -26,7 +26,6 @@ samples refined by golden-section search (60 reductions of a two-sample bracket)
 
 from __future__ import annotations
 
-
 import jax
 import jax.numpy as jnp
 import numpy as np

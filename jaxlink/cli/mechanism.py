@@ -537,10 +537,10 @@ def cmd_check(args) -> int:
     p = np.asarray(mech.parameters, dtype)  # the solve in the asked dtype
     from ..cache import traced
 
-    q, code, resid, steps, jac = (np.asarray(x) for x in traced(
+    q, result, resid, steps, jac = (np.asarray(x) for x in traced(
         "check_start", _start_arrays, (mech.replace(parameters=p, guess=np.asarray(mech.guess, dtype)),
                                        np.asarray(mech.input_start, dtype), p)))
-    code = int(code)
+    code = int(result)
     cond = np.linalg.cond(jac)
     how = ("closed-form dyads" if method_for(mech, NewtonOptions()) == "closed_form"
            else f"{int(steps)} Newton steps")
