@@ -8,12 +8,10 @@ The names below are imported when first used (PEP 562): a command that only chec
 `[optimize]` table (`jaxlink check`, `kinematics`) imports `problem` alone, not the searches
 and their optimizer library (about 0.1 s of its start-up)."""
 
-from __future__ import annotations
+import importlib as _importlib
+import typing as _typing
 
-import importlib
-from typing import TYPE_CHECKING
-
-if TYPE_CHECKING:
+if _typing.TYPE_CHECKING:
     from .distributed import initialize_distributed as initialize_distributed
     from .evaluator import Evaluator as Evaluator
     from .objectives import OBJECTIVES as OBJECTIVES
@@ -41,7 +39,7 @@ __all__ = list(_WHERE)
 
 def __getattr__(name: str):
     if name in _WHERE:
-        value = getattr(importlib.import_module(_WHERE[name], __name__), name)
+        value = getattr(_importlib.import_module(_WHERE[name], __name__), name)
         globals()[name] = value
         return value
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
