@@ -5,12 +5,16 @@ all in one run.
 1. **Latency.** `jaxlink kinematics sewing-feed --rpm 2500 --csv f.csv` twice with
    `JAXLINK_CACHE_DIR` set to a fresh directory (cold: compiles and fills the cache; warm: loads
    the compiled code), and once with the cache off (`JAXLINK_CACHE_DIR=""`).
+   **`check` latency** (issue 24: ≤ 2 s cold, ≤ 1 s warm on 2 cores): `jaxlink check four-bar`
+   and `jaxlink check whitworth`, each `--runs` times (default 5) with a fresh cache directory
+   (cold) and again with it filled (warm); the median and the range of each, with the load
+   average (1 min) before and after, since the machine may be shared.
 2. **Search rate.** `jaxlink optimize sewing-feed-opt --method montecarlo --budget B --progress off
    --out R.json` (B = 3e6; `--quick` 3e5): peak resident memory of the process, and the search's
    positions/s (evaluations × samples / `search_wall_s`, or `wall_s` where the JSON has no
    `search_wall_s`) against `throughput.py --quick --jaxlink-only` positions/s in the same run.
 
-    python benchmarks/system.py [--quick] [--json OUT]
+    python benchmarks/system.py [--quick] [--latency-only] [--runs N] [--json OUT]
 """
 
 from __future__ import annotations
@@ -18,6 +22,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import statistics
 import subprocess
 import sys
 import tempfile
@@ -44,10 +49,41 @@ def timed(args, env, cwd):
     return wall, (peak[-1] / 1024 if peak else float("nan")), r
 
 
+def check_latency(cli, tmp, runs: int, scenes=("four-bar", "whitworth")) -> dict:
+    """`jaxlink check SCENE` cold (a fresh cache directory) then warm (the same again), `runs`
+    times per scene, alternating the scenes: the median and range of each, the load average."""
+    times: dict = {s: {"cold": [], "warm": []} for s in scenes}
+    ok = True
+    load_before = os.getloadavg()[0]
+    for i in range(runs):
+        for scene in scenes:
+            env = dict(os.environ, JAXLINK_CACHE_DIR=os.path.join(tmp, f"check-{scene}-{i}"))
+            for kind in ("cold", "warm"):
+                wall, _, r = timed(cli + ["check", scene], env, tmp)
+                times[scene][kind].append(wall)
+                ok = ok and r.returncode == 0
+    load_after = os.getloadavg()[0]
+    out: dict = {"runs": runs, "load_1min_before": load_before, "load_1min_after": load_after,
+                 "cpus": len(os.sched_getaffinity(0)), "ok": ok}
+    for scene in scenes:
+        out[scene] = {f"{k}_{stat}": f(v) for k, v in times[scene].items()
+                      for stat, f in (("median_s", statistics.median), ("min_s", min), ("max_s", max))}
+        out[scene].update({f"{k}_s": v for k, v in times[scene].items()})
+        c, w = out[scene]["cold_median_s"], out[scene]["warm_median_s"]
+        print(f"check {scene}: cold {c:.2f} s ({min(times[scene]['cold']):.2f}–{max(times[scene]['cold']):.2f}), "
+              f"warm {w:.2f} s ({min(times[scene]['warm']):.2f}–{max(times[scene]['warm']):.2f}), median of {runs}; "
+              f"goal ≤ 2 s cold, ≤ 1 s warm", flush=True)
+    print(f"check latency: load average (1 min) {load_before:.2f} before, {load_after:.2f} after, "
+          f"{out['cpus']} cores{'' if ok else '  (a run failed)'}", flush=True)
+    return out
+
+
 def main(argv=None) -> dict:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--quick", action="store_true", help="a 3e5-design search instead of 3e6")
+    ap.add_argument("--latency-only", action="store_true", help="the latency figures only (no search)")
+    ap.add_argument("--runs", type=int, default=5, help="runs of each `check` latency (default 5; the median)")
     ap.add_argument("--json", metavar="OUT", help="write the results as JSON (default: benchmarks/results/latest/)")
     args = ap.parse_args(argv)
     out: dict = {}
@@ -65,6 +101,13 @@ def main(argv=None) -> dict:
                           "warm_s": warm, "uncached_s": off, "warm_over_cold": warm / cold, "ok": ok}
         print(f"latency: cold {cold:.2f} s, warm {warm:.2f} s ({100 * warm / cold:.0f} % of cold), "
               f"cache off {off:.2f} s{'' if ok else '  (a run failed)'}", flush=True)
+        out["check_latency"] = check_latency(cli, tmp, args.runs)
+        if args.latency_only:
+            path = args.json or default_output("system-latency.json")
+            with open(path, "w") as f:
+                json.dump(out, f, indent=1)
+            print(f"wrote {path}")
+            return out
 
         # 2. the raw rate, then the search
         tp_json = os.path.join(tmp, "tp.json")

@@ -97,7 +97,9 @@ def source_digest() -> str:
     return _SOURCE_DIGEST[0]
 
 
-_LOADED: dict = {}  # in this process: the key text -> a jitted callable of the flat leaves
+# in this process: the key text, and (name, fun, tree structure, static, shapes and dtypes, x64 mode)
+# of a call made before -> a jitted callable of the flat leaves
+_LOADED: dict = {}
 _LOADED_MAX = 256
 
 
@@ -144,6 +146,34 @@ def _trace_path(key: str) -> str | None:
     return os.path.join(folder, "trace-" + hashlib.sha256(key.encode()).hexdigest()[:40] + TRACE_SUFFIX)
 
 
+def stored_traces() -> bool:
+    """Whether `traced` stores and loads programs here (the compilation cache is on)."""
+    import jax
+
+    return bool(getattr(jax.config, "jax_compilation_cache_dir", None))
+
+
+_ONE_COMMAND: list = []
+
+
+@__import__("contextlib").contextmanager
+def one_command():
+    """While a command of the command line runs (`jaxlink.cli.main`): small steps that a library
+    session evaluates as it goes — each operation compiled once per process and kept, cheap for a
+    long session, a fresh compilation for every new mechanism when traced — become stored programs
+    too (`in_one_command`), since a short process pays for every operation it dispatches."""
+    _ONE_COMMAND.append(True)
+    try:
+        yield
+    finally:
+        _ONE_COMMAND.pop()
+
+
+def in_one_command() -> bool:
+    """Inside `one_command` with the stored traces on."""
+    return bool(_ONE_COMMAND) and stored_traces()
+
+
 def traced(name: str, fun, args: tuple, static: tuple = ()):
     """`fun(*args, *static)` under `jax.jit`, through a stored trace when the compilation cache is
     on (`enable_compilation_cache`): the first call traces `fun`, stores the program in the cache
@@ -156,22 +186,64 @@ def traced(name: str, fun, args: tuple, static: tuple = ()):
     leaves), every static option through `static` (hashable values whose `repr` identifies them).
     When the stored trace cannot be written or read, it is `jax.jit` of the same function."""
     import jax
+    import numpy as np
 
     if getattr(fun, "__closure__", None) or not hasattr(fun, "__qualname__") or "<locals>" in fun.__qualname__:
         raise TypeError(f"traced({name!r}): {fun!r} must be a module-level function without a closure "
                         "(pass every number as an argument, every option in `static`)")
     leaves, treedef = jax.tree_util.tree_flatten(args)
-    key = key_text(name, fun, treedef, tuple(static), leaves)
-    call = _LOADED.get(key)
+    static = tuple(static)
+    # a call like one made before in this process (a search's many small calls) skips the key text
+    fast = (name, fun, treedef, static, tuple((np.shape(a), np.result_type(a)) for a in leaves),
+            bool(jax.config.read("jax_enable_x64")))
+    call = _LOADED.get(fast)
     if call is None:
-        def flat(*xs):
-            return fun(*jax.tree_util.tree_unflatten(treedef, xs), *static)
+        key = key_text(name, fun, treedef, static, leaves)
+        call = _LOADED.get(key)
+        if call is None:
+            def flat(*xs):
+                return fun(*jax.tree_util.tree_unflatten(treedef, xs), *static)
 
-        call = _load_or_store(flat, leaves, key, _trace_path(key))
-        if len(_LOADED) >= _LOADED_MAX:
-            _LOADED.pop(next(iter(_LOADED)))
-        _LOADED[key] = call
+            call, lapack = _load_or_store(flat, leaves, key, _trace_path(key))
+            _remember(key, call)
+            _remember(fast, call)
+            if not lapack:  # its first call lowers it: without JAX's LAPACK set-up, which it does not use
+                with _without_lapack_setup():
+                    return call(*leaves)
+        _remember(fast, call)
     return call(*leaves)
+
+
+def _remember(key, call) -> None:
+    if len(_LOADED) >= _LOADED_MAX:
+        _LOADED.pop(next(iter(_LOADED)))
+    _LOADED[key] = call
+
+
+# JAX sets up its LAPACK kernels (importing scipy.linalg: 0.2–0.4 s, a third of a warm `check`)
+# whenever it lowers a call of an exported program on the CPU, whether or not the program uses
+# LAPACK. A stored program that names no LAPACK kernel (no `lapack` in its serialized module,
+# where every custom call's target is written out) is lowered without it; one that does, as JAX
+# does it. (JAX's own lowering of a LAPACK-using function sets them up itself.)
+_LAPACK_NAME = b"lapack"
+
+
+@__import__("contextlib").contextmanager
+def _without_lapack_setup():
+    try:
+        from jax._src.export import _export
+    except ImportError:  # another JAX: nothing to skip
+        yield
+        return
+    ensure = getattr(_export, "_ensure_backends_initialized", None)
+    if ensure is None:
+        yield
+        return
+    _export._ensure_backends_initialized = lambda platforms: None
+    try:
+        yield
+    finally:
+        _export._ensure_backends_initialized = ensure
 
 
 def _pack(key: str, data: bytes | bytearray) -> bytes:
@@ -203,10 +275,12 @@ def _unpack(key: str, blob: bytes) -> bytes | None:
 
 
 def _load_or_store(flat, leaves, key: str, path: str | None):
+    """`(callable, uses_lapack)`: the stored program of `key` at `path`, else `flat` traced,
+    exported and stored there (a plain `jax.jit` where it cannot be)."""
     import jax
 
     if path is None:
-        return jax.jit(flat)
+        return jax.jit(flat), True
     from jax import export
 
     if os.path.exists(path):
@@ -216,14 +290,14 @@ def _load_or_store(flat, leaves, key: str, path: str | None):
             if stored is not None:
                 exp = export.deserialize(bytearray(stored))
                 if _spec(leaves) == tuple((tuple(a.shape), str(a.dtype)) for a in exp.in_avals):
-                    return jax.jit(exp.call)
+                    return jax.jit(exp.call), _LAPACK_NAME in stored
         except Exception:  # noqa: BLE001 (a stale or damaged file: trace again and replace it)
             pass
     try:
         exp = export.export(jax.jit(flat))(*leaves)
         data = exp.serialize()
     except Exception:  # noqa: BLE001 (cannot be exported or serialized here: no stored trace)
-        return jax.jit(flat)
+        return jax.jit(flat), True
     tmp = f"{path}.{os.getpid()}.tmp"
     try:
         with open(tmp, "wb") as fh:
@@ -232,4 +306,4 @@ def _load_or_store(flat, leaves, key: str, path: str | None):
     except OSError:
         if os.path.exists(tmp):
             os.unlink(tmp)
-    return jax.jit(exp.call)
+    return jax.jit(exp.call), _LAPACK_NAME in data

@@ -10,7 +10,9 @@ traces of the ones that follow it in the list) and *off* (`JAXLINK_CACHE_DIR=""`
 pairs of files of one structure that differ only in numbers: today's cache bug (a stored trace
 keyed by the structure alone, with the guesses baked in) made the second of a pair print the
 first's branch. `test_a_wrong_key_is_caught` runs the same comparison with the key deliberately
-blind to the arguments' structure and asserts that it fails — the test can fail."""
+blind to the arguments' structure and asserts that it fails — the test can fail (for the table
+of `kinematics` and for every stored program of `check`: the file's check at its guesses, the
+start, the turn, the transmission angles, the outputs' jets)."""
 
 from __future__ import annotations
 
@@ -114,6 +116,11 @@ def _commands(paths: dict) -> list:
         ("slider", ["kinematics", "slider-crank", "--count", "8", "--step", "45", "--csv", "{OUT}/slider.csv"]),
         ("reactions", ["reactions", "slider-crank-mass", "--count", "8", "--step", "45", "--rpm", "600",
                        "--csv", "{OUT}/reactions.csv"]),
+        # the designer's numbers through every stored program of `check` (issue 24, start-up): a
+        # triple-rocker of A's structure (limit positions: branch points, bisection on the reach
+        # margins) and the Whitworth quick return (RPR and RRP dyads, a slider's stroke)
+        ("check-rocker", ["check", a, "--set", "d=90"]),
+        ("check-whitworth", ["check", "whitworth"]),
     ]
     # a small search, then its best file (another four-bar file of the structure ran before it)
     y = str(paths["yu1"])
@@ -250,6 +257,10 @@ def test_the_variants_give_their_own_numbers(runs):
     np.testing.assert_allclose(rows["D"]["P_x_m"], rows["A"]["P_x_m"], rtol=0, atol=1e-15)
     assert not np.allclose(rows["A"]["P_x_m"], rows["E"]["P_x_m"])
     assert out["off"]["set-b.csv"] != out["off"]["kin-A.csv"]
+    # the triple-rocker's limits: ±acos((a² + d² − (b + c)²) / (2ad)), printed to 10 digits
+    limit = np.degrees(np.arccos((20.0**2 + 90.0**2 - 105.0**2) / (2 * 20.0 * 90.0)))
+    assert f"phi2 from {-limit:.10g}° to {limit:.10g}° (limit positions" in out["off"]["check-rocker.txt"]
+    assert "turns fully" in out["off"]["check-A.txt"] and "time ratio" in out["off"]["check-whitworth.txt"]
     f32 = np.genfromtxt(out["off"]["f32.csv"].splitlines(), delimiter=",", names=True)
     assert not np.array_equal(f32["P_x_m"], rows["A"]["P_x_m"])  # float32 numbers ...
     np.testing.assert_allclose(f32["P_x_m"], rows["A"]["P_x_m"], rtol=0, atol=1.2e-4 * 0.06)  # ... near float64
@@ -330,6 +341,7 @@ def test_a_wrong_key_is_caught(runs):
     mechanism's `Structure.key`: E's frame angle inside its loop) must find differences: the
     differential test would fail on such a key."""
     tmp, _, cmds, out = runs
-    cmds = [c for c in cmds if c[0] in ("kin-A", "kin-E")]
+    cmds = [c for c in cmds if c[0] in ("kin-A", "kin-E", "check-A", "check-E")]
     blind = _run(tmp / "blind", cmds, tmp / "blind-xla", blind=True)
-    assert _differences(blind, {k: v for k, v in out["off"].items() if k in blind}) == ["kin-E.csv", "kin-E.txt"]
+    assert _differences(blind, {k: v for k, v in out["off"].items() if k in blind}) == [
+        "check-E.txt", "kin-E.csv", "kin-E.txt"]

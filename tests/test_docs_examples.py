@@ -207,7 +207,9 @@ def test_python_example(name, code, where, tmp_path, monkeypatch, capsys):
 
 
 def _public(module):
-    return sorted(n for n, v in vars(module).items() if not n.startswith("_") and not inspect.ismodule(v))
+    # a package that imports its names when first used (`jaxlink.optimize`) lists them in `__all__`
+    names = {n for n, v in vars(module).items() if not inspect.ismodule(v)} | set(getattr(module, "__all__", ()))
+    return sorted(n for n in names if not n.startswith("_"))
 
 
 @pytest.mark.parametrize("module", ["jaxlink", "jaxlink.optimize", "jaxlink.cam", "jaxlink.study"])

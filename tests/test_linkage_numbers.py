@@ -61,6 +61,22 @@ def test_crank_rocker_turns_fully_and_its_transmission_angle_is_exact(four_bar):
     assert o["name"] == "phi4" and o["kind"] == "rocker" and abs(o["stroke"] - (gamma[1] - gamma[0])) < 1e-9
 
 
+def test_an_obtuse_transmission_angle_is_not_folded(four_bar):
+    """A crank-rocker whose transmission angle stays above 90° (b = c = 30, d = 54, a = 5 mm:
+    μ from acos((b² + c² − (d − a)²)/(2bc)) = 109.5° to 159.1°). The least μ comes from the
+    samples' largest cos μ, negative here: it was returned as acos(−cos μ) = 70.5° (the sample's
+    candidate compared with its sign flipped). The design of the scene's structure (in-process,
+    the programs of the test above)."""
+    a, b, c, d = 5.0, 30.0, 30.0, 54.0
+    m = motion(four_bar, _p(four_bar, a, b, c, d))
+    (t,) = m.transmission
+    mu_min = math.acos((b * b + c * c - (d - a) ** 2) / (2 * b * c))
+    mu_max = math.acos((b * b + c * c - (d + a) ** 2) / (2 * b * c))
+    assert mu_min > math.pi / 2
+    assert abs(t["min"] - mu_min) < 1e-9 and abs(t["max"] - mu_max) < 1e-9
+    assert t["worst"] == pytest.approx(math.pi - mu_max, abs=1e-12)
+
+
 def test_non_grashof_input_limits_are_the_toggles():
     """The input of a triple-rocker stops where coupler and rocker come into line,
     cos φ = (a² + d² − (b + c)²) / (2 a d): ±132.1° around its start (0°). The limits are bisected

@@ -23,16 +23,19 @@ transmission angle is the one farthest from 90°: min over the motion of min(μ,
 from __future__ import annotations
 
 import dataclasses
+from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 
+from ..cache import traced
 from ..model.mechanism import Mechanism
 from ..results import RESULTS
 from ..solvers import dyads as _dyads
 from ..solvers.assemble import solve
 from ..solvers.branch_points import TOGGLE, branch_points
+from .whole_curve import _arg
 
 _GOLD = 0.6180339887498949
 
@@ -67,43 +70,112 @@ def _cos_mu(mech, dyads, j, sigma, q_ref, phi, p):
     return (La * La + Lb * Lb - (wx * wx + wy * wy)) / (2.0 * jnp.abs(La) * jnp.abs(Lb))
 
 
-def _window_between_samples(mech, dyads, sigma, q_ref, phis, p):
-    """A window where the linkage cannot assemble that lies wholly between two of the equally
-    spaced inputs `phis` of a turn (all assembled), or None: the reach margin's minimum refined
-    between the samples (`jaxlink.analysis.feasibility.certify`); where it is negative, the two
-    toggles on either side of it in its interval, the roots of that dyad's margin by the
-    bracketed Newton iteration of the branch points (`(first, second)`, turning forward)."""
-    from ..solvers.branch_points import _root, _secant
+# ---------------------------------------------------------------- the compiled parts, stored
+# Each is a module-level function of arrays (the mechanism, with its parameters and guesses, is an
+# argument) run through `jaxlink.cache.traced`: a repeated `check` loads the stored programs
+# instead of tracing them again (`docs/numbers.md`, "check latency").
+
+
+def _turn_arrays(mech, phis, p):
+    """The turn's closed-form solve (`solve`, from the guesses), the dyads' branches σ at its first
+    sample and the certificate of the turn between its samples (`phis[:-1]`, a whole turn; used
+    only where every sample assembled): `(q, result, sigma, certified, where)`."""
     from .feasibility import certify
 
-    pj = jnp.asarray(p)
-    cert = jax.jit(lambda s, q, ph, pp: certify(mech, dyads, s, q, ph, pp))(sigma, q_ref, jnp.asarray(phis), pj)
-    if bool(cert.certified):
-        return None
-    where = jnp.asarray(float(cert.where))
-    j = int(jnp.argmin(_dyads.reach_margins(mech, dyads, sigma, q_ref, where, pj)))
+    sol = solve(mech, phis, p)
+    dyads = _dyads.classify(mech)
+    q0 = sol.q[0]
+    sigma = _dyads.solve_nearest(mech, dyads, q0, phis[0], p)[3]
+    cert = certify(mech, dyads, sigma, q0, phis[:-1], p)
+    return sol.q, sol.result, sigma, cert.certified, cert.where
+
+
+def _cos_mus(mech, sigma, q_ref, phis, p, js):
+    """cos μ of the RRR dyads `js` (static) at the inputs `phis` (M,): (len(js), M)."""
+    dyads = _dyads.classify(mech)
+    return jnp.stack([jax.vmap(lambda ph, j=j: _cos_mu(mech, dyads, j, sigma, q_ref, ph, p))(phis) for j in js])
+
+
+def _margin_root(mech, sigma, q_ref, lo, hi, p, j):
+    """The root of dyad j's reach margin in [lo, hi] (the branch points' bracketed Newton)."""
+    from ..solvers.branch_points import _root, _secant
+
+    dyads = _dyads.classify(mech)
 
     def f(x):
-        return _dyads.reach_margins(mech, dyads, sigma, q_ref, x, pj)[j]
+        return _dyads.reach_margins(mech, dyads, sigma, q_ref, x, p)[j]
 
     def F(x):
         return jax.jvp(f, (x,), (jnp.ones_like(x),))
 
-    @jax.jit
+    flo, fhi = f(lo), f(hi)
+    return _root(F, lo, hi, flo, fhi, _secant(lo, hi, flo, fhi), jnp.asarray(True))[0]
+
+
+def _window_between_samples(mech, sigma, q_ref, phis, p, cert):
+    """A window where the linkage cannot assemble that lies wholly between two of the equally
+    spaced inputs `phis` of a turn (all assembled), or None: the reach margin's minimum refined
+    between the samples (`cert = (certified, where)`: `jaxlink.analysis.feasibility.certify`);
+    where it is negative, the two toggles on either side of it in its interval, the roots of that
+    dyad's margin by the bracketed Newton iteration of the branch points (`(first, second)`,
+    turning forward)."""
+    from .whole_curve import _margins
+
+    certified, where = cert
+    if bool(certified):
+        return None
+    where = float(where)
+    m = traced("reach_margins", _margins, (_arg(mech, p), sigma, q_ref, np.asarray([where, where]), p))
+    j = int(np.argmin(np.asarray(m)[0]))
+
     def root(lo, hi):
-        flo, fhi = f(lo), f(hi)
-        return _root(F, lo, hi, flo, fhi, _secant(lo, hi, flo, fhi), jnp.asarray(True))[0]
+        return float(traced("motion_margin_root", _margin_root,
+                            (_arg(mech, p), sigma, q_ref, np.asarray(lo), np.asarray(hi), p), (j,)))
 
     h = float(phis[1] - phis[0])
-    k = int(np.floor((float(where) - float(phis[0])) / h))
-    a, b = jnp.asarray(float(phis[0]) + k * h), jnp.asarray(float(phis[0]) + (k + 1) * h)
-    return float(root(a, where)), float(root(where, b))
+    k = int(np.floor((where - float(phis[0])) / h))
+    a, b = float(phis[0]) + k * h, float(phis[0]) + (k + 1) * h
+    return root(a, where), root(where, b)
+
+
+def _golden(f, a, b, c0, x0, sign, iterations: int = 60):
+    """Golden-section refinement of the extremes of cos μ, every (dyad, extreme) pair at once:
+    pair i minimizes `sign[i]` × cos μ, the diagonal of `f(x)` ((pairs,) → (pairs, pairs)), in
+    the bracket [a[i], b[i]] around its best sample x0[i] (cos μ there c0[i]). Returns
+    `(cos μ, where)` (pairs,): the best of the sample and the two last points."""
+    rows = np.arange(a.shape[0])
+
+    def ev(x):
+        return sign * np.asarray(f(x))[rows, rows]
+
+    x1, x2 = b - _GOLD * (b - a), a + _GOLD * (b - a)
+    f1, f2 = ev(x1), ev(x2)
+    for _ in range(iterations):
+        left = f1 <= f2
+        b = np.where(left, x2, b)
+        a = np.where(left, a, x1)
+        nx1 = np.where(left, b - _GOLD * (b - a), x2)
+        nx2 = np.where(left, x1, a + _GOLD * (b - a))
+        fn = ev(np.where(left, nx1, nx2))
+        f1, f2 = np.where(left, fn, f2), np.where(left, f1, fn)
+        x1, x2 = nx1, nx2
+    best, best_x = [], []
+    for i in rows:  # the least of the sample and the two refined points (the first on a tie)
+        cands = [(c0[i], x0[i]), (f1[i] * sign[i], x1[i]), (f2[i] * sign[i], x2[i])]
+        k = 0
+        for n in (1, 2):
+            if sign[i] * cands[n][0] < sign[i] * cands[k][0]:
+                k = n
+        best.append(cands[k][0])
+        best_x.append(cands[k][1])
+    return np.asarray(best), np.asarray(best_x)
 
 
 def motion(mech: Mechanism, p=None, *, samples: int = 3600) -> Motion | None:
     """The range of motion and the dyads' transmission angles of `mech` (design `p`, SI, default
     the file's) on the branch of its guesses; None unless the input is an angle and every block
-    is a dyad. Host-side (a few compiled calls)."""
+    is a dyad. Host-side (a few compiled calls, stored traces where the compilation cache is on:
+    `jaxlink.cache.traced`)."""
     dyads = _dyads.classify(mech)
     if dyads is None or mech.input_kind != "angle":
         return None
@@ -112,21 +184,19 @@ def motion(mech: Mechanism, p=None, *, samples: int = 3600) -> Motion | None:
     start = float(mech.input_start)
     h = 2 * np.pi / samples
     phis = start + h * np.arange(samples + 1)  # one turn, the start again at the end
-    sol = solve(mech, phis, p)
-    res = np.asarray(sol.result)
+    q_all, res, sigma, *cert = (np.asarray(x) for x in traced("motion_turn", _turn_arrays, (_arg(mech, p), phis, p)))
     ok = (res == RESULTS.converged) | (res == RESULTS.singular)
     lower = upper = None
     full = bool(ok.all())
     if not full:
-        bp = branch_points(mech, phis, sol, p)
+        bp = branch_points(mech, phis, _Path(q_all, res), p)
         toggles = np.sort(bp.input[np.asarray(bp.kind) == TOGGLE])
         ahead, behind = toggles[toggles > start], toggles[toggles < start + 2 * np.pi]
         upper = float(ahead[0]) if ahead.size else None
         lower = float(behind[-1] - 2 * np.pi) if behind.size else None
         if not ok[0] or upper is None or lower is None:
             return Motion(False, lower, upper, [])
-    q0 = jnp.asarray(np.asarray(sol.q)[0])
-    sigma = _dyads.solve_nearest(mech, dyads, q0, jnp.asarray(start), jnp.asarray(p))[3]
+    q0 = q_all[0]
     if not full:  # each limit to adjacent floats by bisection on the toggling dyad's margin
         from .whole_curve import limit
 
@@ -134,47 +204,47 @@ def motion(mech: Mechanism, p=None, *, samples: int = 3600) -> Motion | None:
         upper = upper if up is None else up[0]
         lower = lower if down is None else down[0]
     if full:  # every sample assembled: certify the whole turn between them too
-        window = _window_between_samples(mech, dyads, sigma, q0, phis[:-1], p)
+        window = _window_between_samples(mech, sigma, q0, phis[:-1], p, cert)
         if window is not None:
             full, upper, lower = False, window[0], window[1] - 2 * np.pi
     lo_end = start if full or lower is None else lower
     hi_end = start + 2 * np.pi if full or upper is None else upper
     trans = []
-    for j, d in enumerate(dyads):
-        if d.kind != "RRR":
-            continue
-        f = jax.jit(jax.vmap(lambda ph, j=j: _cos_mu(mech, dyads, j, sigma, q0, ph, jnp.asarray(p))))
+    js = tuple(j for j, d in enumerate(dyads) if d.kind == "RRR")
+    if js:
+        def f(x):  # (len(js), len(x)), numpy (indexing a JAX array would dispatch an operation)
+            return np.asarray(traced("motion_cos_mu", _cos_mus, (_arg(mech, p), sigma, q0, np.asarray(x), p), (js,)))
+
         grid = np.linspace(lo_end, hi_end, samples + 1)
-        c = np.asarray(f(jnp.asarray(grid)))
-        ext = {}
-        for which, sign in (("max", 1.0), ("min", -1.0)):  # μ max where cos μ is least, and back
-            k = int(np.argmin(sign * c))
-            a, b = grid[max(k - 1, 0)], grid[min(k + 1, samples)]
-            x1, x2 = b - _GOLD * (b - a), a + _GOLD * (b - a)
-            f1, f2 = (sign * float(v) for v in f(jnp.asarray([x1, x2])))
+        c = f(grid)  # (len(js), samples + 1)
+        # the pairs (dyad, extreme): μ max where cos μ is least (sign 1), μ min where it is largest
+        row = np.repeat(np.arange(len(js)), 2)
+        sign = np.tile([1.0, -1.0], len(js))
+        k = np.argmin(sign[:, None] * c[row], axis=1)
+        a, b = grid[np.maximum(k - 1, 0)], grid[np.minimum(k + 1, samples)]
 
-            def one(x):
-                return sign * float(f(jnp.asarray([x, x]))[0])  # the shape already compiled
+        def g(x):  # cos μ of pair i's dyad at x[i]: the evaluations at x, rows per pair
+            return f(x)[row]
 
-            for _ in range(60):
-                if f1 <= f2:
-                    b, x2, f2 = x2, x1, f1
-                    x1 = b - _GOLD * (b - a)
-                    f1 = one(x1)
-                else:
-                    a, x1, f1 = x1, x2, f2
-                    x2 = a + _GOLD * (b - a)
-                    f2 = one(x2)
-            cands = [(sign * c[k], grid[k]), (f1 * sign, x1), (f2 * sign, x2)]
-            best = min(cands, key=lambda t: sign * t[0])
-            ext[which] = (float(np.arccos(np.clip(best[0], -1.0, 1.0))), float(best[1]))
-        mu_min, mu_max = ext["min"][0], ext["max"][0]
-        trans.append({"loop": mech.loops[d.loop][0], "unknowns": tuple(mech.unknown_names[i] for i in d.unknowns),
-                      "min": mu_min, "min_at": ext["min"][1], "max": mu_max, "max_at": ext["max"][1],
-                      "worst": min(mu_min, np.pi - mu_max)})
+        best, best_x = _golden(g, a, b, c[row, k], grid[k], sign)
+        mu = np.arccos(np.clip(best, -1.0, 1.0))
+        for i, j in enumerate(js):
+            d = dyads[j]
+            mu_max, mu_min = float(mu[2 * i]), float(mu[2 * i + 1])
+            trans.append({"loop": mech.loops[d.loop][0],
+                          "unknowns": tuple(mech.unknown_names[u] for u in d.unknowns),
+                          "min": mu_min, "min_at": float(best_x[2 * i + 1]), "max": mu_max,
+                          "max_at": float(best_x[2 * i]), "worst": min(mu_min, np.pi - mu_max)})
     outs = []
     if full:
         from .stroke import outputs
 
         outs = outputs(mech, dyads, sigma, q0, phis, p)
     return Motion(full, lower, upper, trans, outs)
+
+
+class _Path(NamedTuple):
+    """A solved path as `branch_points` reads it (q, result)."""
+
+    q: np.ndarray
+    result: np.ndarray

@@ -26,12 +26,11 @@ samples refined by golden-section search (60 reductions of a two-sample bracket)
 
 from __future__ import annotations
 
-import functools
-
 import jax
 import jax.numpy as jnp
 import numpy as np
 
+from ..cache import traced
 from ..files import expr as _expr
 from ..model.mechanism import Mechanism
 from ..solvers import dyads as _dyads
@@ -60,13 +59,12 @@ def rockers(mech: Mechanism) -> tuple:
     return tuple(n for n in mech.unknown_names if n in found)
 
 
-@functools.partial(jax.jit, static_argnums=(0, 1))
-def _jets(structure, idx, sigma, q_ref, phis, p):
-    """(q, q′, q″) of the unknowns `idx` at the inputs `phis` (M,): (M, len(idx)) each."""
-    dyads = _dyads.classify(structure)
+def _jets_of(mech, sigma, q_ref, phis, p, idx):
+    """(q, q′, q″) of the unknowns `idx` (static) at the inputs `phis` (M,): (M, len(idx)) each."""
+    dyads = _dyads.classify(mech)
 
     def q_of(phi):
-        return _dyads.solve(structure, dyads, sigma, q_ref, phi, p)[0][jnp.asarray(idx)]
+        return _dyads.solve(mech, dyads, sigma, q_ref, phi, p)[0][jnp.asarray(idx)]
 
     def one(phi):
         t = jnp.ones_like(phi)
@@ -76,11 +74,20 @@ def _jets(structure, idx, sigma, q_ref, phis, p):
     return jax.vmap(one)(phis)
 
 
+def _jets(mech, idx, sigma, q_ref, phis, p):
+    """`_jets_of` through a stored trace (`jaxlink.cache.traced`; the mechanism an argument)."""
+    from .whole_curve import _arg
+
+    p = np.asarray(p)
+    return traced("stroke_jets", _jets_of, (_arg(mech, p), np.asarray(sigma, p.dtype), np.asarray(q_ref, p.dtype),
+                                            np.asarray(phis, p.dtype), p), (tuple(idx),))
+
+
 class _Eval:
     """The jets at batches of inputs, one column per (output, point), padded to few shapes."""
 
     def __init__(self, mech, idx, sigma, q_ref, p):
-        self.args = (mech.structure, idx, sigma, q_ref)
+        self.args = (mech, idx, sigma, q_ref)
         self.p = p
 
     def __call__(self, x, col):
@@ -88,7 +95,7 @@ class _Eval:
         n = x.shape[0]
         m = max(_PAD, -(-n // _PAD) * _PAD)
         xs = np.concatenate([x, np.full(m - n, x[0] if n else 0.0)])
-        q, d1, d2 = (np.asarray(a)[:n] for a in _jets(*self.args, jnp.asarray(xs), self.p))
+        q, d1, d2 = (np.asarray(a)[:n] for a in _jets(*self.args, xs, self.p))
         r = np.arange(n)
         return q[r, col], d1[r, col], d2[r, col]
 
@@ -118,8 +125,10 @@ def _zeros(ev, lo, hi, col, iterations: int = 60):
 
 
 def _extremes(ev, grid, v, col, sign):
-    """The least (sign 1) or largest (sign −1) q′ of each output, refined by golden section."""
-    k = np.argmin(sign * v, axis=0)
+    """The least (sign 1) or largest (sign −1) q′ of output `col[i]` (`sign[i]`, so that both
+    extremes of every output refine at once), refined by golden section."""
+    vs = sign * v[:, col]
+    k = np.argmin(vs, axis=0)
     n = grid.shape[0] - 1
     a, b = grid[np.maximum(k - 1, 0)], grid[np.minimum(k + 1, n)]
     x1, x2 = b - _GOLD * (b - a), a + _GOLD * (b - a)
@@ -135,7 +144,7 @@ def _extremes(ev, grid, v, col, sign):
         x1, x2 = nx1, nx2
     best_x = np.where(f1 <= f2, x1, x2)
     best = np.minimum(f1, f2)
-    samp = sign * v[k, col]
+    samp = vs[k, np.arange(len(col))]
     return np.where(samp < best, samp, best) * sign, np.where(samp < best, grid[k], best_x)
 
 
@@ -152,12 +161,11 @@ def outputs(mech: Mechanism, dyads, sigma, q0, phis, p) -> list:
     if not names:
         return []
     idx = tuple(mech.unknown_names.index(n) for n in names)
-    ev = _Eval(mech, idx, jnp.asarray(sigma), jnp.asarray(q0), jnp.asarray(p))
+    ev = _Eval(mech, idx, sigma, q0, p)
     grid = np.asarray(phis, float)
     m = len(idx)
     cols = np.arange(m)
-    q, v, _ = (np.asarray(a) for a in _jets(mech.structure, idx, jnp.asarray(sigma), jnp.asarray(q0),
-                                              jnp.asarray(grid), jnp.asarray(p)))
+    q, v, _ = (np.asarray(a) for a in _jets(mech, idx, sigma, q0, grid, p))
     angle = np.array([mech.unknown_kinds[i] == "angle" for i in idx])
     q = np.where(angle, np.unwrap(q, axis=0), q)
     keep = ~angle | (np.abs(q[-1] - q[0]) < np.pi)  # a rocker comes back; a crank turns
@@ -165,8 +173,8 @@ def outputs(mech: Mechanism, dyads, sigma, q0, phis, p) -> list:
     ks, cs = np.nonzero((v[:-1] * v[1:] < 0) | ((v[:-1] == 0) & (v[1:] != 0)))
     roots = _zeros(ev, grid[ks], grid[ks + 1], cs) if ks.size else np.zeros(0)
     vals = ev(roots, cs)[0] if ks.size else np.zeros(0)
-    vmin, vmin_at = _extremes(ev, grid, v, cols, 1.0)
-    vmax, vmax_at = _extremes(ev, grid, v, cols, -1.0)
+    ext, ext_at = _extremes(ev, grid, v, np.concatenate([cols, cols]), np.repeat([1.0, -1.0], m))
+    vmin, vmin_at, vmax, vmax_at = ext[:m], ext_at[:m], ext[m:], ext_at[m:]
     out = []
     for j, name in enumerate(names):
         if not keep[j]:

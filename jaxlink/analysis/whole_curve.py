@@ -27,6 +27,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from ..cache import traced
 from ..model.mechanism import Mechanism
 from ..solvers import dyads as _dyads
 
@@ -51,8 +52,16 @@ class WholeCurve:
     points: np.ndarray
 
 
-def _margins(mech, dyads, sigma, q_ref, phis, p):
+def _margins(mech, sigma, q_ref, phis, p):
+    """Every dyad's reach margin at the inputs `phis` (M,): (M, n_dyads) (a stored trace:
+    `jaxlink.cache.traced`, the mechanism an argument)."""
+    dyads = _dyads.classify(mech)
     return jax.vmap(lambda ph: _dyads.reach_margins(mech, dyads, sigma, q_ref, ph, p))(phis)
+
+
+def _arg(mech, p):
+    """The mechanism as a stored program's argument: its numbers `p`, its guesses in p's dtype."""
+    return mech.replace(parameters=p, guess=np.asarray(mech.guess, dtype=np.asarray(p).dtype))
 
 
 def _positions(mech, dyads, sigma, q_ref, phis, p):
@@ -63,7 +72,6 @@ def _positions(mech, dyads, sigma, q_ref, phis, p):
     return jax.vmap(one)(phis)
 
 
-_margins_jit = jax.jit(_margins, static_argnums=(1,))
 _positions_jit = jax.jit(_positions, static_argnums=(1,))
 
 
@@ -74,11 +82,14 @@ def limit(mech: Mechanism, dyads, sigma, q_ref, p, phi0: float, direction: float
     last sample where every dyad assembles: it needs only the margin's sign, so it finds the same
     floats whatever the compiler does with the arithmetic around it."""
     h = 2 * np.pi / samples
-    sig = jnp.asarray(np.asarray(sigma, dtype=np.float64))
-    pj = jnp.asarray(p)
+    del dyads  # (classified again inside the stored program)
+    pj = np.asarray(p)
+    sig = np.asarray(sigma, dtype=pj.dtype)
+    q_ref = np.asarray(q_ref, dtype=pj.dtype)
+    arg = _arg(mech, pj)
 
     def margins(phis):
-        return np.asarray(_margins_jit(mech, dyads, sig, q_ref, jnp.asarray(phis), pj))
+        return np.asarray(traced("reach_margins", _margins, (arg, sig, q_ref, np.asarray(phis, dtype=pj.dtype), pj)))
 
     grid = phi0 + direction * h * np.arange(1, samples + 1)
     m = margins(grid)

@@ -74,11 +74,12 @@ def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     name = f"jaxlink {args.command}"
-    from ..cache import enable_compilation_cache
+    from ..cache import enable_compilation_cache, one_command
 
     enable_compilation_cache()  # JAXLINK_CACHE_DIR: a repeated command loads its compiled code
     try:
-        return int(args.func(args) or 0)
+        with one_command():
+            return int(args.func(args) or 0)
     except MechanismError as exc:
         print(f"{name}: error: {exc}", file=sys.stderr)
         return 2

@@ -457,14 +457,23 @@ def _sum_text(terms) -> str:
     return out
 
 
+def _start_arrays(mech, phi, p):
+    """What `check` computes at `[input] start` (a stored trace: `jaxlink.cache.traced`): the
+    solve from the guesses (`q`, result code, residual, Newton steps) and the Jacobian Φ_q there."""
+    import jax
+
+    from ..solvers.assemble import solve
+
+    sol = solve(mech, phi[None], p)
+    q = sol.q[0]
+    return q, sol.result[0], sol.residual[0], sol.steps[0], jax.jacfwd(mech.residual)(q, phi, p)
+
+
 def cmd_check(args) -> int:
     dtype = enable_dtype(args.dtype)
-    import jax.numpy as jnp
-
     from ..model import structure as _structure
     from ..results import RESULTS
-    from ..solvers.assemble import NewtonOptions, method_for, solve
-    from ..solvers.linalg import solve_small
+    from ..solvers.assemble import NewtonOptions, method_for
 
     mech = load_from_args(args)
     if mech.bodies is not None:  # what `reactions` checks before it solves
@@ -526,19 +535,20 @@ def cmd_check(args) -> int:
         print(f"            {g['mobility']} by Grübler: u = {g['members']} members, s = {g['joint_count']} "
               f"joint count, n = 3(u−1) − 2s; independent loops k = s − u + 1 = {g['loops']}")
     p = np.asarray(mech.parameters, dtype)  # the solve in the asked dtype
-    sol = solve(mech, np.asarray([mech.input_start], dtype), p)
-    code = int(sol.result[0])
-    jac = np.asarray(__import__("jax").jacfwd(mech.residual)(sol.q[0], jnp.asarray(mech.input_start, dtype),
-                                                             jnp.asarray(p)))
-    _, ratio = solve_small(jnp.asarray(jac), jnp.zeros(jac.shape[0]))
+    from ..cache import traced
+
+    q, result, resid, steps, jac = (np.asarray(x) for x in traced(
+        "check_start", _start_arrays, (mech.replace(parameters=p, guess=np.asarray(mech.guess, dtype)),
+                                       np.asarray(mech.input_start, dtype), p)))
+    code = int(result)
     cond = np.linalg.cond(jac)
     how = ("closed-form dyads" if method_for(mech, NewtonOptions()) == "closed_form"
-           else f"{int(sol.steps[0])} Newton steps")
-    print(f"assembly    at the start: {RESULTS.names[code]} (residual {float(sol.residual[0]):.2e} m, "
+           else f"{int(steps)} Newton steps")
+    print(f"assembly    at the start: {RESULTS.names[code]} (residual {float(resid):.2e} m, "
           f"{how}, Jacobian condition number {cond:.3g})")
     if code == RESULTS.converged:
         print("            start configuration: " + ", ".join(
-            f"{n} = {mech.from_si(n, float(v)):.6g}" for n, v in zip(mech.unknown_names, sol.q[0])))
+            f"{n} = {mech.from_si(n, float(v)):.6g}" for n, v in zip(mech.unknown_names, q)))
         _print_designer_numbers(mech, lu)
         return 0
     print(f"            {RESULTS.messages[code]}", file=sys.stderr)

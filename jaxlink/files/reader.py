@@ -426,19 +426,39 @@ def loads(text: str, *, file: str = "<string>", overrides: Mapping[str, float] |
     )
     # evaluate once at the guess, where it holds (the input at `[input] start`), in numpy float64,
     # to catch anything left (e.g. sqrt of a negative number)
-    r = np.asarray(mechanism.residual(jnp.asarray(q_si), jnp.asarray(input_start_si), jnp.asarray(p_si)))
+    r, xy = _at_guess_checked(mechanism)
     if not np.all(np.isfinite(r)):
         lname = loops[int(np.flatnonzero(~np.isfinite(r))[0]) // 2][0]
         raise err(f"loop '{lname}' gives a non-finite value at the guess (the input at [input] start); "
                   "check the expressions (sqrt of a negative number? division by zero?)", "loops", lname)
     if points:
-        xy = np.asarray(mechanism.point_positions(jnp.asarray(q_si), jnp.asarray(input_start_si), jnp.asarray(p_si)))
         bad = ~np.all(np.isfinite(xy), axis=1)
         if bad.any():
             pname = points[int(np.flatnonzero(bad)[0])][0]
             raise err(f"point '{pname}' is not finite at the guess (the input at [input] start); "
                       "check its expressions (sqrt of a negative number? division by zero?)", "points", pname)
     return mechanism
+
+
+def _at_guess(mech, phi):
+    """The residual and the points at the guesses (the input at `phi`, `[input] start`)."""
+    q, p = mech.guess, mech.parameters
+    return mech.residual(q, phi, p), mech.point_positions(q, phi, p)
+
+
+def _at_guess_checked(mech) -> tuple:
+    """`_at_guess` as numpy arrays: in a command of the command line with its cache on, one stored
+    program (`jaxlink.cache.traced`: a repeated command does not trace it, 0.1–0.3 s); elsewhere
+    evaluated as it goes (a library's `load` compiles nothing new for a new structure)."""
+    from ..cache import in_one_command, traced
+
+    phi = np.asarray(mech.input_start, dtype=np.float64)
+    if in_one_command():
+        r, xy = traced("load_at_guess", _at_guess, (mech, phi))
+    else:
+        r, xy = _at_guess(mech.replace(parameters=jnp.asarray(mech.parameters), guess=jnp.asarray(mech.guess)),
+                          jnp.asarray(phi))
+    return np.asarray(r), np.asarray(xy)
 
 
 def _derived(texts: dict, base: dict, guesses: dict, input_name: str, err) -> dict:
