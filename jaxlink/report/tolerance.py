@@ -182,8 +182,10 @@ def plot_band(path, mech, rep: ToleranceReport, *, k: float = 3.0, ellipses: int
     widest = max(float(k * b[2].max()) for b in bands)
     # tolerances are small against the mechanism: magnify the deviations (a round factor, said in the title)
     mag = 1.0
-    if widest > 0 and widest < 0.005 * extent:
-        mag = 10.0 ** math.floor(math.log10(0.03 * extent / widest))
+    if widest > 0 and 0.03 * extent / widest >= 2.0:  # a band narrower than 3 % of the figure
+        target = 0.03 * extent / widest
+        decade = 10.0 ** math.floor(math.log10(target))
+        mag = max(m * decade for m in (1.0, 2.0, 5.0) if m * decade <= target)
     circle = np.stack([np.cos(t), np.sin(t)])
     for j, p in enumerate(rep.inputs.points):
         xy, cov, sn, nrm = bands[j]
