@@ -189,7 +189,8 @@ def plot_bars(path, mech, rep: SensitivityReport) -> None:
     """S1 and ST of each factor with their bootstrap intervals, one panel per scalar output (the
     feasibility first)."""
     plt = _plt()
-    panels = [("feasible (indicator)", rep.feasibility, 0)]
+    panels = [("feasible (indicator)" + (": every design feasible" if rep.feasibility.constant[0] else ""),
+               rep.feasibility, 0)]
     if rep.indices is not None:
         panels += [(f"{name} ({unit})", rep.indices, i) for i, (name, unit, k) in enumerate(rep.labels) if k is None]
     D = len(rep.factors)
