@@ -108,25 +108,33 @@ def _design_space(args, mech, study, show: bool, t0: float) -> int:
 
         bar = tqdm(total=total, desc=inputs.method, unit="design", leave=False, file=sys.stderr)
     progress = None if bar is None else bar.update
+    srep = rep = None
     try:
         if inputs.method == "sensitivity":
-            rep = sensitivity(mech, study=study, progress=progress)
+            srep = sensitivity(mech, study=study, progress=progress)
         else:
             rep = sample(mech, study=study, grid=inputs.method == "grid", progress=progress)
     finally:
         if bar is not None:
             bar.close()
+    done = srep if srep is not None else rep
+    assert done is not None
     print(f"{inputs.method} study of {mech.name}: {len(inputs.factors)} factors "
           f"({', '.join(f.name for f in inputs.factors)}), {inputs.positions} positions; "
-          f"{rep.timings['total']:.3g} s")
-    print(_report.sensitivity_summary(rep) if inputs.method == "sensitivity" else _report.sample_summary(rep))
-    for w in rep.warnings:
+          f"{done.timings['total']:.3g} s")
+    if srep is not None:
+        print(_report.sensitivity_summary(srep))
+    else:
+        assert rep is not None
+        print(_report.sample_summary(rep))
+    for w in done.warnings:
         print(f"warning: {w}", file=sys.stderr)
     if args.out:
         wall = time.perf_counter() - t0
-        if inputs.method == "sensitivity":
-            files = _report.write_sensitivity_all(args.out, mech, rep, wall_time=wall, plot=not args.no_plot)
+        if srep is not None:
+            files = _report.write_sensitivity_all(args.out, mech, srep, wall_time=wall, plot=not args.no_plot)
         else:
+            assert rep is not None
             files = _report.write_sample_all(args.out, mech, rep, wall_time=wall, plot=not args.no_plot)
         print("wrote " + ", ".join(files))
     return 0

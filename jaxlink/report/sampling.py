@@ -50,9 +50,9 @@ def write_indices_csv(path, mech, rep: SensitivityReport) -> None:
     iu = _input_unit(mech)
     with open(path, "w", newline="", encoding="utf-8") as fh:
         w = csv.writer(fh)
-        w.writerow(["output", f"input ({iu})", "parameter", "method", "value (1)", "low (1)", "high (1)", "conditional"])
-        blocks = [(("feasible", "1", None),), rep.feasibility, "0"]
-        rows = [blocks]
+        w.writerow(["output", f"input ({iu})", "parameter", "method", "value (1)", "low (1)", "high (1)",
+                    "conditional"])
+        rows: list = [[(("feasible", "1", None),), rep.feasibility, "0"]]
         if rep.indices is not None:
             rows.append([rep.labels, rep.indices, "1"])
         for labels, ind, cond in rows:
@@ -166,7 +166,7 @@ def sensitivity_summary(rep: SensitivityReport) -> str:
     if ind is None:
         return "\n".join(lines)
     groups: dict = {}
-    for i, (name, _u, k) in enumerate(rep.labels):
+    for i, (name, _u, _k) in enumerate(rep.labels):
         groups.setdefault(name, []).append(i)
     for name, idx in groups.items():
         if len(idx) == 1:

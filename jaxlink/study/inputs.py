@@ -3,7 +3,7 @@ the study computes — the `[study]` table of a mechanism file (or the same keys
 
 ```toml
 [study]
-method = "tolerance"        # the only method of this step
+method = "tolerance"        # or "sample", "grid", "sensitivity" (over [study.ranges])
 positions = 360             # input positions over the cycle (a full turn of an angle input)
 points = ["P"]              # the points whose x, y are responses (default: every point)
 metrics = ["stroke", "deviation"]   # scalar cycle metrics (default these two)
@@ -17,7 +17,14 @@ l2 = 0.05                   # ±0.05, the table's distribution (normal, ±t = 3�
 l3 = { tol = 0.05, distribution = "uniform" }   # uniform on [−t, t]: σ = t / √3
 l4 = { sigma = 0.01 }       # normal, σ given (the worst case takes ±k σ)
 B0 = { radius = 0.1 }       # a circular zone of the frame pivot B0: the parameters B0_x, B0_y
+
+[study.ranges]              # sample, grid, sensitivity: the design space (file units)
+l2 = [40, 60]               # uniform over [40, 60] (sample, sensitivity); `levels` values (grid)
 ```
+
+`sampler` ("sobol", "lhs", "halton", "random"), `levels` (grid: an integer or NAME = n),
+`bootstrap` and `confidence` (the Sobol' intervals) belong to the design-space methods
+(docs/methods/sensitivity.md).
 
 **The meaning of ±t** (t in the parameter's file unit):
 
@@ -76,7 +83,8 @@ class Tolerance(NamedTuple):
 class Range(NamedTuple):
     """One parameter varied over a range (file units) by `sample`, `grid` and `sensitivity`:
     uniformly over [low, high] (`sample`, `sensitivity`), `levels` equally spaced values from low to
-    high (`grid`; one level: the midpoint). `parameters` is `(name,)` (as a `Tolerance`'s), `kind` "length" | "angle" | "number"."""
+    high (`grid`; one level: the midpoint). `parameters` is `(name,)` (as a `Tolerance`'s), `kind`
+    "length" | "angle" | "number"."""
 
     name: str
     parameters: tuple

@@ -98,9 +98,10 @@ class SobolAccumulator:
         ya = np.asarray(ya, float) - s
         yb = np.asarray(yb, float) - s
         diff = np.asarray(yab, float) - s - ya  # (D, n, M): y_AB − y_A
-        terms = np.concatenate([ya + yb, ya * ya + yb * yb, (yb * diff).transpose(1, 0, 2).reshape(n, -1),
-                                diff.transpose(1, 0, 2).reshape(n, -1), (diff * diff).transpose(1, 0, 2).reshape(n, -1)],
-                               axis=1)
+        def flat(z):  # (D, n, M) → (n, D M)
+            return z.transpose(1, 0, 2).reshape(n, -1)
+
+        terms = np.concatenate([ya + yb, ya * ya + yb * yb, flat(yb * diff), flat(diff), flat(diff * diff)], axis=1)
         c = np.empty((self.r + 1, n))
         c[0] = w
         c[1:] = self.counts[:, start:start + n] * w
@@ -139,7 +140,7 @@ class SobolAccumulator:
             v = est[0].T  # (M, D)
             half = z * est[1:].std(axis=0, ddof=1).T if self.r > 1 else np.zeros_like(v)
             out += [v, v - half, v + half]
-        return SobolIndices(*out, samples=self.used, constant=flat[0], confidence=confidence)
+        return SobolIndices(out[0], out[1], out[2], out[3], out[4], out[5], self.used, flat[0], confidence)
 
 
 def sobol_indices(ya, yb, yab, *, resamples: int = 100, confidence: float = 0.95, seed=None,
