@@ -166,3 +166,181 @@ def test_the_study_table_is_checked():
                                              "rod": {"tol": 0.06, "distribution": "normal"}})
     assert inputs.tolerances[0].half_width == pytest.approx(0.02)  # t = kσ
     assert inputs.tolerances[1].sigma == pytest.approx(0.02)        # σ = t/k, k = 3
+
+
+# ---------------------------------------------------------------- step 2: ranges, sampling, Sobol'
+ISHIGAMI_S1 = (0.3139051827, 0.4424111333, 0.0)  # a = 7, b = 0.1 (Ishigami & Homma 1990)
+ISHIGAMI_ST = (0.5575888667, 0.4424111333, 0.2436836840)
+
+
+def _ishigami_design(n, seed):
+    from scipy.stats import qmc
+
+    u = qmc.Sobol(6, scramble=True, seed=seed).random(n)
+    a, b = -np.pi + 2 * np.pi * u[:, :3], -np.pi + 2 * np.pi * u[:, 3:]
+    ab = np.stack([np.where(np.arange(3) == j, b, a) for j in range(3)])
+
+    def f(x):
+        return np.sin(x[..., 0]) + 7 * np.sin(x[..., 1]) ** 2 + 0.1 * x[..., 2] ** 4 * np.sin(x[..., 0])
+    return f(a), f(b), f(ab)
+
+
+def test_sobol_estimators_against_the_ishigami_closed_form():
+    """S1 (Saltelli 2010) and ST (Jansen) of the Ishigami function against its exact indices, each
+    inside its bootstrap interval widened by 1.5 (the estimate is unbiased; 6 intervals at 95 %)."""
+    ya, yb, yab = _ishigami_design(8192, 3)
+    r = st.sobol_indices(ya, yb, yab, resamples=200, seed=5)
+    for m, exact in (("S1", ISHIGAMI_S1), ("ST", ISHIGAMI_ST)):
+        v, lo, hi = (getattr(r, m)[0], getattr(r, m + "_low")[0], getattr(r, m + "_high")[0])
+        half = 0.5 * (hi - lo)
+        assert np.all(np.abs(v - exact) <= 1.5 * half + 1e-3), (m, v, exact, half)
+        assert np.all(half < 0.04)
+    # a constant output: indices 0, never a NaN; weights leave samples out exactly
+    c = st.sobol_indices(np.ones(64), np.ones(64), np.ones((3, 64)), resamples=10, seed=1)
+    assert c.constant[0] and np.all(c.S1 == 0) and np.all(c.ST_high == 0)
+    w = np.arange(8192) % 3 != 0
+    rw = st.sobol_indices(ya, yb, yab, resamples=0, weight=w)
+    rs = st.sobol_indices(ya[w], yb[w], yab[:, w], resamples=0)
+    np.testing.assert_allclose(rw.S1, rs.S1, rtol=1e-9, atol=1e-12)
+    np.testing.assert_allclose(rw.ST, rs.ST, rtol=1e-9)
+
+
+def _closed_form(x, theta):
+    """A.x, A.y, B.x (n, N each) of the slider-crank at designs x (n, 4: crank, rod, O1_x, O1_y)."""
+    a, b, ox, oy = (x[:, k:k + 1] for k in range(4))
+    ax, ay = ox + a * np.cos(theta), oy + a * np.sin(theta)
+    return ax, ay, ax + np.sqrt(b * b - (ay - E) ** 2)
+
+
+RANGES = {"crank": [24.99, 25.01], "rod": [80.0, 80.02], "O1_x": [-0.01, 0.01], "O1_y": [-0.01, 0.01]}
+
+
+@pytest.fixture(scope="module")
+def sensitivity_run(setup):
+    mech, _inputs, study = setup
+    inputs = st.read_study(mech, method="sensitivity", samples=1024, seed=4, ranges=RANGES)
+    rep = st.sensitivity(mech, study=study.moved(inputs=inputs))
+    return mech, inputs, study, rep
+
+
+def test_sensitivity_of_the_path_against_closed_forms_and_first_order(sensitivity_run):
+    """The study's indices of A.x, A.y and B.x at every position are the estimators' on the closed
+    form evaluated at the same designs (the samples rebuilt from `unit_blocks`); for the linear A
+    (y = Σ a_j x_j, uniform inputs) S1 = ST = a_j² σ_j² / Σ exactly, which are the tolerance
+    method's importance factors with the same uniform half-widths: each within its interval
+    (×2: 4 × 144 comparisons). With SALib installed, SALib's numbers on the same samples."""
+    mech, inputs, study, rep = sensitivity_run
+    assert rep.samples == 1024 and rep.evaluations == 6144 and rep.complete == 1024 and not rep.warnings
+    assert rep.feasible_fraction == 1.0 and rep.feasibility.constant[0] and np.all(rep.feasibility.ST == 0)
+    theta = np.deg2rad(rep.input_values)
+    u = np.concatenate(list(st.unit_blocks("sobol", 8, 1024, 4, 300)))
+    a, b = st.to_values(inputs, study.x0, u[:, :4]), st.to_values(inputs, study.x0, u[:, 4:])
+    ab = np.repeat(a[None], 4, axis=0)
+    for j in range(4):
+        ab[j][:, j] = b[:, j]
+    ya, yb = _closed_form(a, theta), _closed_form(b, theta)
+    yab = [_closed_form(x, theta) for x in ab]
+    ind = rep.indices
+    for c, name in enumerate(("A.x", "A.y", "B.x")):
+        rows = _rows(rep, name)
+        ref = st.sobol_indices(ya[c], yb[c], np.stack([y[c] for y in yab]), seed=[4, 1])
+        for m in ("S1", "ST", "S1_low", "ST_high"):
+            np.testing.assert_allclose(getattr(ind, m)[rows], getattr(ref, m), rtol=1e-6, atol=1e-8)
+    # the linear A: the importance factors of the tolerance method (uniform ±(high − low)/2)
+    tol = st.read_study(mech, tolerances={k: {"tol": (hi - lo) / 2, "distribution": "uniform"}
+                                          for k, (lo, hi) in RANGES.items()})
+    first = study.moved(x0=[25.0, 80.01, 0.0, 0.0], inputs=tol).first_order()
+    for name in ("A.x", "A.y"):
+        rows = _rows(rep, name)
+        imp = first.importance[rows]
+        for m in ("S1", "ST"):
+            v, half = getattr(ind, m)[rows], 0.5 * (getattr(ind, m + "_high") - getattr(ind, m + "_low"))[rows]
+            assert np.all(np.abs(v - imp) <= 2 * half + 1e-9), (name, m, np.abs(v - imp).max())
+    salib = pytest.importorskip("SALib.analyze.sobol")
+    problem = {"num_vars": 4, "names": list(RANGES), "bounds": list(RANGES.values())}
+    rows = _rows(rep, "B.x")
+    for k in (0, 17, 40):
+        Y = np.concatenate([ya[2][:, k:k + 1], np.stack([y[2][:, k] for y in yab], 1), yb[2][:, k:k + 1]], 1).ravel()
+        s = salib.analyze(problem, Y, calc_second_order=False, seed=[4, 1])
+        np.testing.assert_allclose(ind.S1[rows[k]], s["S1"], rtol=1e-6, atol=1e-9)
+        np.testing.assert_allclose(ind.ST[rows[k]], s["ST"], rtol=1e-6, atol=1e-9)
+        np.testing.assert_allclose(ind.S1_high[rows[k]] - ind.S1[rows[k]], s["S1_conf"], rtol=1e-5, atol=1e-9)
+        np.testing.assert_allclose(ind.ST_high[rows[k]] - ind.ST[rows[k]], s["ST_conf"], rtol=1e-5, atol=1e-9)
+
+
+def test_sensitivity_of_the_feasibility_and_conditional_indices(setup, tmp_path):
+    """Near the toggle b = a + e: feasibility iff b ≥ a + |e − O1_y| (independent check). The
+    feasible fraction of the A, B draws equals that count; O1_x does not enter it, so its indices
+    of the feasibility are exactly 0; the responses' indices are conditional (a warning), finite;
+    indices.csv holds no NaN and the plots are written."""
+    mech, _inputs, study = setup
+    ranges = {"crank": [24.0, 26.0], "rod": [36.5, 39.0], "O1_x": [-0.5, 0.5], "O1_y": [-0.5, 0.5]}
+    inputs = st.read_study(mech, method="sensitivity", samples=512, seed=2, ranges=ranges, bootstrap=50)
+    rep = st.sensitivity(mech, study=study.moved(x0=[25.0, 38.0, 0.0, 0.0], inputs=inputs))
+    u = np.concatenate(list(st.unit_blocks("sobol", 8, 512, 2)))
+    x = np.concatenate([st.to_values(inputs, study.x0, u[:, :4]), st.to_values(inputs, study.x0, u[:, 4:])])
+    ok = x[:, 1] >= x[:, 0] + np.abs(E - x[:, 3])
+    assert 0.2 < ok.mean() < 0.9
+    assert rep.feasible_fraction == pytest.approx(ok.mean(), abs=1e-12)
+    f = rep.feasibility
+    assert f.S1[0, 2] == 0 and f.ST[0, 2] == 0 and f.ST[0, 1] > 0.3 and f.ST[0, 0] > 0.05
+    assert 0 < rep.complete < 512 and any("conditional on feasibility" in w for w in rep.warnings)
+    for v in rep.indices:
+        assert np.all(np.isfinite(np.asarray(v, float)))
+    from jaxlink.report import sampling as rs
+
+    files = rs.write_sensitivity_all(tmp_path, mech, rep, wall_time=1.0)
+    assert {p.split("/")[-1] for p in files} == {"indices.csv", "sobol.png", "sobol_curves.png", "study.json"}
+    text = (tmp_path / "indices.csv").read_text()
+    assert "nan" not in text.lower()
+    assert text.splitlines()[0] == "output,input (deg),parameter,method,value (1),low (1),high (1),conditional"
+    assert len(text.splitlines()) == 1 + (1 + len(rep.labels)) * 4 * 2
+
+
+def test_grid_and_samplers_keep_infeasible_designs(setup, tmp_path):
+    """The grid over (crank, rod) across the toggle: every design's feasibility equals the
+    independent check; the infeasible rows are kept with empty responses; the heat map is drawn.
+    Each sampler draws its count inside the ranges; the Latin hypercube puts one point per slice."""
+    mech, _inputs, study = setup
+    ranges = {"crank": [22.0, 28.0], "rod": [33.05, 41.05], "O1_x": [-0.1, 0.1], "O1_y": [-1.0, 1.0]}
+    inputs = st.read_study(mech, method="grid", ranges=ranges, levels={"crank": 13, "rod": 17, "O1_x": 1, "O1_y": 1})
+    rep = st.sample(mech, grid=True, study=study.moved(inputs=inputs))
+    assert rep.grid_shape == (13, 17, 1, 1) and rep.values.shape == (221, 4)
+    np.testing.assert_allclose(rep.values[:17, 1], np.linspace(33.05, 41.05, 17))  # the last range varies fastest
+    ok = rep.values[:, 1] >= rep.values[:, 0] + np.abs(E - rep.values[:, 3])
+    assert 20 < ok.sum() < 200 and np.array_equal(rep.feasible, ok)
+    from jaxlink.report import sampling as rs
+
+    files = rs.write_sample_all(tmp_path, mech, rep, wall_time=1.0)
+    assert (tmp_path / "grid.png").is_file() and len(files) == 3
+    lines = (tmp_path / "study.csv").read_text().splitlines()
+    assert lines[0].startswith("sample,crank (mm),rod (mm),O1_x (mm),O1_y (mm),feasible,swing(theta_rod) (deg)")
+    assert len(lines) == 222
+    bad = [ln for ln in lines[1:] if ln.split(",")[5] == "0"]
+    assert len(bad) == 221 - ok.sum() and all(ln.endswith(",,,,") for ln in bad)
+    for sampler in ("sobol", "lhs", "halton", "random"):
+        inp = st.read_study(mech, method="sample", samples=100, sampler=sampler, ranges=ranges)
+        r = st.sample(mech, study=study.moved(inputs=inp))
+        lo, hi = np.asarray(list(ranges.values())).T
+        assert r.values.shape == (100, 4) and np.all((r.values >= lo) & (r.values <= hi))
+        assert np.array_equal(r.feasible, r.values[:, 1] >= r.values[:, 0] + np.abs(E - r.values[:, 3]))
+        if sampler == "lhs":
+            for j in range(4):
+                slices = np.floor((r.values[:, j] - lo[j]) / (hi[j] - lo[j]) * 100).astype(int)
+                assert sorted(slices) == list(range(100))
+
+
+def test_the_ranges_are_checked():
+    mech = jl.loads(FILE)
+    for ranges, msg in (({"crank": [2, 1]}, "low < high"), ({"crank": 3}, r"\[low, high\]"),
+                        ({"crank_len": [1, 2]}, "'crank_len' is not a parameter")):
+        with pytest.raises(jl.MechanismError, match=msg):
+            st.read_study(mech, method="sample", ranges=ranges)
+    with pytest.raises(jl.MechanismError, match="grid method needs"):
+        st.read_study(mech, method="grid", tolerances={"crank": 0.1})
+    with pytest.raises(jl.MechanismError, match="'sampler' must be one of"):
+        st.read_study(mech, method="sample", sampler="faure", ranges={"crank": [1, 2]})
+    with pytest.raises(jl.MechanismError, match="'levels' of 'crank'"):
+        st.read_study(mech, method="grid", ranges={"crank": [1, 2]}, levels=0)
+    s = st.read_study(mech, {"method": "sensitivity", "ranges": {"rod": [70, 90]}, "tolerances": {"crank": 0.1}})
+    assert s.parameters == ("rod",) and s.samples == 1024  # the ranges win; the method's default count

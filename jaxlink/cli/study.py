@@ -1,5 +1,6 @@
-"""Command `jaxlink study`: parameter studies of the file's `[study]` table (this step: the
-tolerance analysis, docs/methods/tolerance.md)."""
+"""Command `jaxlink study`: parameter studies of the file's `[study]` table — the tolerance
+analysis (docs/methods/tolerance.md), sampling and grids over `[study.ranges]` and Sobol' global
+sensitivity (docs/methods/sensitivity.md)."""
 
 from __future__ import annotations
 
@@ -11,29 +12,38 @@ def register(sub) -> None:
     from .mechanism import add_mechanism_arguments
 
     p = sub.add_parser(
-        "study", help="parameter studies: the tolerance analysis of the file's [study] table",
+        "study", help="parameter studies of the file's [study] table: tolerance, sample, grid, sensitivity",
         description=(
-            "Tolerance analysis around the file's design: exact first order (RSS σ, linear worst case, "
-            "importance factors) of the studied points' paths and cycle metrics from the exact Jacobian, and "
-            "Monte Carlo with the tolerances' distributions (seeded, streamed; infeasible samples counted). "
-            "The tolerances are the file's [study.tolerances] (docs/reference/file-format.md §17). Writes "
-            "tolerance.csv, importance.csv, tolerance.png and study.json into --out, in the file's units."
+            "Parameter studies of the file's [study] table (docs/reference/file-format.md §17), in the file's "
+            "units. tolerance: exact first order (RSS σ, linear worst case, importance factors) from the exact "
+            "Jacobian and Monte Carlo with the tolerances' distributions (tolerance.csv, importance.csv, "
+            "tolerance.png). sample: designs drawn over [study.ranges] by a scrambled Sobol', Halton, Latin "
+            "hypercube or random sampler; grid: the full factorial over the ranges (study.csv; grid.png for two "
+            "ranges). sensitivity: Sobol' S1 and ST with bootstrap intervals of every response along the cycle "
+            "and of the feasibility (indices.csv, sobol.png, sobol_curves.png). Infeasible designs are kept and "
+            "flagged. Every method writes study.json."
         ),
     )
     add_mechanism_arguments(p, positions=False)
-    p.add_argument("--method", default=None, choices=("tolerance",),
+    p.add_argument("--method", default=None, choices=("tolerance", "sample", "grid", "sensitivity"),
                    help="the study (default: [study] method, else tolerance)")
     p.add_argument("--samples", type=int, default=None, metavar="N",
-                   help="Monte Carlo samples (default: [study] samples, else 10000; 0: first order only)")
+                   help="tolerance: Monte Carlo samples (default 10000; 0: first order only); sample: designs "
+                        "(default 1024); sensitivity: base samples N, N (D + 2) designs (default 1024); "
+                        "default: [study] samples")
+    p.add_argument("--sampler", default=None, choices=("sobol", "lhs", "halton", "random"),
+                   help="the sequence of sample and sensitivity (default: [study] sampler, else sobol)")
+    p.add_argument("--bootstrap", type=int, default=None, metavar="R",
+                   help="bootstrap resamples of the Sobol' intervals (default: [study] bootstrap, else 100)")
     p.add_argument("--positions", type=int, default=None, metavar="N",
                    help="input positions over the cycle (default: [study] positions, else 360)")
     p.add_argument("--seed", type=int, default=None, help="random seed (default: [study] seed, else 0)")
     p.add_argument("--chunk", type=int, default=None,
-                   help="Monte Carlo designs per batch (default: [study] chunk, else about 2^21 positions)")
+                   help="designs per batch (default: [study] chunk, else about 2^21 positions)")
     p.add_argument("--out", metavar="DIR", default=None, help="write the files into this folder")
-    p.add_argument("--no-plot", action="store_true", help="do not draw tolerance.png")
+    p.add_argument("--no-plot", action="store_true", help="do not draw the plots")
     p.add_argument("--progress", choices=("auto", "on", "off"), default="auto",
-                   help="progress bar of the Monte Carlo run (auto: when stderr is a terminal)")
+                   help="progress bar of the sampled designs (auto: when stderr is a terminal)")
     p.set_defaults(func=cmd_study)
 
 
@@ -48,13 +58,15 @@ def cmd_study(args) -> int:
     from ..study import Study, read_study, tolerance
 
     for opt, v, lo in (("--samples", args.samples, 0), ("--positions", args.positions, 8), ("--seed", args.seed, 0),
-                       ("--chunk", args.chunk, 1)):
+                       ("--chunk", args.chunk, 1), ("--bootstrap", args.bootstrap, 0)):
         if v is not None and v < lo:
             raise MechanismError(f"{opt} must be at least {lo}, got {v}")
     inputs = read_study(mech, method=args.method, samples=args.samples, positions=args.positions, seed=args.seed,
-                        chunk=args.chunk)
+                        chunk=args.chunk, sampler=args.sampler, bootstrap=args.bootstrap)
     study = Study(mech, inputs)
     show = sys.stderr.isatty() if args.progress == "auto" else args.progress == "on"
+    if inputs.method != "tolerance":
+        return _design_space(args, mech, study, show, t0)
     bar = None
     if show and inputs.samples > 0:
         from tqdm import tqdm
@@ -74,5 +86,55 @@ def cmd_study(args) -> int:
         print(f"warning: {w}", file=sys.stderr)
     if args.out:
         files = _report.write_all(args.out, mech, rep, wall_time=time.perf_counter() - t0, plot=not args.no_plot)
+        print("wrote " + ", ".join(files))
+    return 0
+
+
+def _design_space(args, mech, study, show: bool, t0: float) -> int:
+    """`sample`, `grid` and `sensitivity`."""
+    import numpy as np
+
+    from ..report import sampling as _report
+    from ..study.design import grid_shape
+    from ..study.sampling import sample, sensitivity
+
+    inputs = study.inputs
+    D = len(inputs.factors)
+    total = {"sample": inputs.samples, "grid": int(np.prod(grid_shape(inputs))) if inputs.ranges else 0,
+             "sensitivity": inputs.samples * (D + 2)}[inputs.method]
+    bar = None
+    if show and total > 0:
+        from tqdm import tqdm
+
+        bar = tqdm(total=total, desc=inputs.method, unit="design", leave=False, file=sys.stderr)
+    progress = None if bar is None else bar.update
+    srep = rep = None
+    try:
+        if inputs.method == "sensitivity":
+            srep = sensitivity(mech, study=study, progress=progress)
+        else:
+            rep = sample(mech, study=study, grid=inputs.method == "grid", progress=progress)
+    finally:
+        if bar is not None:
+            bar.close()
+    done = srep if srep is not None else rep
+    assert done is not None
+    print(f"{inputs.method} study of {mech.name}: {len(inputs.factors)} factors "
+          f"({', '.join(f.name for f in inputs.factors)}), {inputs.positions} positions; "
+          f"{done.timings['total']:.3g} s")
+    if srep is not None:
+        print(_report.sensitivity_summary(srep))
+    else:
+        assert rep is not None
+        print(_report.sample_summary(rep))
+    for w in done.warnings:
+        print(f"warning: {w}", file=sys.stderr)
+    if args.out:
+        wall = time.perf_counter() - t0
+        if srep is not None:
+            files = _report.write_sensitivity_all(args.out, mech, srep, wall_time=wall, plot=not args.no_plot)
+        else:
+            assert rep is not None
+            files = _report.write_sample_all(args.out, mech, rep, wall_time=wall, plot=not args.no_plot)
         print("wrote " + ", ".join(files))
     return 0

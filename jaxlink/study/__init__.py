@@ -1,22 +1,39 @@
 """Parameter studies on the batched, differentiable evaluator (`jaxlink study`).
 
-This step: the tolerance analysis around one design — exact first order (RSS σ, linear worst
-case, importance factors) from the Jacobian of the responses over the whole cycle, and Monte
-Carlo with the tolerances' distributions, streamed; feasibility over the whole cycle counted.
+The tolerance analysis around one design — exact first order (RSS σ, linear worst case,
+importance factors) from the Jacobian of the responses over the whole cycle, and Monte Carlo with
+the tolerances' distributions, streamed; feasibility over the whole cycle counted — and the
+design-space studies over ranges: `sample` (scrambled Sobol', Halton, Latin hypercube, random),
+`grid` (full factorial) and `sensitivity` (Sobol' S1/ST with bootstrap intervals of every response
+along the cycle and of the feasibility).
 
-- inputs: `read_study`, `StudyInputs`, `Tolerance` (the `[study]` table);
+- inputs: `read_study`, `StudyInputs`, `Tolerance`, `Range` (the `[study]` table);
+- designs: `unit_blocks` (the samplers), `to_values` (unit cube → parameters);
+- design-space studies: `sample`, `sensitivity`, `SampleReport`, `SensitivityReport`;
+- Sobol' estimators: `sobol_indices`, `SobolIndices`, `SobolAccumulator`;
 - responses: `Responses` (points' x, y over the cycle, stroke/swing, max speed/acceleration);
 - the analysis: `tolerance`, `Study`, `ToleranceReport`, `FirstOrder`, `MonteCarlo`, `draw`, `draws`;
 - streamed statistics: `Moments`.
 
-docs/methods/tolerance.md gives the formulas; docs/reference/file-format.md §17 the table.
+docs/methods/tolerance.md and docs/methods/sensitivity.md give the formulas;
+docs/reference/file-format.md §17 the table.
 """
 
+from .design import to_values as to_values
+from .design import unit_blocks as unit_blocks
+from .inputs import Range as Range
 from .inputs import StudyInputs as StudyInputs
 from .inputs import Tolerance as Tolerance
 from .inputs import read_study as read_study
 from .moments import Moments as Moments
 from .responses import Responses as Responses
+from .sampling import SampleReport as SampleReport
+from .sampling import SensitivityReport as SensitivityReport
+from .sampling import sample as sample
+from .sampling import sensitivity as sensitivity
+from .sobol import SobolAccumulator as SobolAccumulator
+from .sobol import SobolIndices as SobolIndices
+from .sobol import sobol_indices as sobol_indices
 from .tolerance import FirstOrder as FirstOrder
 from .tolerance import MonteCarlo as MonteCarlo
 from .tolerance import Study as Study

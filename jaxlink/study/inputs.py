@@ -3,7 +3,7 @@ the study computes — the `[study]` table of a mechanism file (or the same keys
 
 ```toml
 [study]
-method = "tolerance"        # the only method of this step
+method = "tolerance"        # or "sample", "grid", "sensitivity" (over [study.ranges])
 positions = 360             # input positions over the cycle (a full turn of an angle input)
 points = ["P"]              # the points whose x, y are responses (default: every point)
 metrics = ["stroke", "deviation"]   # scalar cycle metrics (default these two)
@@ -17,7 +17,14 @@ l2 = 0.05                   # ±0.05, the table's distribution (normal, ±t = 3�
 l3 = { tol = 0.05, distribution = "uniform" }   # uniform on [−t, t]: σ = t / √3
 l4 = { sigma = 0.01 }       # normal, σ given (the worst case takes ±k σ)
 B0 = { radius = 0.1 }       # a circular zone of the frame pivot B0: the parameters B0_x, B0_y
+
+[study.ranges]              # sample, grid, sensitivity: the design space (file units)
+l2 = [40, 60]               # uniform over [40, 60] (sample, sensitivity); `levels` values (grid)
 ```
+
+`sampler` ("sobol", "lhs", "halton", "random"), `levels` (grid: an integer or NAME = n),
+`bootstrap` and `confidence` (the Sobol' intervals) belong to the design-space methods
+(docs/methods/sensitivity.md).
 
 **The meaning of ±t** (t in the parameter's file unit):
 
@@ -41,14 +48,18 @@ from typing import Any, Mapping, NamedTuple
 
 from ..errors import MechanismError
 
-METHODS = ("tolerance",)
+METHODS = ("tolerance", "sample", "grid", "sensitivity")
+SAMPLERS = ("sobol", "lhs", "halton", "random")
 DISTRIBUTIONS = ("normal", "uniform")
 METRICS = ("stroke", "speed", "acceleration", "deviation")
 KNOWN_KEYS = {"method", "positions", "points", "metrics", "samples", "seed", "distribution", "k", "chunk",
-              "rpm", "tolerances"}
+              "rpm", "tolerances", "ranges", "sampler", "levels", "bootstrap", "confidence"}
 TOLERANCE_KEYS = {"tol", "sigma", "radius", "distribution", "k"}
 DEFAULTS: dict = {"method": "tolerance", "positions": 360, "metrics": ("stroke", "deviation"), "samples": 10000,
-            "seed": 0, "distribution": "normal", "k": 3.0}
+            "seed": 0, "distribution": "normal", "k": 3.0, "sampler": "sobol", "levels": 11, "bootstrap": 100,
+            "confidence": 0.95}
+#: the default number of samples of the other methods (`sensitivity`: base samples N, N (D + 2) designs)
+DEFAULT_SAMPLES = {"tolerance": 10000, "sample": 1024, "sensitivity": 1024, "grid": 0}
 
 
 class Tolerance(NamedTuple):
@@ -69,12 +80,28 @@ class Tolerance(NamedTuple):
     zone: bool = False
 
 
+class Range(NamedTuple):
+    """One parameter varied over a range (file units) by `sample`, `grid` and `sensitivity`:
+    uniformly over [low, high] (`sample`, `sensitivity`), `levels` equally spaced values from low to
+    high (`grid`; one level: the midpoint). `parameters` is `(name,)` (as a `Tolerance`'s), `kind`
+    "length" | "angle" | "number"."""
+
+    name: str
+    parameters: tuple
+    kind: str
+    low: float
+    high: float
+    levels: int
+
+
 class StudyInputs(NamedTuple):
     """A study's inputs, read from `[study]` (`read_study`): `method`, `tolerances` (tuple of
     `Tolerance`), `positions` (over the cycle), `points` (names), `metrics`, `samples` (Monte Carlo
     designs, 0 = none),
     `seed`, `chunk` (designs per batch, None = default), `rpm` (input speed for the speed and
-    acceleration metrics; None: per radian of the input)."""
+    acceleration metrics; None: per radian of the input); `ranges` (tuple of `Range`), `sampler`
+    (the unit-cube sequence of `sample` and `sensitivity`), `bootstrap` (resamples of the Sobol'
+    intervals), `confidence` (their level)."""
 
     method: str
     tolerances: tuple
@@ -85,11 +112,21 @@ class StudyInputs(NamedTuple):
     seed: int
     chunk: int | None
     rpm: float | None
+    ranges: tuple = ()
+    sampler: str = "sobol"
+    bootstrap: int = 100
+    confidence: float = 0.95
+
+    @property
+    def factors(self) -> tuple:
+        """The study's inputs: the `ranges` (methods `sample`, `grid`, `sensitivity` when given),
+        else the `tolerances` (a zone is one factor of two parameters)."""
+        return self.ranges if (self.method != "tolerance" and self.ranges) else self.tolerances
 
     @property
     def parameters(self) -> tuple:
-        """The toleranced parameters, in order (a zone gives two)."""
-        return tuple(n for t in self.tolerances for n in t.parameters)
+        """The studied parameters, in order (the factors' parameters; a zone gives two)."""
+        return tuple(n for t in self.factors for n in t.parameters)
 
 
 def read_study(mech, table: Mapping[str, Any] | None = None, **overrides) -> StudyInputs:
@@ -113,10 +150,19 @@ def _read_study(mech, table, overrides) -> StudyInputs:
             raise _err(mech, f"unknown key '{k}'; known keys: {', '.join(sorted(KNOWN_KEYS))}", k)
     method = t.get("method", DEFAULTS["method"])
     if method not in METHODS:
-        raise _err(mech, f"'method' must be one of {', '.join(map(repr, METHODS))} (the others are not yet "
-                         f"built), got {method!r}", "method")
+        raise _err(mech, f"'method' must be one of {', '.join(map(repr, METHODS))} (Dakota's vector, list "
+                         f"and centered studies are not yet built), got {method!r}", "method")
     positions = _integer(mech, t, "positions", 8, 100_000)
+    if "samples" not in t:
+        t["samples"] = DEFAULT_SAMPLES[method]
     samples = _integer(mech, t, "samples", 0, 10**10)
+    sampler = t.get("sampler", DEFAULTS["sampler"])
+    if sampler not in SAMPLERS:
+        raise _err(mech, f"'sampler' must be one of {', '.join(map(repr, SAMPLERS))}, got {sampler!r}", "sampler")
+    bootstrap = _integer(mech, t, "bootstrap", 0, 100_000)
+    confidence = _number(mech, t, "confidence") if "confidence" in t else float(DEFAULTS["confidence"])
+    if not 0 < confidence < 1:
+        raise _err(mech, f"'confidence' must lie between 0 and 1, got {confidence:g}", "confidence")
     seed = _integer(mech, t, "seed", 0, 2**32 - 1)
     chunk = _integer(mech, t, "chunk", 1, 10**7) if "chunk" in t else None
     rpm = _number(mech, t, "rpm") if "rpm" in t else None
@@ -144,7 +190,16 @@ def _read_study(mech, table, overrides) -> StudyInputs:
     if not isinstance(metrics, (list, tuple)) or any(m not in METRICS for m in metrics):
         raise _err(mech, f"'metrics' must be a list of {', '.join(map(repr, METRICS))}, got {metrics!r}", "metrics")
 
+    ranges = _ranges(mech, t.get("ranges"), t.get("levels", DEFAULTS["levels"]))
     tol_raw = t.get("tolerances")
+    if method == "grid" and not ranges:
+        raise _err(mech, "the grid method needs [study.ranges]: NAME = [low, high] (file units)", "ranges")
+    if method in ("sample", "sensitivity") and not ranges and not tol_raw:
+        raise _err(mech, f"the {method} method needs [study.ranges] (NAME = [low, high], file units) or "
+                         "[study.tolerances]", "ranges")
+    if method != "tolerance" and not tol_raw:
+        return StudyInputs(method, (), positions, tuple(points), tuple(dict.fromkeys(metrics)), samples, seed,
+                           chunk, rpm, ranges, sampler, bootstrap, confidence)
     if not isinstance(tol_raw, Mapping) or not tol_raw:
         raise _err(mech, "[study.tolerances] must give at least one tolerance: NAME = t, or NAME = { tol = t, "
                          "distribution = \"uniform\" }, { sigma = s } or { radius = r } (a pivot's zone)",
@@ -159,7 +214,40 @@ def _read_study(mech, table, overrides) -> StudyInputs:
             seen.add(p)
         tolerances.append(tol)
     return StudyInputs(method, tuple(tolerances), positions, tuple(points), tuple(dict.fromkeys(metrics)),
-                       samples, seed, chunk, rpm)
+                       samples, seed, chunk, rpm, ranges, sampler, bootstrap, confidence)
+
+
+def _ranges(mech, raw, levels_raw) -> tuple:
+    """The `Range`s of `[study.ranges]` (NAME = [low, high]) with their grid levels (`levels`: one
+    integer for every range, or a table NAME = n)."""
+    if raw is None:
+        return ()
+    if not isinstance(raw, Mapping):
+        raise _err(mech, f"[study.ranges] must be a table NAME = [low, high], got {raw!r}", "ranges")
+    if isinstance(levels_raw, Mapping):
+        for name in levels_raw:
+            if name not in raw:
+                raise _err(mech, f"levels: '{name}' has no range; ranges: {', '.join(raw) or '(none)'}", "levels")
+    elif isinstance(levels_raw, bool) or not isinstance(levels_raw, int):
+        raise _err(mech, f"'levels' must be an integer ≥ 1 or a table NAME = n, got {levels_raw!r}", "levels")
+    out = []
+    for name, entry in raw.items():
+        key = f"ranges.{name}"
+        if name not in mech.parameter_names:
+            derived = [d[0] for d in mech.derived]
+            why = " (derived: vary the parameters it is computed from)" if name in derived else ""
+            raise _err(mech, f"'{name}' is not a parameter{why}; parameters: {', '.join(mech.parameter_names)}", key)
+        if (not isinstance(entry, (list, tuple)) or len(entry) != 2
+                or any(isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) for v in entry)):
+            raise _err(mech, f"a range is [low, high] (two finite numbers, file units), got {entry!r}", key)
+        lo, hi = float(entry[0]), float(entry[1])
+        if not lo < hi:
+            raise _err(mech, f"a range needs low < high, got [{lo:g}, {hi:g}]", key)
+        n = levels_raw.get(name, DEFAULTS["levels"]) if isinstance(levels_raw, Mapping) else levels_raw
+        if isinstance(n, bool) or not isinstance(n, int) or not 1 <= n <= 100_000:
+            raise _err(mech, f"'levels' of '{name}' must be an integer from 1 to 100000, got {n!r}", "levels")
+        out.append(Range(name, (name,), mech.kinds[name], lo, hi, int(n)))
+    return tuple(out)
 
 
 def _tolerance(mech, name: str, entry, default_dist: str, default_k: float) -> Tolerance:

@@ -1,0 +1,293 @@
+"""Design-space studies on the batched evaluator: `sample` (random, Latin hypercube, scrambled
+Sobol' or Halton designs over the ranges), `grid` (the full factorial) and `sensitivity` (Sobol'
+S1 and ST of every response along the cycle at once, with bootstrap intervals, and of the
+feasibility itself). docs/methods/sensitivity.md gives the formulas.
+
+Every design is evaluated by the tolerance study's compiled batch (`Study`: `Responses.single`
+`vmap`ped over `chunk` designs, the reach margin's screen, the certificate where it is below zero),
+chunk by chunk: memory is bounded by the chunk (the `sample` and `grid` results keep only each
+design's parameters, flag and scalar responses; `sensitivity` keeps only the estimators' sums).
+
+**Feasibility** (a design assembles over the whole cycle on the nominal's branch, see
+`responses`): an infeasible design is kept and flagged (`feasible` False), its responses are not
+used (0 in the arrays, empty cells in study.csv), never dropped and never a NaN. In `sensitivity`:
+
+- the indicator 1{feasible} is an output of its own: its Sobol' indices over all base samples say
+  which parameters drive infeasibility; `feasible_fraction` is the fraction of the 2N independent
+  draws (A and B) that are feasible — an estimate of the probability that a design drawn from the
+  ranges assembles;
+- the responses' indices are computed over the base samples whose D + 2 evaluations are all
+  feasible (the others weigh 0): indices *conditional on feasibility*, with a warning — an
+  approximation, the feasible region not being a product of the ranges; with fewer than two such
+  base samples the responses' indices are not computed (a warning, no NaN).
+"""
+
+from __future__ import annotations
+
+import time
+from typing import NamedTuple
+
+import jax.numpy as jnp
+import numpy as np
+
+from ..errors import MechanismError
+from .design import grid_shape, grid_values, to_values, unit_blocks
+from .inputs import StudyInputs
+from .responses import unit_names
+from .sobol import SobolAccumulator, SobolIndices, bootstrap_counts
+from .tolerance import Study
+
+
+class SampleReport(NamedTuple):
+    """The result of `sample` and `grid` (file units).
+
+    - `inputs`; `parameters` (T,) names, `units` (T,) their unit names; `nominal_x` (T,);
+    - `values` (n, T) every design's parameters; `feasible` (n,) bool;
+    - `labels` (S,) `(output, unit)` of the scalar responses (the metrics' and each point's
+      `deviation(P)`: max over the cycle of |P − P_nominal|); `responses` (n, S), 0 where infeasible;
+      `nominal` (S,) the nominal's;
+    - `grid_shape` (the levels per range for `grid`, else None); `certificate`; `warnings`;
+      `timings` (seconds).
+    """
+
+    inputs: StudyInputs
+    parameters: tuple
+    units: tuple
+    nominal_x: np.ndarray
+    values: np.ndarray
+    feasible: np.ndarray
+    labels: tuple
+    responses: np.ndarray
+    nominal: np.ndarray
+    grid_shape: tuple | None
+    certificate: str
+    warnings: list
+    timings: dict
+
+
+class SensitivityReport(NamedTuple):
+    """The result of `sensitivity` (file units).
+
+    - `inputs`; `factors` (D,) the factors' names (a range's parameter, a tolerance's name);
+    - `labels` (M,) `(output, unit, position index or None)` of every response (the points' x, y
+      at every position, the metrics, each point's `deviation(P)`); `input_values` (N_pos,) the
+      cycle's inputs (the input's file unit); `nominal` (M,);
+    - `indices` (`SobolIndices` of the M responses, conditional on feasibility; None when fewer
+      than two base samples are wholly feasible); `feasibility` (`SobolIndices` of the indicator,
+      one output);
+    - `samples` (base samples N), `evaluations` (N (D + 2)), `feasible_fraction` (of the 2N draws A
+      and B), `complete` (base samples whose D + 2 evaluations are all feasible);
+    - `certificate`, `warnings`, `timings`.
+    """
+
+    inputs: StudyInputs
+    factors: tuple
+    labels: tuple
+    input_values: np.ndarray
+    nominal: np.ndarray
+    indices: SobolIndices | None
+    feasibility: SobolIndices
+    samples: int
+    evaluations: int
+    feasible_fraction: float
+    complete: int
+    certificate: str
+    warnings: list
+    timings: dict
+
+
+class _Evaluator:
+    """Batches of designs → (responses (n, M) with each point's path deviation appended, feasible
+    (n,)); the nominal's responses from the first call (its first row)."""
+
+    def __init__(self, study: Study):
+        self.study = study
+        r = study.responses
+        self.n_curve = r.n_curve
+        self.K = len(study.inputs.points)
+        self.N = study.inputs.positions
+        self.deviation = "deviation" in study.inputs.metrics and self.K > 0
+        lu = unit_names(study.mech)[0]
+        self.labels = tuple(r.labels) + (tuple((f"deviation({p})", lu, None) for p in study.inputs.points)
+                                          if self.deviation else ())
+        self.nominal: np.ndarray | None = None
+        self.seconds = 0.0
+
+    def __call__(self, x):
+        t0 = time.perf_counter()
+        s = self.study
+        first = self.nominal is None
+        if first:
+            x = np.concatenate([s.x0[None], x])
+        n = x.shape[0]
+        vals, oks = [], []
+        for a in range(0, n, s.chunk):
+            k = min(s.chunk, n - a)
+            xp = np.empty((s.chunk, x.shape[1]))
+            xp[:] = s.x0
+            xp[:k] = x[a:a + k]
+            v, ok, est = s._batch(jnp.asarray(xp))
+            ok = s._certified(xp[:k], np.asarray(ok)[:k], np.asarray(est)[:k])
+            vals.append(np.asarray(v)[:k])
+            oks.append(ok)
+        v = np.concatenate(vals)
+        ok = np.concatenate(oks)
+        if first:
+            if not ok[0]:
+                raise MechanismError("the file's design does not assemble over its whole cycle: a study needs an "
+                                     "assemblable design (its branch is the reference)", file=s.mech.file, key="study")
+            self.nominal = np.concatenate([v[0], np.zeros(self.K if self.deviation else 0)])
+            v, ok = v[1:], ok[1:]
+        if self.deviation:
+            assert self.nominal is not None
+            d = (v[:, :self.n_curve] - self.nominal[:self.n_curve]).reshape(-1, self.K, 2, self.N)
+            v = np.concatenate([v, np.hypot(d[:, :, 0], d[:, :, 1]).max(axis=2)], axis=1)
+        v = np.where(ok[:, None], v, 0.0)
+        self.seconds += time.perf_counter() - t0
+        return v, ok
+
+
+def _study(mech, inputs, study, chunk, options):
+    from ..solvers.assemble import NewtonOptions
+    from .inputs import read_study
+
+    if study is not None:
+        return study
+    inputs = read_study(mech) if inputs is None else inputs
+    return Study(mech, inputs, options=options or NewtonOptions(), chunk=chunk)
+
+
+def _units(mech, inputs) -> tuple:
+    lu, au = unit_names(mech)
+    return tuple({"length": lu, "angle": au}.get(mech.kinds[p], "1") for p in inputs.parameters)
+
+
+def sample(mech, inputs: StudyInputs | None = None, *, samples: int | None = None, grid: bool = False, chunk=None,
+           options=None, progress=None, study: Study | None = None) -> SampleReport:
+    """Evaluate `samples` designs drawn by the study's `sampler` over its ranges (or its
+    tolerances' distributions), or with `grid=True` the full factorial over the ranges.
+
+    **Arguments:** as `tolerance` (`inputs`, `samples`, `chunk`, `options`, `progress` called with
+    the designs done after each batch, `study` a compiled `Study` whose parameters are the ranges').
+
+    **Returns:** a `SampleReport` (see the module doc for what is done with infeasible designs).
+    """
+    t0 = time.perf_counter()
+    study = _study(mech, inputs, study, chunk, options)
+    inputs = study.inputs
+    ev = _Evaluator(study)
+    T = len(inputs.parameters)
+    if grid:
+        if not inputs.ranges:
+            raise MechanismError("the grid method needs [study.ranges]", file=mech.file, key="study.ranges")
+        shape = grid_shape(inputs)
+        n = int(np.prod(shape))
+        blocks = ((grid_values(inputs, a, min(n, a + study.chunk))) for a in range(0, n, study.chunk))
+    else:
+        shape = None
+        n = inputs.samples if samples is None else int(samples)
+        blocks = (to_values(inputs, study.x0, u)
+                  for u in unit_blocks(inputs.sampler, T, n, inputs.seed, study.chunk))
+    xs, oks, vs = [], [], []
+    scalar = np.asarray([k is None for (_, _, k) in ev.labels], bool)
+    for x in blocks:
+        v, ok = ev(x)
+        xs.append(x)
+        oks.append(ok)
+        vs.append(v[:, scalar])
+        if progress is not None:
+            progress(len(x))
+    if ev.nominal is None:  # no design: the nominal alone
+        ev(np.zeros((0, T)))
+    assert ev.nominal is not None
+    values = np.concatenate(xs) if xs else np.zeros((0, T))
+    feasible = np.concatenate(oks) if oks else np.zeros(0, bool)
+    responses = np.concatenate(vs) if vs else np.zeros((0, int(scalar.sum())))
+    warnings = []
+    bad = int(np.count_nonzero(~feasible))
+    if bad:
+        warnings.append(f"{bad} of {len(feasible)} designs ({100 * bad / len(feasible):.3g} %) do not assemble over "
+                        f"the whole cycle on the nominal's branch ({study.responses.certificate}): kept and flagged "
+                        "(feasible = 0), their responses left empty")
+    labels = tuple((name, unit) for (name, unit, k) in ev.labels if k is None)
+    timings = {"evaluate": ev.seconds, "total": time.perf_counter() - t0}
+    return SampleReport(inputs, inputs.parameters, _units(mech, inputs), np.asarray(study.x0), values, feasible,
+                        labels, responses, ev.nominal[scalar], shape, study.responses.certificate, warnings, timings)
+
+
+def sensitivity(mech, inputs: StudyInputs | None = None, *, samples: int | None = None, chunk=None, options=None,
+                progress=None, study: Study | None = None) -> SensitivityReport:
+    """Sobol' S1 and ST of every response (and of the feasibility) with bootstrap intervals,
+    from N = `samples` base samples of the study's `sampler` (2d columns: A and B) over its ranges
+    (or its tolerances' distributions; a circular zone is one factor of two parameters).
+
+    **Arguments:** as `sample`. **Returns:** a `SensitivityReport` (see the module doc; the
+    estimators in `jaxlink.study.sobol`).
+    """
+    t0 = time.perf_counter()
+    study = _study(mech, inputs, study, chunk, options)
+    inputs = study.inputs
+    ev = _Evaluator(study)
+    factors = inputs.factors
+    D = len(factors)
+    T = len(inputs.parameters)
+    cols = []
+    j = 0
+    for f in factors:
+        cols.append(np.arange(j, j + len(f.parameters)))
+        j += len(f.parameters)
+    N = inputs.samples if samples is None else int(samples)
+    if N < 2:
+        raise MechanismError(f"a sensitivity study needs at least 2 base samples, got {N}", file=mech.file,
+                             key="study.samples")
+    counts = bootstrap_counts(N, inputs.bootstrap, [inputs.seed, 1])
+    per = max(1, study.chunk // (D + 2))
+    resp: SobolAccumulator | None = None
+    feas = SobolAccumulator(1, D, counts)
+    drawn = ok_draws = complete = 0
+    t_est = 0.0
+    start = 0
+    for u in unit_blocks(inputs.sampler, 2 * T, N, inputs.seed, per):
+        n = len(u)
+        a = to_values(inputs, study.x0, u[:, :T])
+        b = to_values(inputs, study.x0, u[:, T:])
+        ab = np.repeat(a[None], D, axis=0)
+        for k, c in enumerate(cols):
+            ab[k][:, c] = b[:, c]
+        y, ok = ev(np.concatenate([a, b, ab.reshape(-1, T)]))
+        t1 = time.perf_counter()
+        if resp is None:
+            assert ev.nominal is not None
+            resp = SobolAccumulator(len(ev.labels), D, counts, shift=ev.nominal)
+        okb = ok.reshape(D + 2, n)
+        w = okb.all(axis=0)
+        resp.update(start, y[:n], y[n:2 * n], y[2 * n:].reshape(D, n, -1), w)
+        f = ok.astype(float)[:, None]
+        feas.update(start, f[:n], f[n:2 * n], f[2 * n:].reshape(D, n, 1))
+        drawn += 2 * n
+        ok_draws += int(okb[:2].sum())
+        complete += int(w.sum())
+        start += n
+        t_est += time.perf_counter() - t1
+        if progress is not None:
+            progress(n * (D + 2))
+    assert resp is not None and ev.nominal is not None
+    t1 = time.perf_counter()
+    warnings = []
+    indices = None
+    if complete >= 2:
+        indices = resp.result(inputs.confidence)
+    else:
+        warnings.append(f"only {complete} of {N} base samples have all their {D + 2} designs feasible: the responses' "
+                        "Sobol' indices are not computed (only the feasibility's)")
+    if 2 <= complete < N:
+        warnings.append(
+            f"{N - complete} of {N} base samples have an infeasible design among their {D + 2}: the responses' indices "
+            f"are computed over the {complete} others — conditional on feasibility, an approximation (the feasible "
+            "region is not a product of the ranges); the feasibility's own indices say which parameters drive it")
+    fi = feas.result(inputs.confidence)
+    t_est += time.perf_counter() - t1
+    timings = {"evaluate": ev.seconds, "estimate": t_est, "total": time.perf_counter() - t0}
+    r = study.responses
+    return SensitivityReport(inputs, tuple(f.name for f in factors), ev.labels, r.input_values, ev.nominal, indices,
+                             fi, N, N * (D + 2), ok_draws / max(drawn, 1), complete, r.certificate, warnings, timings)

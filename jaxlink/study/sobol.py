@@ -1,0 +1,159 @@
+"""Sobol' indices of many outputs at once, streamed over batches of base samples, with bootstrap
+intervals — the estimators of SALib's `sobol.analyze` (Saltelli et al. 2010 for S1, Jansen 1999
+for ST), vectorized over the outputs and the bootstrap replicates. docs/methods/sensitivity.md
+gives the design and the formulas.
+
+**The design.** Two independent N × d matrices A and B of input draws; for each factor j the
+matrix AB_j: A with factor j's columns taken from B. The model is evaluated on A, B and every
+AB_j (N (D + 2) evaluations, D factors); y_A, y_B, y_ABj (N, M) are the M outputs.
+
+**The estimators** (per output; m the mean of every evaluation, V the variance of the 2N values
+of y_A and y_B, population form as SALib):
+
+    S1_j = (1/N) Σ_i (y_B,i − m) (y_ABj,i − y_A,i) / V          (Saltelli et al. 2010)
+    ST_j = (1/2N) Σ_i (y_A,i − y_ABj,i)² / V                    (Jansen 1999)
+
+S1 is not invariant to a shift of y in a finite sample: centring with m is SALib's (it normalizes
+y by its mean and standard deviation before estimating).
+
+**Streaming.** Every estimator is a ratio of sums over the base samples i, so a batch adds to
+sums and nothing per sample is kept. Sums are of y − s, s a fixed shift per output (the nominal
+design's responses): no cancellation of large equal numbers; m is applied at the end through
+Σ (y_B − m)(y_AB − y_A) = Σ (y_B − s)(y_AB − y_A) − (m − s) Σ (y_AB − y_A).
+
+**Bootstrap.** Resample i.e. of the N base samples with replacement, R times; replicate b counts
+base sample i c_bi times (multinomial counts, from `numpy.random.default_rng(seed).integers(N,
+size=(N, R))`, SALib's draw). Each replicate's sums are c_b · (per-sample terms): one matrix
+product (R + 1) × n by n × (M (3D + 2)) per batch, row 0 the estimate itself (all counts 1). The
+interval is SALib's: the estimate ± z σ_boot (σ_boot the replicates' standard deviation, z the
+normal quantile of the confidence level).
+
+**Weights.** A base sample of weight 0 is left out of every sum (the study's infeasible designs:
+`w_i = 0` where any of its D + 2 evaluations is infeasible); the normalizations count only the
+rest. An output whose V is zero (constant; relative to its scale, below 1e−24 (|m| + …)²) gets
+indices 0 and `constant` True, never a NaN; so does a replicate with fewer than two samples.
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import numpy as np
+
+
+class SobolIndices(NamedTuple):
+    """Sobol' indices of M outputs and D factors: `S1`, `S1_low`, `S1_high`, `ST`, `ST_low`,
+    `ST_high` (M, D); `samples` (the base samples used, those of weight 1), `constant` (M,) True
+    where the output did not vary (its indices 0), `confidence` (the intervals' level)."""
+
+    S1: np.ndarray
+    S1_low: np.ndarray
+    S1_high: np.ndarray
+    ST: np.ndarray
+    ST_low: np.ndarray
+    ST_high: np.ndarray
+    samples: int
+    constant: np.ndarray
+    confidence: float
+
+
+def bootstrap_counts(n: int, resamples: int, seed) -> np.ndarray:
+    """(R, N) uint16: how often replicate b draws base sample i — SALib's draw
+    `default_rng(seed).integers(N, size=(N, R))` counted per column."""
+    if resamples == 0 or n == 0:
+        return np.zeros((resamples, n), np.uint16)
+    r = np.random.default_rng(seed).integers(n, size=(n, resamples))
+    counts = np.zeros((resamples, n), np.uint16)
+    for b in range(resamples):
+        counts[b] = np.bincount(r[:, b], minlength=n)
+    return counts
+
+
+class SobolAccumulator:
+    """Streamed sums of the Sobol' estimators of M outputs and D factors (see the module doc).
+
+    **Arguments:** `m` (outputs), `d` (factors), `counts` (R, N) the bootstrap counts
+    (`bootstrap_counts`), `shift` (M,) subtracted from every output (default 0)."""
+
+    def __init__(self, m: int, d: int, counts, shift=None):
+        self.m, self.d = int(m), int(d)
+        self.counts = np.asarray(counts)
+        self.r = self.counts.shape[0]
+        self.shift = np.zeros(self.m) if shift is None else np.asarray(shift, float)
+        k = self.m * (2 + 3 * self.d)
+        self.sums = np.zeros((self.r + 1, k))
+        self.n = np.zeros(self.r + 1)
+        self.sum_a = np.zeros(self.m)  # unweighted by the bootstrap: the mean m of every evaluation
+        self.sum_b = np.zeros(self.m)
+        self.used = 0
+
+    def update(self, start: int, ya, yb, yab, weight=None) -> None:
+        """Add base samples `start` … `start + n − 1`: `ya`, `yb` (n, M), `yab` (D, n, M), `weight`
+        (n,) of 0 and 1 (default 1)."""
+        n = ya.shape[0]
+        if n == 0:
+            return
+        w = np.ones(n) if weight is None else np.asarray(weight, float)
+        s = self.shift
+        ya = np.asarray(ya, float) - s
+        yb = np.asarray(yb, float) - s
+        diff = np.asarray(yab, float) - s - ya  # (D, n, M): y_AB − y_A
+        def flat(z):  # (D, n, M) → (n, D M)
+            return z.transpose(1, 0, 2).reshape(n, -1)
+
+        terms = np.concatenate([ya + yb, ya * ya + yb * yb, flat(yb * diff), flat(diff), flat(diff * diff)], axis=1)
+        c = np.empty((self.r + 1, n))
+        c[0] = w
+        c[1:] = self.counts[:, start:start + n] * w
+        self.sums += c @ terms
+        self.n += c.sum(axis=1)
+        self.sum_a += w @ ya
+        self.sum_b += w @ yb
+        self.used += int(w.sum())
+
+    def result(self, confidence: float = 0.95) -> SobolIndices:
+        """The indices and their bootstrap intervals (see the module doc)."""
+        from scipy.stats import norm
+
+        M, D = self.m, self.d
+        n = np.maximum(self.n, 1.0)[:, None]
+        s = self.sums
+        sum_ab = s[:, 0:M]
+        sq = s[:, M:2 * M]
+        p = s[:, 2 * M:(2 + D) * M].reshape(-1, D, M)
+        q = s[:, (2 + D) * M:(2 + 2 * D) * M].reshape(-1, D, M)
+        t = s[:, (2 + 2 * D) * M:].reshape(-1, D, M)
+        # m − s: the mean of every evaluation (A, B and every AB_j) of the estimate's samples
+        total = (D + 1) * self.sum_a + self.sum_b + q[0].sum(axis=0)
+        mean = total / max(self.used * (D + 2), 1)
+        mu = sum_ab / (2 * n)
+        var = sq / (2 * n) - mu * mu  # (R + 1, M)
+        scale = np.abs(mean + self.shift) + np.sqrt(np.maximum(var[0], 0.0))
+        few = (self.n < 2)[:, None]
+        flat = (var <= 1e-24 * scale * scale + 1e-300) | few
+        den = np.where(flat, 1.0, var)[:, None, :]
+        s1 = np.where(flat[:, None, :], 0.0, (p - mean * q) / n[:, :, None] / den)
+        st = np.where(flat[:, None, :], 0.0, 0.5 * t / n[:, :, None] / den)
+        z = float(norm.ppf(0.5 + confidence / 2))
+        out = []
+        for est in (s1, st):
+            v = est[0].T  # (M, D)
+            half = z * est[1:].std(axis=0, ddof=1).T if self.r > 1 else np.zeros_like(v)
+            out += [v, v - half, v + half]
+        return SobolIndices(out[0], out[1], out[2], out[3], out[4], out[5], self.used, flat[0], confidence)
+
+
+def sobol_indices(ya, yb, yab, *, resamples: int = 100, confidence: float = 0.95, seed=None,
+                  weight=None) -> SobolIndices:
+    """Sobol' S1 and ST of every output column from the evaluations on A, B and AB_j: `ya`, `yb`
+    (N, M) or (N,), `yab` (D, N, M) or (D, N); bootstrap with `resamples` replicates drawn with
+    `seed` (SALib's draw for the same seed); `weight` (N,) of 0 and 1 leaves base samples out."""
+    ya = np.asarray(ya, float)
+    yb = np.asarray(yb, float)
+    yab = np.asarray(yab, float)
+    if ya.ndim == 1:
+        ya, yb, yab = ya[:, None], yb[:, None], yab[..., None]
+    n, m = ya.shape
+    acc = SobolAccumulator(m, yab.shape[0], bootstrap_counts(n, resamples, seed))
+    acc.update(0, ya, yb, yab, weight)
+    return acc.result(confidence)
