@@ -327,7 +327,8 @@ def test_sketch_file_checks_and_prints_its_loops(tmp_path, capsys):
     out = capsys.readouterr().out
     assert "loop_A_B_B0: (A0_x, A0_y) + crank @ theta_crank + coupler @ theta_coupler" in out
     assert "P = (A0_x, A0_y) + crank @ theta_crank + coupler_P @ theta_coupler + coupler_P_angle" in out
-    assert "frame A0, B0; links crank (A0 A), coupler (A B P: a plate), rocker (B0 B)" in out
+    assert "frame A0, B0; links crank (A0 A), coupler (A B P: a plate), rocker (B0 B); input: theta_crank, " \
+           "the angle of link crank about A0" in out
 
 
 def test_sketch_masses_give_the_reactions_of_the_loop_file():

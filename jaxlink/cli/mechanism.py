@@ -508,8 +508,11 @@ def cmd_check(args) -> int:
     if mech.sketch is not None:
         lay = mech.sketch
         sliders = "".join(f"; slider {j} on {b}" for j, b in lay.sliders)
-        drive = (f"crank {lay.input[1]}" if lay.input[0] == "crank"
-                 else f"actuator {lay.input[1][0]}–{lay.input[1][1]}")
+        if lay.input[0] == "crank":
+            pivot = dict(lay.bodies)[lay.input[1]][0]
+            drive = f"{mech.input_name}, the angle of link {lay.input[1]} about {pivot}"
+        else:
+            drive = f"{mech.input_name}, the length of the actuator {lay.input[1][0]}–{lay.input[1][1]}"
         print(f"sketch      frame {', '.join(lay.frame)}; links " + ", ".join(
             f"{b} ({' '.join(js)}{': a plate' if len(js) > 2 else ''})" for b, js in lay.bodies)
             + f"{sliders}; input: {drive}")
