@@ -149,6 +149,46 @@ def test_infeasible_samples_are_counted_near_a_toggle(setup):
         assert np.all(np.isfinite(v))
 
 
+
+def test_the_true_worst_case(setup):
+    """The worst case over the box ≥ every Monte Carlo sample's deviation (uniform inputs: the
+    samples lie in the box) and ≥ the linear worst case where that is reached at a corner; for the
+    linear A (A = O1 + a (cos θ, sin θ)) equal to the linear worst case, the zone's disc included.
+    With scalar tolerances (16 corners, wide ±0.2–0.4 mm) the search is an enumeration and equals
+    the closed form's largest deviation over the 16 corners."""
+    import itertools
+
+    from jaxlink.study.worstcase import monte_carlo_objectives
+
+    mech, inputs, study = setup
+    rep = st.tolerance(mech, study=study)
+    w, K, N, nc = rep.worst, len(inputs.points), inputs.positions, study.responses.n_curve
+    mc = monte_carlo_objectives(rep.monte_carlo, K, N, nc)
+    assert w.names == ("swing(theta_rod)", "stroke(s_B)", "deviation(A.x)", "deviation(A.y)", "deviation(A)",
+                       "deviation(B.x)", "deviation(B.y)", "deviation(B)")
+    assert np.all(w.value >= mc) and not w.corners and set(w.status) == {"found"} and w.infeasible == 0
+    for n in ("deviation(A.x)", "deviation(A.y)", "deviation(A)"):  # linear: 0.01 + 0.01
+        assert w.value[w.names.index(n)] == pytest.approx(0.02, rel=1e-9)
+        assert w.linear[w.names.index(n)] == pytest.approx(0.02, rel=1e-9)
+    assert np.all(w.value >= w.linear * (1 - 1e-3))  # second order only adds here
+    # every corner enumerated, against the closed form at the corners
+    half = np.asarray([0.3, 0.3, 0.2, 0.4])
+    tol = st.read_study(mech, tolerances={p: {"tol": h, "distribution": "uniform"}
+                                          for p, h in zip(("crank", "rod", "O1_x", "O1_y"), half)})
+    rep = st.tolerance(mech, study=study.moved(inputs=tol), samples=1024)
+    w = rep.worst
+    assert w.corners and w.candidates == 16 and set(w.status) == {"enumerated"}
+    theta = np.deg2rad(rep.input_values)
+    corners = study.x0 + np.asarray(list(itertools.product((-1, 1), repeat=4))) * half
+    (ax, ay, bx), (ax0, ay0, bx0) = _closed_form(corners, theta), _closed_form(study.x0[None], theta)
+    ref = {"deviation(A.x)": np.abs(ax - ax0).max(), "deviation(A)": np.hypot(ax - ax0, ay - ay0).max(),
+           "deviation(B.x)": np.abs(bx - bx0).max(), "deviation(A.y)": 0.7}
+    for n, v in ref.items():
+        assert w.value[w.names.index(n)] == pytest.approx(v, rel=1e-9), n
+    assert np.all(w.value >= monte_carlo_objectives(rep.monte_carlo, K, N, nc))
+    # the path's linear bound Σ_j t_j ‖∂A/∂x_j‖ = 0.3 + 0.2 + 0.4 is not reached by the path itself
+    assert w.linear[w.names.index("deviation(A)")] == pytest.approx(0.9) and ref["deviation(A)"] < 0.8
+
 def test_the_study_table_is_checked():
     mech = jl.loads(FILE)
     bad = {
