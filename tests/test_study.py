@@ -150,7 +150,7 @@ def test_infeasible_samples_are_counted_near_a_toggle(setup):
 
 
 
-def test_the_true_worst_case(setup):
+def test_the_true_worst_case(setup, tmp_path):
     """The worst case over the box ≥ every Monte Carlo sample's deviation (uniform inputs: the
     samples lie in the box) and ≥ the linear worst case where that is reached at a corner; for the
     linear A (A = O1 + a (cos θ, sin θ)) equal to the linear worst case, the zone's disc included.
@@ -188,6 +188,18 @@ def test_the_true_worst_case(setup):
     assert np.all(w.value >= monte_carlo_objectives(rep.monte_carlo, K, N, nc))
     # the path's linear bound Σ_j t_j ‖∂A/∂x_j‖ = 0.3 + 0.2 + 0.4 is not reached by the path itself
     assert w.linear[w.names.index("deviation(A)")] == pytest.approx(0.9) and ref["deviation(A)"] < 0.8
+    import csv
+    import json
+
+    from jaxlink.report import tolerance as rt
+
+    rt.write_all(tmp_path, mech, rep, wall_time=1.0, plot=False)
+    rows = {r["output"]: r for r in csv.DictReader((tmp_path / "tolerance.csv").open())}
+    assert float(rows["deviation(A)"]["worst_case (unit)"]) == pytest.approx(ref["deviation(A)"], rel=1e-9)
+    assert rows["deviation(A.y)"]["worst_case_status"] == "enumerated" and rows["A.x"]["worst_case (unit)"] == ""
+    out = json.loads((tmp_path / "study.json").read_text())["worst_case"]["outputs"]
+    assert out[w.names.index("deviation(B.x)")]["worst"] == pytest.approx(ref["deviation(B.x)"], rel=1e-9)
+    assert "worst case over the tolerance box" in rt.summary(mech, rep)
 
 def test_the_study_table_is_checked():
     mech = jl.loads(FILE)
