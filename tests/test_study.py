@@ -396,3 +396,52 @@ def test_the_ranges_are_checked():
         st.read_study(mech, method="grid", ranges={"crank": [1, 2]}, levels=0)
     s = st.read_study(mech, {"method": "sensitivity", "ranges": {"rod": [70, 90]}, "tolerances": {"crank": 0.1}})
     assert s.parameters == ("rod",) and s.samples == 1024  # the ranges win; the method's default count
+
+
+CLI_RANGES = """
+levels = { crank = 4, rod = 5, O1_x = 1, O1_y = 3 }
+
+[study.ranges]
+crank = [24.0, 26.0]
+rod = [36.5, 39.0]
+O1_x = [-0.5, 0.5]
+O1_y = [-0.5, 0.5]
+"""
+
+
+def test_the_command_line_sample_grid_sensitivity(tmp_path, capsys):
+    """`jaxlink study --method sample|grid|sensitivity` on one small file (16 positions, few
+    designs): the files written, and each design's feasibility against the closed-form assembly
+    condition b ≥ a + |e − O1_y| (the designs read back from study.csv; the sensitivity's
+    samples rebuilt from the Sobol' sequence), O1_x's feasibility indices exactly 0."""
+    import csv
+    import json
+
+    from jaxlink.cli import main
+
+    src = tmp_path / "slider.toml"
+    src.write_text(FILE.replace("\n[study.tolerances]", CLI_RANGES + "\n[study.tolerances]"))
+    common = ["--positions", "16", "--chunk", "1024", "--no-plot", "--progress", "off", "--seed", "3"]
+    for method, n, files in (("sample", 64, {"study.csv", "study.json"}), ("grid", 60, {"study.csv", "study.json"})):
+        out = tmp_path / method
+        assert main(["study", str(src), "--method", method, "--samples", "64", "--out", str(out)] + common) == 0
+        assert {p.name for p in out.iterdir()} == files
+        rows = list(csv.DictReader((out / "study.csv").open()))
+        assert len(rows) == n
+        x = np.asarray([[float(r[f"{p} (mm)"]) for p in ("crank", "rod", "O1_x", "O1_y")] for r in rows])
+        ok = x[:, 1] >= x[:, 0] + np.abs(E - x[:, 3])
+        assert 0 < ok.sum() < n and [int(r["feasible"]) for r in rows] == ok.astype(int).tolist()
+        assert json.loads((out / "study.json").read_text())["method"] == method
+    out = tmp_path / "sensitivity"
+    assert main(["study", str(src), "--method", "sensitivity", "--samples", "32", "--bootstrap", "20",
+                 "--out", str(out)] + common) == 0
+    assert {p.name for p in out.iterdir()} == {"indices.csv", "study.json"}
+    u = np.concatenate(list(st.unit_blocks("sobol", 8, 32, 3)))
+    lo, hi = np.asarray([[24.0, 36.5, -0.5, -0.5], [26.0, 39.0, 0.5, 0.5]])
+    ab = np.concatenate([lo + u[:, :4] * (hi - lo), lo + u[:, 4:] * (hi - lo)])
+    ok = ab[:, 1] >= ab[:, 0] + np.abs(E - ab[:, 3])
+    data = json.loads((out / "study.json").read_text())
+    assert data["feasible_fraction"] == pytest.approx(ok.mean(), abs=1e-12)
+    idx = [r for r in csv.DictReader((out / "indices.csv").open()) if r["output"] == "feasible"]
+    assert {float(r["value (1)"]) for r in idx if r["parameter"] == "O1_x"} == {0.0}
+    capsys.readouterr()
