@@ -234,8 +234,7 @@ def worst_case(study, first, bound) -> WorstCase:
         return cache[key]
 
     for q in range(Q):
-        order = np.argsort(-vals[:, q])[:RESTARTS]
-        order = [i for i in order if np.isfinite(vals[i, q])]
+        order = [int(i) for i in np.argsort(-vals[:, q])[:RESTARTS] if np.isfinite(vals[i, q])]
         corner_best = vals[order[0], q] if order else 0.0
         found, at = (corner_best, s_all[order[0]]) if order else (0.0, np.zeros(len(scale)))
         for i in order:
