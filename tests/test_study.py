@@ -149,6 +149,58 @@ def test_infeasible_samples_are_counted_near_a_toggle(setup):
         assert np.all(np.isfinite(v))
 
 
+
+def test_the_true_worst_case(setup, tmp_path):
+    """The worst case over the box ≥ every Monte Carlo sample's deviation (uniform inputs: the
+    samples lie in the box) and ≥ the linear worst case where that is reached at a corner; for the
+    linear A (A = O1 + a (cos θ, sin θ)) equal to the linear worst case, the zone's disc included.
+    With scalar tolerances (16 corners, wide ±0.2–0.4 mm) the search is an enumeration and equals
+    the closed form's largest deviation over the 16 corners."""
+    import itertools
+
+    from jaxlink.study.worstcase import monte_carlo_objectives
+
+    mech, inputs, study = setup
+    rep = st.tolerance(mech, study=study)
+    w, K, N, nc = rep.worst, len(inputs.points), inputs.positions, study.responses.n_curve
+    mc = monte_carlo_objectives(rep.monte_carlo, K, N, nc)
+    assert w.names == ("swing(theta_rod)", "stroke(s_B)", "deviation(A.x)", "deviation(A.y)", "deviation(A)",
+                       "deviation(B.x)", "deviation(B.y)", "deviation(B)")
+    assert np.all(w.value >= mc) and not w.corners and set(w.status) == {"found"} and w.infeasible == 0
+    for n in ("deviation(A.x)", "deviation(A.y)", "deviation(A)"):  # linear: 0.01 + 0.01
+        assert w.value[w.names.index(n)] == pytest.approx(0.02, rel=1e-9)
+        assert w.linear[w.names.index(n)] == pytest.approx(0.02, rel=1e-9)
+    assert np.all(w.value >= w.linear * (1 - 1e-3))  # second order only adds here
+    # every corner enumerated, against the closed form at the corners
+    half = np.asarray([0.3, 0.3, 0.2, 0.4])
+    tol = st.read_study(mech, tolerances={p: {"tol": h, "distribution": "uniform"}
+                                          for p, h in zip(("crank", "rod", "O1_x", "O1_y"), half)})
+    rep = st.tolerance(mech, study=study.moved(inputs=tol), samples=1024)
+    w = rep.worst
+    assert w.corners and w.candidates == 16 and set(w.status) == {"enumerated"}
+    theta = np.deg2rad(rep.input_values)
+    corners = study.x0 + np.asarray(list(itertools.product((-1, 1), repeat=4))) * half
+    (ax, ay, bx), (ax0, ay0, bx0) = _closed_form(corners, theta), _closed_form(study.x0[None], theta)
+    ref = {"deviation(A.x)": np.abs(ax - ax0).max(), "deviation(A)": np.hypot(ax - ax0, ay - ay0).max(),
+           "deviation(B.x)": np.abs(bx - bx0).max(), "deviation(A.y)": 0.7}
+    for n, v in ref.items():
+        assert w.value[w.names.index(n)] == pytest.approx(v, rel=1e-9), n
+    assert np.all(w.value >= monte_carlo_objectives(rep.monte_carlo, K, N, nc))
+    # the path's linear bound Σ_j t_j ‖∂A/∂x_j‖ = 0.3 + 0.2 + 0.4 is not reached by the path itself
+    assert w.linear[w.names.index("deviation(A)")] == pytest.approx(0.9) and ref["deviation(A)"] < 0.8
+    import csv
+    import json
+
+    from jaxlink.report import tolerance as rt
+
+    rt.write_all(tmp_path, mech, rep, wall_time=1.0, plot=False)
+    rows = {r["output"]: r for r in csv.DictReader((tmp_path / "tolerance.csv").open())}
+    assert float(rows["deviation(A)"]["worst_case (unit)"]) == pytest.approx(ref["deviation(A)"], rel=1e-9)
+    assert rows["deviation(A.y)"]["worst_case_status"] == "enumerated" and rows["A.x"]["worst_case (unit)"] == ""
+    out = json.loads((tmp_path / "study.json").read_text())["worst_case"]["outputs"]
+    assert out[w.names.index("deviation(B.x)")]["worst"] == pytest.approx(ref["deviation(B.x)"], rel=1e-9)
+    assert "worst case over the tolerance box" in rt.summary(mech, rep)
+
 def test_the_study_table_is_checked():
     mech = jl.loads(FILE)
     bad = {
@@ -344,3 +396,52 @@ def test_the_ranges_are_checked():
         st.read_study(mech, method="grid", ranges={"crank": [1, 2]}, levels=0)
     s = st.read_study(mech, {"method": "sensitivity", "ranges": {"rod": [70, 90]}, "tolerances": {"crank": 0.1}})
     assert s.parameters == ("rod",) and s.samples == 1024  # the ranges win; the method's default count
+
+
+CLI_RANGES = """
+levels = { crank = 4, rod = 5, O1_x = 1, O1_y = 3 }
+
+[study.ranges]
+crank = [24.0, 26.0]
+rod = [36.5, 39.0]
+O1_x = [-0.5, 0.5]
+O1_y = [-0.5, 0.5]
+"""
+
+
+def test_the_command_line_sample_grid_sensitivity(tmp_path, capsys):
+    """`jaxlink study --method sample|grid|sensitivity` on one small file (16 positions, few
+    designs): the files written, and each design's feasibility against the closed-form assembly
+    condition b ≥ a + |e − O1_y| (the designs read back from study.csv; the sensitivity's
+    samples rebuilt from the Sobol' sequence), O1_x's feasibility indices exactly 0."""
+    import csv
+    import json
+
+    from jaxlink.cli import main
+
+    src = tmp_path / "slider.toml"
+    src.write_text(FILE.replace("\n[study.tolerances]", CLI_RANGES + "\n[study.tolerances]"))
+    common = ["--positions", "16", "--chunk", "1024", "--no-plot", "--progress", "off", "--seed", "3"]
+    for method, n, files in (("sample", 64, {"study.csv", "study.json"}), ("grid", 60, {"study.csv", "study.json"})):
+        out = tmp_path / method
+        assert main(["study", str(src), "--method", method, "--samples", "64", "--out", str(out)] + common) == 0
+        assert {p.name for p in out.iterdir()} == files
+        rows = list(csv.DictReader((out / "study.csv").open()))
+        assert len(rows) == n
+        x = np.asarray([[float(r[f"{p} (mm)"]) for p in ("crank", "rod", "O1_x", "O1_y")] for r in rows])
+        ok = x[:, 1] >= x[:, 0] + np.abs(E - x[:, 3])
+        assert 0 < ok.sum() < n and [int(r["feasible"]) for r in rows] == ok.astype(int).tolist()
+        assert json.loads((out / "study.json").read_text())["method"] == method
+    out = tmp_path / "sensitivity"
+    assert main(["study", str(src), "--method", "sensitivity", "--samples", "32", "--bootstrap", "20",
+                 "--out", str(out)] + common) == 0
+    assert {p.name for p in out.iterdir()} == {"indices.csv", "study.json"}
+    u = np.concatenate(list(st.unit_blocks("sobol", 8, 32, 3)))
+    lo, hi = np.asarray([[24.0, 36.5, -0.5, -0.5], [26.0, 39.0, 0.5, 0.5]])
+    ab = np.concatenate([lo + u[:, :4] * (hi - lo), lo + u[:, 4:] * (hi - lo)])
+    ok = ab[:, 1] >= ab[:, 0] + np.abs(E - ab[:, 3])
+    data = json.loads((out / "study.json").read_text())
+    assert data["feasible_fraction"] == pytest.approx(ok.mean(), abs=1e-12)
+    idx = [r for r in csv.DictReader((out / "indices.csv").open()) if r["output"] == "feasible"]
+    assert {float(r["value (1)"]) for r in idx if r["parameter"] == "O1_x"} == {0.0}
+    capsys.readouterr()

@@ -8,9 +8,13 @@ angle unit for a rocker's swing, …), `input (<input unit>)` (empty for a scala
 `nominal (unit)`, `sigma_rss (unit)`, `worst_case_linear (unit)` and with Monte Carlo
 `mc_mean_shift (unit)`, `mc_std (unit)`, `mc_std_error (unit)`, `mc_p0.135 (unit)`,
 `mc_p99.865 (unit)` (deviations from the nominal), `mc_max_abs_deviation (unit)`, `agree` (1, or 0
-where first order and Monte Carlo disagree beyond the sampling error). The rows `deviation(P)`
-(the largest distance of P's path from the nominal over the cycle) give `worst_case_linear` (the
-linear bound) and the Monte Carlo mean and largest value; a cell that has no value is empty.
+where first order and Monte Carlo disagree beyond the sampling error), and with the worst case
+`worst_case (unit)` (the largest deviation over the tolerance box, computed exactly) and
+`worst_case_status` ("enumerated" | "found"). The rows `deviation(P.x)`, `deviation(P.y)` (the
+largest |change| of the coordinate over the cycle) and `deviation(P)` (the largest distance of P's
+path from the nominal over the cycle) give `worst_case_linear` (the linear bound), the Monte Carlo
+mean (of `deviation(P)`) and largest value, and the worst case; a metric's row its worst case; a cell
+that has no value is empty.
 
 **importance.csv**: `output`, `input (<input unit>)`, `parameter`, `factor (1)`: (J σ)² / σ_RSS².
 """
@@ -27,6 +31,7 @@ import numpy as np
 
 from ..study.responses import unit_names
 from ..study.tolerance import QUANTILES, ToleranceReport
+from ..study.worstcase import monte_carlo_objectives
 
 
 def _g(v) -> str:
@@ -43,6 +48,15 @@ def write_tolerance_csv(path, mech, rep: ToleranceReport) -> None:
         head += ["mc_mean_shift (unit)", "mc_std (unit)", "mc_std_error (unit)",
                  f"mc_p{100 * QUANTILES[0]:g} (unit)", f"mc_p{100 * QUANTILES[1]:g} (unit)",
                  "mc_max_abs_deviation (unit)", "agree"]
+    wc = rep.worst
+    if wc is not None:
+        head += ["worst_case (unit)", "worst_case_status"]
+    worst = {} if wc is None else {n: (wc.value[q], wc.status[q]) for q, n in enumerate(wc.names)}
+    N = rep.inputs.positions
+
+    def tail(name):
+        return [] if wc is None else (["", ""] if name not in worst else [_g(worst[name][0]), worst[name][1]])
+
     with open(path, "w", newline="", encoding="utf-8") as fh:
         w = csv.writer(fh)
         w.writerow(head)
@@ -52,13 +66,19 @@ def write_tolerance_csv(path, mech, rep: ToleranceReport) -> None:
             if mc is not None:
                 row += [_g(mc.mean_shift[i]), _g(mc.std[i]), _g(mc.std_error[i]), _g(mc.low[i]), _g(mc.high[i]),
                         _g(mc.max_abs[i]), str(int(mc.agree[i]))]
-            w.writerow(row)
+            w.writerow(row + tail(name) if k is None else row + tail(None))
         lu = unit_names(mech)[0]
         for j, p in enumerate(rep.inputs.points):
+            for c, a in (("x", 2 * N * j), ("y", 2 * N * j + N)):
+                row = [f"deviation({p}.{c})", lu, "", "0", "", _g(f.worst_case[a:a + N].max())]
+                if mc is not None:
+                    row += ["", "", "", "", "", _g(mc.max_abs[a:a + N].max()), ""]
+                w.writerow(row + tail(f"deviation({p}.{c})"))
             row = [f"deviation({p})", lu, "", "0", "", _g(rep.deviation_bound[j])]
             if mc is not None:
                 row += [_g(mc.deviation_mean[j]), "", "", "", "", _g(mc.deviation_max[j]), ""]
-            w.writerow(row)
+            w.writerow(row + tail(f"deviation({p})"))
+
 
 
 def write_importance_csv(path, mech, rep: ToleranceReport) -> None:
@@ -104,12 +124,32 @@ def manifest(mech, rep: ToleranceReport, *, wall_time: float, files: list) -> di
         "monte_carlo": None if mc is None else {"samples": mc.samples, "feasible": mc.feasible,
                                                 "infeasible": mc.infeasible,
                                                 "disagree": int(np.count_nonzero(~mc.agree))},
+        "worst_case": worst_case_json(rep),
         "warnings": list(rep.warnings),
         "timings_s": {k: round(v, 4) for k, v in rep.timings.items()},
         "wall_time_s": round(wall_time, 3),
         "files": files,
     }
     return out
+
+
+def _mc_objectives(rep: ToleranceReport):
+    n_curve = sum(1 for lab in rep.labels if lab[2] is not None)
+    return monte_carlo_objectives(rep.monte_carlo, len(rep.inputs.points), rep.inputs.positions, n_curve)
+
+
+def worst_case_json(rep: ToleranceReport):
+    """The manifest's `worst_case` (None when not searched)."""
+    wc = rep.worst
+    if wc is None:
+        return None
+    mcq = None if rep.monte_carlo is None else _mc_objectives(rep)
+    return {"corners_enumerated": wc.corners, "candidates": wc.candidates, "infeasible": wc.infeasible,
+            "ascent_evaluations": wc.evaluations,
+            "outputs": [{"name": n, "unit": wc.units[q], "worst": float(wc.value[q]), "status": wc.status[q],
+                         "linear": float(wc.linear[q]), "mc_max": None if mcq is None else float(mcq[q]),
+                         "design": {p: float(d) for p, d in zip(rep.parameters, wc.design[q])}}
+                        for q, n in enumerate(wc.names)]}
 
 
 def summary(mech, rep: ToleranceReport) -> str:
@@ -139,6 +179,17 @@ def summary(mech, rep: ToleranceReport) -> str:
         if mc is not None:
             row += f" {'max ' + format(mc.deviation_max[j], '.4g'):>11} {'':>11}"
         lines.append(row)
+    wc = rep.worst
+    if wc is not None:
+        mcq = None if mc is None else _mc_objectives(rep)
+        lines.append(f"worst case over the tolerance box ({wc.candidates} "
+                     f"{'corners, every one' if wc.corners else 'candidate corners'} + gradient ascent; "
+                     "Monte Carlo's largest is a sample's, not a worst case):")
+        lines.append(f"{'output':<22} {'unit':<8} {'linear':>11} {'worst':>11}" + (f" {'MC max':>11}" if mc else "")
+                     + "  status")
+        for q, n in enumerate(wc.names):
+            lines.append(f"{n:<22} {wc.units[q]:<8} {wc.linear[q]:11.4g} {wc.value[q]:11.4g}"
+                         + (f" {mcq[q]:11.4g}" if mcq is not None else "") + f"  {wc.status[q]}")
     if mc is not None:
         lines.append(f"Monte Carlo: {mc.samples} samples, {mc.feasible} feasible, {mc.infeasible} infeasible "
                      f"(feasibility: {rep.certificate})")

@@ -42,6 +42,7 @@ from ..solvers.assemble import NewtonOptions
 from .inputs import StudyInputs
 from .moments import Moments
 from .responses import Responses
+from .worstcase import WorstCase, worst_case
 
 #: samples per random stream (the chunk is a multiple of it)
 BLOCK = 1024
@@ -102,7 +103,8 @@ class ToleranceReport(NamedTuple):
       margin over the cycle, dimensionless; None without a certificate), `margin_drop` (its linear
       worst-case drop under the tolerances; first order is not to be trusted where it reaches the
       margin: a toggle or change point within the tolerances);
-    - `warnings` (list of str); `timings` (dict of seconds).
+    - `warnings` (list of str); `timings` (dict of seconds);
+    - `worst` (`worstcase.WorstCase`, or None when not asked): the true worst case over the box.
     """
 
     inputs: StudyInputs
@@ -118,6 +120,7 @@ class ToleranceReport(NamedTuple):
     margin_drop: float | None
     warnings: list
     timings: dict
+    worst: WorstCase | None = None
 
 
 def draw(inputs: StudyInputs, block: int, size: int = BLOCK) -> np.ndarray:
@@ -371,7 +374,8 @@ def _bonferroni(m: int) -> float:
 
 
 def tolerance(mech, inputs: StudyInputs | None = None, *, samples: int | None = None, chunk=None,
-              options: NewtonOptions = NewtonOptions(), progress=None, study: Study | None = None) -> ToleranceReport:
+              options: NewtonOptions = NewtonOptions(), progress=None, study: Study | None = None,
+              worst: bool = True) -> ToleranceReport:
     """The tolerance analysis of `mech` around its design (see the module doc).
 
     **Arguments:**
@@ -379,7 +383,8 @@ def tolerance(mech, inputs: StudyInputs | None = None, *, samples: int | None = 
     - `mech`: the mechanism; `inputs`: `StudyInputs` (default: its `[study]` table, `read_study`);
     - `samples` (keyword-only): Monte Carlo samples (default the inputs'; 0: first order only);
     - `chunk`: designs per compiled batch; `options`: `NewtonOptions`; `progress`: called with
-      the samples done after each Monte Carlo batch; `study`: a `Study` already compiled (warm).
+      the samples done after each Monte Carlo batch; `study`: a `Study` already compiled (warm);
+    - `worst`: search the true worst case over the tolerance box (`worstcase.worst_case`).
 
     **Returns:** a `ToleranceReport`. Raises `MechanismError` when the nominal design does not
     assemble over its whole cycle.
@@ -433,6 +438,16 @@ def tolerance(mech, inputs: StudyInputs | None = None, *, samples: int | None = 
                 f"to {100 * float(rel.max()):.3g} %): the response is not linear over the tolerances there")
     K = len(inputs.points)
     bound = deviation_bound(first.jacobian, inputs, K, inputs.positions)
+    wc = None
+    if worst:
+        t3 = time.perf_counter()
+        wc = worst_case(study, first, bound)
+        timings["worst_case"] = time.perf_counter() - t3
+        if wc.infeasible:
+            warnings.append(
+                f"{wc.infeasible} of the {wc.candidates} corners searched for the worst case do not assemble over the "
+                "whole cycle: the tolerance box holds designs that do not assemble (the worst case is that of the "
+                "feasible designs found)")
     timings["total"] = time.perf_counter() - t0
     return ToleranceReport(inputs, r.labels, r.input_values, inputs.parameters, nominal, first, mc, bound,
-                           r.certificate, m, drop, warnings, timings)
+                           r.certificate, m, drop, warnings, timings, wc)
