@@ -907,7 +907,8 @@ def _solve_batch_impl(mech: Mechanism, opts: NewtonOptions, points: bool, P, phi
             # answers bit for bit (tests/test_strider.py)
             args = (P, phis, Q0, tol, ref, trig_in)
             axes = (0, ax, 0, 0, 0, ax)
-            q, rn, code, pts = _map_designs(designs, args, axes, _design_chunk(B, phis.shape[-1]))
+            chunk = _design_chunk(B, phis.shape[-1], len(_dyads.classify(mech)))
+            q, rn, code, pts = _map_designs(designs, args, axes, chunk)
             return q, rn, code, jnp.zeros(code.shape, jnp.int32), pts
         out, trig_p = designs(P, phis, Q0, tol, ref, trig_in)
         # for the derivative: every output stored (`materialize`) as one (B, N) array per value,
@@ -965,17 +966,20 @@ def _solve_batch_impl(mech: Mechanism, opts: NewtonOptions, points: bool, P, phi
 
 
 #: positions per chunk of a closed-form batch on the CPU (`_design_chunk`): its intermediate arrays
-#: (≈ 70 of 8 bytes per position for the Strider) stay within the cache. 0: never chunk
+#: (≈ 70 of 8 bytes per position for the Strider) stay within the cache (measured on the Strider:
+#: 8192 to 32768 alike). 0: never chunk
 CHUNK_POSITIONS = 8192
 
 
-def _design_chunk(B: int, N: int) -> int:
+def _design_chunk(B: int, N: int, n_dyads: int = 2) -> int:
     """Designs per chunk of a closed-form batch of B designs × N positions, or 0 for one piece:
     about `CHUNK_POSITIONS` positions, a divisor of B where one is near (no padding), at least 2
     designs (XLA fuses a batch of one design differently: other kernels, other roundings). Only
-    on a single CPU device: a GPU wants the whole batch, and a batch sharded over several devices
-    is split by them."""
-    if not CHUNK_POSITIONS or jax.default_backend() != "cpu" or jax.device_count() != 1:
+    for two dyads or more (one dyad's few intermediate arrays cost less than the loop: the
+    four-bar's batch 8 % slower in chunks), and on a single CPU device (a GPU wants the whole
+    batch, and a batch sharded over several devices is split by them)."""
+    if (not CHUNK_POSITIONS or n_dyads < 2 or jax.default_backend() != "cpu"
+            or jax.device_count() != 1):
         return 0
     target = max(2, CHUNK_POSITIONS // max(N, 1))
     if B < 2 * target:
@@ -1004,6 +1008,10 @@ def _map_designs(fn, args, axes, chunk: int):
     batched = [jax.tree_util.tree_map(split, a) for a, x in zip(args, axes) if x == 0]
 
     def one(xs):
+        # the chunk's inputs copied first: read through the loop's slice instead, every kernel of
+        # the chunk indexes them afresh, which XLA does not vectorize (and fuses differently: the
+        # four-bar's points changed in the last bit, and took 2.5× as long)
+        xs = materialize(xs)
         it = iter(xs)
         return fn(*(next(it) if x == 0 else a for a, x in zip(args, axes)))
 
