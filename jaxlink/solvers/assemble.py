@@ -1094,13 +1094,15 @@ def _residual_known(mech: Mechanism, env, trig, dtype):
 @functools.partial(jax.custom_jvp, nondiff_argnums=(0, 1, 2))
 def _solve_batch(structure, opts: NewtonOptions, points: bool, P, phis, Q0, phi_ref):
     """The differentiable batched solve: (P (B,P), phis (N,) or (B,N), Q0 (B,n), phi_ref (B,) or
-    None) -> (q, rnorm, result, steps, points or None). `structure`, `opts`, `points` are static."""
+    None) -> (q, rnorm, result, steps, points or None), the points checked and masked
+    (`_finalize`). `structure`, `opts`, `points` are static."""
     return _solve_batch_impl(structure, opts, points, P, phis, Q0, phi_ref)
 
 
 @functools.partial(jax.custom_jvp, nondiff_argnums=(0, 1, 2))
 def _solve_batch_trig(structure, opts: NewtonOptions, points: bool, P, phis, Q0, phi_ref):
-    """`_solve_batch` and the (cos, sin) of its angles (`_Trig`): the primal of its derivative."""
+    """`_solve_batch` (its points not yet checked nor masked: its JVP rule does it) and the
+    (cos, sin) of its angles (`_Trig`): the primal of its derivative."""
     return _solve_batch_impl(structure, opts, points, P, phis, Q0, phi_ref, trig=True)
 
 
