@@ -8,7 +8,9 @@ no Newton at all. At φ_0 each dyad's assembly branch is the one nearest to the 
 closed form on those branches (`_closed_form_path`). A position is converged when its loops close
 to the tolerance (a dyad at its exact toggle, h² negative by rounding, is assembled at h = 0) and
 `singular` when a dyad's two links are collinear to within `singular_ratio` (toggle, dead
-centre, change point).
+centre, change point). On the CPU a batch of two dyads or more is solved in chunks of about
+`CHUNK_POSITIONS` positions (`lax.map` over designs), so that its intermediate arrays stay in
+the cache; the answers do not depend on it, bit for bit.
 
 **Newton** (`"continuation"`, `"independent"`, and `"auto"` for other structures):
 
@@ -878,19 +880,40 @@ def _solve_batch_impl(mech: Mechanism, opts: NewtonOptions, points: bool, P, phi
         # every per-position kernel: one design × 360 positions took 90 µs, now ≈ 50)
         ref = phi0 if phi_ref is None else jnp.where(ref_finite, phi_ref, 0.0)
         tol = jnp.where(ref_finite, tol, jnp.nan)
-        trig_p = _dyads.parameter_trig(mech, P)
-        reference = jax.vmap(lambda p, q0, t, tp, r: _closed_form_reference(mech, p, q0, t, tp, r))(
-            P, Q0, tol, trig_p, ref)
-        if opts.change_points == "smooth":  # the sides of every position, flipped at change points
-            sides = jax.vmap(lambda p, ph, ref_, r, t: _smooth_sides(mech, ref_, p, ph, r, t, thr),
-                             in_axes=(0, ax, 0, 0, 0))(P, phis, reference, ref, tol)
-            reference = (sides,) + tuple(reference[1:])
-        trig_in, trig_p, reference = materialize((_dyads.input_trig(mech, phis), trig_p, reference))
-        out = jax.vmap(
-            lambda p, ph, t, ti, tp, r: _closed_form_path(mech, p, ph, t, ti, tp, thr, r, points, trig),
-            in_axes=(0, ax, 0, ax, 0, 0))(P, phis, tol, trig_in, trig_p, reference)
+        # the inputs' trigonometry of the whole batch at once (`sincos` chooses its method from the
+        # largest |φ| of the array it is given)
+        trig_in = materialize(_dyads.input_trig(mech, phis))
+
+        def designs(P, phis, Q0, tol, ref, trig_in):
+            trig_p = _dyads.parameter_trig(mech, P)
+            reference = jax.vmap(lambda p, q0, t, tp, r: _closed_form_reference(mech, p, q0, t, tp, r))(
+                P, Q0, tol, trig_p, ref)
+            if opts.change_points == "smooth":  # the sides of every position, flipped at change points
+                sides = jax.vmap(lambda p, ph, ref_, r, t: _smooth_sides(mech, ref_, p, ph, r, t, thr),
+                                 in_axes=(0, ax, 0, 0, 0))(P, phis, reference, ref, tol)
+                reference = (sides,) + tuple(reference[1:])
+            trig_p, reference = materialize((trig_p, reference))
+            out = jax.vmap(
+                lambda p, ph, t, ti, tp, r: _closed_form_path(mech, p, ph, t, ti, tp, thr, r, points, trig),
+                in_axes=(0, ax, 0, ax, 0, 0))(P, phis, tol, trig_in, trig_p, reference)
+            if trig:
+                return out, trig_p
+            q, rn, code, _, pts = out
+            code, pts = _finalize(points, code, pts)
+            return q, rn, code, pts
+
         if not trig:
-            return out
+            # a batch on the CPU in chunks of designs (`_design_chunk`): each chunk's intermediate
+            # arrays (every value XLA stores for several kernels: the divisions of each atan2,
+            # the square roots, …) stay in the cache, where the whole batch's went to memory and
+            # back (the Strider, 1000 designs × 360 positions, 97 -> 45 ms; the feed 2×); the
+            # same kernels, the same answers bit for bit (tests/test_strider.py)
+            args = (P, phis, Q0, tol, ref, trig_in)
+            axes = (0, ax, 0, 0, 0, ax)
+            chunk = _design_chunk(B, phis.shape[-1], len(_dyads.classify(mech) or ()))
+            q, rn, code, pts = _map_designs(designs, args, axes, chunk)
+            return q, rn, code, jnp.zeros(code.shape, jnp.int32), pts
+        out, trig_p = designs(P, phis, Q0, tol, ref, trig_in)
         # for the derivative: every output stored (`materialize`) as one (B, N) array per value,
         # so that no kernel of the derivative recomputes the closed form and each reads only the
         # values it uses, contiguous (a packed (B, N, m) array is read whole by every kernel)
@@ -936,11 +959,79 @@ def _solve_batch_impl(mech: Mechanism, opts: NewtonOptions, points: bool, P, phi
                                 in_axes=(0, 0, None, None)), in_axes=(0, ax, 0, 0))(out[0], phis, P, trig_p)
     out = out + ((pts,) if points else (None,))
     if not trig:
-        return out
+        q, rn, code, k, pts = out
+        code, pts = _finalize(points, code, pts)
+        return q, rn, code, k, pts
     qa = [out[0][..., i] for i, k in enumerate(mech.unknown_kinds) if k == "angle"]
     trig_in, trig_q = materialize((_dyads.input_trig(mech, phis), (tuple(jnp.cos(a) for a in qa),
                                                                    tuple(jnp.sin(a) for a in qa))))
     return out + (_Trig(trig_in, trig_p, trig_q),)
+
+
+#: positions per chunk of a closed-form batch on the CPU (`_design_chunk`): its intermediate arrays
+#: (≈ 70 of 8 bytes per position for the Strider) stay within the cache (measured on the Strider:
+#: 8192 to 32768 alike). 0: never chunk
+CHUNK_POSITIONS = 8192
+
+
+def _design_chunk(B: int, N: int, n_dyads: int = 2) -> int:
+    """Designs per chunk of a closed-form batch of B designs × N positions, or 0 for one piece:
+    about `CHUNK_POSITIONS` positions, a divisor of B where one is near (no padding), at least 2
+    designs (XLA fuses a batch of one design differently: other kernels, other roundings). Only
+    for two dyads or more (one dyad's few intermediate arrays cost less than the loop: the
+    four-bar's batch 8 % slower in chunks), and on a single CPU device (a GPU wants the whole
+    batch, and a batch sharded over several devices is split by them)."""
+    if (not CHUNK_POSITIONS or n_dyads < 2 or jax.default_backend() != "cpu"
+            or jax.device_count() != 1):
+        return 0
+    target = max(2, CHUNK_POSITIONS // max(N, 1))
+    if B < 2 * target:
+        return 0
+    for c in range(target, max(2, target // 2) - 1, -1):
+        if B % c == 0:
+            return c
+    return target
+
+
+def _map_designs(fn, args, axes, chunk: int):
+    """`fn(*args)` over the leading (design) axis of the `args` (pytrees) whose axis is 0 (the
+    others are shared), `chunk` designs at a time (`lax.map`; 0: all at once). The last chunk is
+    padded by repeating the last design, and the results cut back to the batch."""
+    if not chunk:
+        return fn(*args)
+    B = jax.tree_util.tree_leaves([a for a, x in zip(args, axes) if x == 0])[0].shape[0]
+    n = -(-B // chunk)
+    pad = n * chunk - B
+
+    def split(a):
+        if pad:
+            a = jnp.concatenate([a, jnp.broadcast_to(a[-1:], (pad,) + a.shape[1:])])
+        return a.reshape((n, chunk) + a.shape[1:])
+
+    batched = [jax.tree_util.tree_map(split, a) for a, x in zip(args, axes) if x == 0]
+
+    def one(xs):
+        # the chunk's inputs copied first: read through the loop's slice instead, every kernel of
+        # the chunk indexes them afresh, which XLA does not vectorize (and fuses differently: the
+        # four-bar's points changed in the last bit, and took 2.5× as long)
+        xs = materialize(xs)
+        it = iter(xs)
+        return fn(*(next(it) if x == 0 else a for a, x in zip(args, axes)))
+
+    out = jax.lax.map(one, batched)
+    return jax.tree_util.tree_map(lambda o: o.reshape((n * chunk,) + o.shape[2:])[:B], out)
+
+
+def _finalize(points: bool, code, pts):
+    """Finiteness is part of convergence: a position whose points are not finite (an expression
+    like asin(2) in [points]) is `nonfinite`, never converged with NaN points; the points are NaN
+    where the position did not assemble (`_mask_points`)."""
+    if not points:
+        return code, pts
+    bad = ~jnp.all(jnp.isfinite(pts), axis=(-2, -1))
+    code = jnp.where(bad & ((code == RESULTS.converged) | (code == RESULTS.singular)),
+                     jnp.int8(RESULTS.nonfinite), code)
+    return code, _mask_points(pts, code)
 
 
 def _check_residual(mech, P, phis, out, tol, rtol, dtype):
@@ -1003,13 +1094,15 @@ def _residual_known(mech: Mechanism, env, trig, dtype):
 @functools.partial(jax.custom_jvp, nondiff_argnums=(0, 1, 2))
 def _solve_batch(structure, opts: NewtonOptions, points: bool, P, phis, Q0, phi_ref):
     """The differentiable batched solve: (P (B,P), phis (N,) or (B,N), Q0 (B,n), phi_ref (B,) or
-    None) -> (q, rnorm, result, steps, points or None). `structure`, `opts`, `points` are static."""
+    None) -> (q, rnorm, result, steps, points or None), the points checked and masked
+    (`_finalize`). `structure`, `opts`, `points` are static."""
     return _solve_batch_impl(structure, opts, points, P, phis, Q0, phi_ref)
 
 
 @functools.partial(jax.custom_jvp, nondiff_argnums=(0, 1, 2))
 def _solve_batch_trig(structure, opts: NewtonOptions, points: bool, P, phis, Q0, phi_ref):
-    """`_solve_batch` and the (cos, sin) of its angles (`_Trig`): the primal of its derivative."""
+    """`_solve_batch` (its points not yet checked nor masked: its JVP rule does it) and the
+    (cos, sin) of its angles (`_Trig`): the primal of its derivative."""
     return _solve_batch_impl(structure, opts, points, P, phis, Q0, phi_ref, trig=True)
 
 
@@ -1087,8 +1180,11 @@ def _implicit_tangents(mech: Mechanism, points: bool, primals, tangents, out):
 def _solve_batch_jvp(structure, opts, points, primals, tangents):
     out = _solve_batch_trig(structure, opts, points, *primals)
     dq, dpts = _implicit_tangents(structure, points, primals, tangents, out)
-    q, rn, code, k, _, _ = out
-    return out[:5], (dq, jnp.zeros_like(rn), _float0(code), _float0(k), dpts)
+    q, rn, code, k, pts, _ = out
+    code, pts = _finalize(points, code, pts)
+    if points:  # the points' mask (`_finalize`) on their tangent too
+        dpts = jnp.where(((code == RESULTS.converged) | (code == RESULTS.singular))[..., None, None], dpts, 0.0)
+    return (q, rn, code, k, pts), (dq, jnp.zeros_like(rn), _float0(code), _float0(k), dpts)
 
 
 def _solve_batch_trig_jvp(structure, opts, points, primals, tangents):
@@ -1144,14 +1240,8 @@ def _batch(mech, phis, p, q0, options: NewtonOptions, points: bool) -> Solution:
     Q0 = q0 if q0.ndim == 2 else jnp.broadcast_to(q0, (B,) + q0.shape)
     phi_ref = jnp.full((B,), mech.input_start, dtype) if from_start else None
     structure = mech.structure if isinstance(mech, Mechanism) else mech
+    # (the points' mask and their finiteness check are part of `_solve_batch`: `_finalize`)
     q, rn, code, k, pts = _solve_batch(structure, options, points, P, phis, Q0, phi_ref)
-    if points:
-        # finiteness is part of convergence: a position whose points are not finite (an
-        # expression like asin(2) in [points]) is `nonfinite`, never converged with NaN points
-        bad = ~jnp.all(jnp.isfinite(pts), axis=(-2, -1))
-        code = jnp.where(bad & ((code == RESULTS.converged) | (code == RESULTS.singular)),
-                         jnp.int8(RESULTS.nonfinite), code)
-        pts = _mask_points(pts, code)
     sol = Solution(q=q, points=pts, result=code, stats=SolveStats(residual=rn, steps=k))
     return sol if batch else jax.tree_util.tree_map(lambda x: x[0], sol)
 
