@@ -186,7 +186,6 @@ def traced(name: str, fun, args: tuple, static: tuple = ()):
     leaves), every static option through `static` (hashable values whose `repr` identifies them).
     When the stored trace cannot be written or read, it is `jax.jit` of the same function."""
     import jax
-    import numpy as np
 
     if getattr(fun, "__closure__", None) or not hasattr(fun, "__qualname__") or "<locals>" in fun.__qualname__:
         raise TypeError(f"traced({name!r}): {fun!r} must be a module-level function without a closure "
@@ -194,8 +193,7 @@ def traced(name: str, fun, args: tuple, static: tuple = ()):
     leaves, treedef = jax.tree_util.tree_flatten(args)
     static = tuple(static)
     # a call like one made before in this process (a search's many small calls) skips the key text
-    fast = (name, fun, treedef, static, tuple((np.shape(a), np.result_type(a)) for a in leaves),
-            bool(jax.config.read("jax_enable_x64")))
+    fast = _fast_key(name, fun, treedef, static, leaves)
     call = _LOADED.get(fast)
     if call is None:
         key = key_text(name, fun, treedef, static, leaves)
@@ -212,6 +210,17 @@ def traced(name: str, fun, args: tuple, static: tuple = ()):
                     return call(*leaves)
         _remember(fast, call)
     return call(*leaves)
+
+
+def _fast_key(name: str, fun, treedef, static: tuple, leaves) -> tuple:
+    """The in-process memo's key of a call: everything of `key_text` that can change within a
+    process (the function, the arguments' structure — a mechanism's `Structure` included — the
+    static options, every leaf's shape and dtype, the x64 mode), without building the text."""
+    import jax
+    import numpy as np
+
+    return (name, fun, treedef, static, tuple((np.shape(a), np.result_type(a)) for a in leaves),
+            bool(jax.config.read("jax_enable_x64")))
 
 
 def _remember(key, call) -> None:

@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 import jaxlink
+import jaxlink.scenes
 from jaxlink import cache
 
 jax.config.update("jax_enable_x64", True)
@@ -32,13 +33,20 @@ CALLS = [  # (name, fun, args, static): one change at a time after the first
 ]
 
 
-def _mismatches() -> list:
-    """Each call through a stored trace (stored, then loaded from disk) against `jax.jit`."""
+def _mismatches(clear: bool = True) -> list:
+    """Each call through a stored trace (stored, then loaded from disk; with `clear` False, one
+    after the other in this process, through the in-process memo) against `jax.jit`."""
     assert jax.config.jax_compilation_cache_dir, "the suite's conftest turns the cache on"
     bad = []
+    cache._LOADED.clear()
     for i, (name, fun, args, static) in enumerate(CALLS):
-        cache._LOADED.clear()  # a new process: load from the stored file
-        got = cache.traced(f"test-key-{name}", fun, args, static)[0]
+        if clear:
+            cache._LOADED.clear()  # a new process: load from the stored file
+        try:
+            got = cache.traced(f"test-key-{name}", fun, args, static)[0]
+        except Exception:  # noqa: BLE001 (a program of another call refusing these arguments)
+            bad.append(i)
+            continue
         want = jax.jit(fun, static_argnums=len(args))(*args, *static)[0]
         if got.dtype != want.dtype or not np.array_equal(np.asarray(got), np.asarray(want)):
             bad.append(i)
@@ -54,6 +62,38 @@ def test_a_key_without_the_static_options_or_the_structure_fails(monkeypatch):
     monkeypatch.setattr(cache, "key_text", lambda name, fun, treedef, static, leaves:
                         real(name + "-blind", _poly, jax.tree_util.tree_structure(()), (), leaves))
     assert _mismatches() != []
+
+
+def test_the_in_process_memo_keys_each_input():
+    """The calls one after the other in one process (the memo kept): each gets its own answer;
+    and a memo key without the static options or the structure fails the same check."""
+    assert _mismatches(clear=False) == []
+
+
+def test_an_in_process_memo_key_without_static_options_or_structure_fails(monkeypatch):
+    monkeypatch.setattr(cache, "_fast_key", lambda name, fun, treedef, static, leaves:
+                        ("blind", tuple(np.shape(a) for a in leaves)))
+    assert _mismatches(clear=False) != []
+
+
+def test_the_in_process_memo_tells_two_structures_with_the_same_shapes_apart():
+    """Two mechanisms whose numbers have the same shapes but whose loops differ (the frame vector
+    of the other sign): one after the other in this process, each its own residual."""
+    text = (jaxlink.scenes.SCENE_DIR / "four-bar.toml").read_text()
+    a = jaxlink.loads(text)
+    b = jaxlink.loads(text.replace('"-d @ 0"', '"d @ 180"'))
+    c = jaxlink.loads(text.replace('"-d @ 0"', '"-d @ 10"'))
+    assert a.structure != c.structure and a.parameters.shape == c.parameters.shape
+    cache._LOADED.clear()
+    got = [np.asarray(cache.traced("test-key-residual", _residual, (m,))[0]) for m in (a, b, c)]
+    want = [np.asarray(m.residual(m.guess, m.input_start, m.parameters)) for m in (a, b, c)]
+    for g, w in zip(got, want):
+        np.testing.assert_allclose(g, w, rtol=0, atol=1e-15)
+    assert np.abs(got[0] - got[2]).max() > 1e-3
+
+
+def _residual(m):
+    return (m.residual(m.guess, m.input_start, m.parameters),)
 
 
 def test_a_function_with_a_closure_is_refused():

@@ -70,6 +70,18 @@ def test_triple_rocker_whole_curve_switches_branch_at_its_limits():
     assert sides[0] != sides[1]  # the two halves are the two assemblies
 
 
+def _watt_limits(r, c, o2):
+    """The closed-form limits of Watt's linkage (rockers r from the origin and from o2, coupler c)
+    driven by one rocker: where coupler and the other rocker are in line, |r e(φ) − o2| = c ± r."""
+    alpha, D = np.arctan2(o2[1], o2[0]), np.hypot(*o2)
+    limits = []
+    for L in (c + r, abs(c - r)):
+        cos_ = (r * r + D * D - L * L) / (2 * r * D)
+        if abs(cos_) <= 1:
+            limits += [alpha + np.arccos(cos_), alpha - np.arccos(cos_)]
+    return limits
+
+
 def test_watt_linkage_driven_by_a_rocker_traces_its_figure_eight():
     """Watt's straight-line linkage: two equal rockers O1A, O2B and a coupler AB with its midpoint
     M; driven by the rocker O1A, which reaches an interval only. The whole curve is the
@@ -104,12 +116,7 @@ M = ["r1 @ phi1", "cc/2 @ phi3"]
     wc = jl.whole_curve(mech, samples=720)
     assert not wc.full_turn and len(wc.segments) == 2
     # the closed-form limits: |r e(φ) − o2|² = L² ⇒ cos(φ − α) = (r² + |o2|² − L²) / (2 r |o2|)
-    alpha, D = np.arctan2(o2[1], o2[0]), np.hypot(*o2)
-    limits = []
-    for L in (c + r, abs(c - r)):
-        cos_ = (r * r + D * D - L * L) / (2 * r * D)
-        if abs(cos_) <= 1:
-            limits += [alpha + np.arccos(cos_), alpha - np.arccos(cos_)]
+    limits = _watt_limits(r, c, o2)
     ends = [e for a, b, _ in wc.segments for e in (a, b)]
     for e in ends:
         assert min(abs(np.remainder(e - lim + np.pi, 2 * np.pi) - np.pi) for lim in limits) < 1e-9, (e, limits)
@@ -151,12 +158,7 @@ main = ["r1 @ phi1", "cc @ phi3", "-r2 @ phi4", "-({o2[0]}, {o2[1]})"]
 """
     m = jl.motion(jl.loads(text), samples=720)
     assert not m.full_turn
-    alpha, D = np.arctan2(o2[1], o2[0]), np.hypot(*o2)
-    limits = []
-    for L in (c + r, abs(c - r)):
-        cos_ = (r * r + D * D - L * L) / (2 * r * D)
-        if abs(cos_) <= 1:
-            limits += [alpha + np.arccos(cos_), alpha - np.arccos(cos_)]
+    limits = _watt_limits(r, c, o2)
     limits = np.asarray(limits)
     start = np.radians(10.0)
     # the nearest closed-form limits below and above the start, as the input turns back and forward
