@@ -3,7 +3,7 @@ per command.
 
 Every `jaxlink` command compiles its solver for the shapes it needs (about 3–10 s on a 2-core
 CPU); with the cache the compiled executables are written to disk and a repeated command loads
-them instead (`docs/numbers.md`, "Latency": cold against warm).
+them instead (`docs/numbers.md`, "`kinematics` latency": cold against warm).
 
 The directory is `JAXLINK_CACHE_DIR` if set, else the user's cache directory
 (`$XDG_CACHE_HOME/jaxlink/xla`, default `~/.cache/jaxlink/xla`); an empty `JAXLINK_CACHE_DIR`

@@ -73,7 +73,7 @@ def _cos_mu(mech, dyads, j, sigma, q_ref, phi, p):
 # ---------------------------------------------------------------- the compiled parts, stored
 # Each is a module-level function of arrays (the mechanism, with its parameters and guesses, is an
 # argument) run through `jaxlink.cache.traced`: a repeated `check` loads the stored programs
-# instead of tracing them again (`docs/numbers.md`, "check latency").
+# instead of tracing them again (`docs/numbers.md`, "`check` latency").
 
 
 def _turn_arrays(mech, phis, p):

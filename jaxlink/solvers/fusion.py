@@ -6,7 +6,8 @@ input angles read by ten (designs × angles) kernels is then evaluated ten times
 (`jax.lax.optimization_barrier` does not prevent this on CPU: it is removed before fusion).
 `materialize` routes values through a one-trip `while_loop` whose trip count XLA cannot know at
 compile time, so they are computed once, stored, and read by every consumer — measured 2.6× on the
-feed six-bar's closed-form solve (benchmarks/throughput.py, docs/numbers.md).
+feed six-bar's closed-form solve (benchmarks/throughput.py; docs/numbers.md, "Feed six-bar
+throughput").
 
 The loop runs exactly once (its trip count is 1 unless the probe value is NaN, when it runs zero
 times) and multiplies by exactly 1, so the values are unchanged bit for bit. Use it on values
