@@ -135,7 +135,7 @@ class RobustEvaluator:
             xs[:len(idx)] = x[idx]
             metric_s, metric_w, metric_v, pts = (np.asarray(a_)[:len(idx)] for a_ in self._fn(jnp.asarray(xs), sig, half))
             out[idx] = self._columns(metric_s, metric_w, metric_v, pts)
-        out = np.where(np.isfinite(out), out, 0.0)
+        out = np.where(np.isnan(out), 0.0, out)  # Cpk may be ±inf (σ = 0), never NaN
         self.seconds += time.perf_counter() - t0
         return out
 
