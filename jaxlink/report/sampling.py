@@ -107,10 +107,14 @@ def draw_sample_plots(d: pathlib.Path, mech, rep: SampleReport) -> list:
     if _two_ranges(rep) and rep.labels:
         files.append(d / "grid.png")
         plot_grid(files[-1], mech, rep)
-    if _two_ranges(rep) and rep.robust is not None and rep.robust.labels:
+    rob = rep.robust
+    if _two_ranges(rep) and rob is not None and rob.labels:
+        # the metrics' columns and each path's deviation bound (not the per-coordinate ones)
+        keep = [j for j, (name, _u) in enumerate(rob.labels)
+                if not (name.endswith(".x)") or name.endswith(".y)"))]
         files.append(d / "robust.png")
-        plot_grid(files[-1], mech, rep, labels=rep.robust.labels, values=rep.robust.values,
-                  title="robust-design map (first-order tolerance report at every design)")
+        plot_grid(files[-1], mech, rep, labels=tuple(rob.labels[j] for j in keep), values=rob.values[:, keep],
+                  title="robust-design map")
     return files
 
 
@@ -341,6 +345,6 @@ def plot_grid(path, mech, rep: SampleReport, *, labels=None, values=None, title:
         ax.axis("off")
     fig.suptitle(f"{mech.name}: {title + ', ' if title else ''}grid of {n1} × {n2} designs, "
                  f"{int(rep.feasible.sum())} feasible", fontsize=10)
-    fig.tight_layout()
+    fig.tight_layout(rect=(0, 0, 1, 0.97))
     fig.savefig(path, dpi=120)
     plt.close(fig)
