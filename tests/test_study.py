@@ -342,7 +342,8 @@ def test_sensitivity_of_the_feasibility_and_conditional_indices(setup, tmp_path)
     from jaxlink.report import sampling as rs
 
     files = rs.write_sensitivity_all(tmp_path, mech, rep, wall_time=1.0)
-    assert {p.split("/")[-1] for p in files} == {"indices.csv", "sobol.png", "sobol_curves.png", "study.json"}
+    assert {p.split("/")[-1] for p in files} == {"indices.csv", "sobol.png", "sobol_curves.png", "study.json",
+                                                 "study.npz"}
     text = (tmp_path / "indices.csv").read_text()
     assert "nan" not in text.lower()
     assert text.splitlines()[0] == "output,input (deg),parameter,method,value (1),low (1),high (1),conditional"
@@ -364,7 +365,7 @@ def test_grid_and_samplers_keep_infeasible_designs(setup, tmp_path):
     from jaxlink.report import sampling as rs
 
     files = rs.write_sample_all(tmp_path, mech, rep, wall_time=1.0)
-    assert (tmp_path / "grid.png").is_file() and len(files) == 3
+    assert (tmp_path / "grid.png").is_file() and len(files) == 4
     lines = (tmp_path / "study.csv").read_text().splitlines()
     assert lines[0].startswith("sample,crank (mm),rod (mm),O1_x (mm),O1_y (mm),feasible,swing(theta_rod) (deg)")
     assert len(lines) == 222
