@@ -478,7 +478,7 @@ def _stop_after(k):
 
 
 def test_a_killed_study_resumes_to_the_same_result(setup, tmp_path):
-    """Monte Carlo, sample and sensitivity over three batches each, interrupted after the first
+    """Monte Carlo, sample and sensitivity over two batches each, interrupted after the first
     (the checkpoint written batch by batch), resumed: every array equals the uninterrupted run's
     bit for bit. A resume whose key differs (another seed, another sample count, other parameters)
     is refused with the reason, never mixed."""
@@ -486,7 +486,7 @@ def test_a_killed_study_resumes_to_the_same_result(setup, tmp_path):
 
     mech, inputs, study = setup
     first = study.first_order()
-    n = 2 * 4096 + 100
+    n = 4096 + 100
 
     def ck(name, inp, what, resume=False, m=mech, **extra):
         return Checkpoint(tmp_path / name, resume_key(m, inp, chunk=study.chunk, what=what, **extra), resume=resume)
@@ -504,18 +504,18 @@ def test_a_killed_study_resumes_to_the_same_result(setup, tmp_path):
         with pytest.raises(jl.MechanismError, match=f"another study .*{why}"):
             study.monte_carlo(n, first, checkpoint=ck("mc", inp, "mc", resume=True, m=m, samples=extra))
 
-    sin = st.read_study(mech, method="sample", samples=2 * 4096 + 7, seed=4, ranges=RANGES)
+    sin = st.read_study(mech, method="sample", samples=4096 + 7, seed=4, ranges=RANGES)
     s2 = study.moved(inputs=sin)
     ref = st.sample(mech, study=s2)
     with pytest.raises(_Stop):
-        st.sample(mech, study=s2, progress=_stop_after(2), checkpoint=ck("s", sin, "sample"))
+        st.sample(mech, study=s2, progress=_stop_after(1), checkpoint=ck("s", sin, "sample"))
     res = st.sample(mech, study=s2, checkpoint=ck("s", sin, "sample", resume=True))
     for f in ("values", "feasible", "responses", "nominal"):
         assert np.array_equal(getattr(ref, f), getattr(res, f)), f
     with pytest.raises(jl.MechanismError, match="sampler"):
         st.sample(mech, study=s2, checkpoint=ck("s", sin._replace(sampler="halton"), "sample", resume=True))
 
-    sin = st.read_study(mech, method="sensitivity", samples=1400, seed=4, ranges=RANGES, bootstrap=10)
+    sin = st.read_study(mech, method="sensitivity", samples=700, seed=4, ranges=RANGES, bootstrap=10)
     s3 = study.moved(inputs=sin)
     ref = st.sensitivity(mech, study=s3)
     with pytest.raises(_Stop):

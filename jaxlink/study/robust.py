@@ -192,7 +192,7 @@ def robust_evaluator(study) -> RobustEvaluator:
     """The study's `RobustEvaluator`, compiled once per study (and its `moved` copies with the same
     tolerance structure)."""
     key = tuple((t.parameters, t.zone) for t in study.inputs.tolerances) + (study.inputs.limits,)
-    cache = study.__dict__.setdefault("_robust_cache", {})
+    cache = study._robust_cache
     ev = cache.get(key)
     if ev is None or ev.study.inputs != study.inputs:
         if ev is not None:  # other tolerances' sizes or a moved design: the compiled function is kept

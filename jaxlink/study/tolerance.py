@@ -179,6 +179,7 @@ class Study:
         if r.dyads is not None:
             self._margin = jax.jit(jax.value_and_grad(self._margin_of))
         self._nominal: tuple | None = None
+        self._robust_cache: dict = {}  # the robust-design map's compiled evaluators, shared with `moved` copies
 
     def moved(self, x0=None, inputs: StudyInputs | None = None) -> "Study":
         """The same study around another design `x0` (T,) (the toleranced parameters, file units)
