@@ -115,7 +115,8 @@ def run_robust(name: str, designs: int) -> dict:
     rel = max(abs(rob.values[i, col[k]] - v) / max(abs(v), 1e-300) for k, v in ref.items())
     return {"case": name, "designs": len(rep.feasible), "feasible": int(rep.feasible.sum()),
             "parameters": len(tin.parameters), "positions": 360, "ranges": [a, b], "robust_cold_s": cold,
-            "robust_warm_s": warm, "robust_only_warm_s": rep.timings["robust"], "evaluate_warm_s": rep.timings["evaluate"],
+            "robust_warm_s": warm, "robust_only_warm_s": rep.timings["robust"],
+            "evaluate_warm_s": rep.timings["evaluate"],
             "robust_batch": int(st.robust.robust_evaluator(study).chunk), "check_design": i,
             "check_max_relative_difference": float(rel), "columns_checked": len(ref)}
 
@@ -138,7 +139,8 @@ def main() -> None:
               f"{'check rel.':>11}")
         for r in robust:
             print(f"{r['case']:<16} {r['designs']:>8} {r['parameters']:>3} {r['robust_cold_s']:8.2f} "
-                  f"{r['robust_warm_s']:8.2f} {r['robust_only_warm_s']:15.2f} {r['check_max_relative_difference']:11.1e}")
+                  f"{r['robust_warm_s']:8.2f} {r['robust_only_warm_s']:15.2f} "
+                  f"{r['check_max_relative_difference']:11.1e}")
     out = pathlib.Path(__file__).parent / "results" / "latest" / "tolerance.json"
     out.parent.mkdir(parents=True, exist_ok=True)
     meta = {"machine": platform.machine(), "cpus": os.cpu_count(), "jax": jax.__version__,

@@ -202,8 +202,9 @@ def _read_study(mech, table, overrides) -> StudyInputs:
     if not isinstance(robust, bool):
         raise _err(mech, f"'robust' must be true or false, got {robust!r}", "robust")
     if robust and (method not in ("sample", "grid") or not ranges or not tol_raw):
-        raise _err(mech, "the robust-design map ('robust = true') is an option of the sample and grid methods and needs "
-                         "both [study.ranges] (the designs) and [study.tolerances] (the tolerances at each design)",
+        raise _err(mech, "the robust-design map ('robust = true') is an option of the sample and grid methods and "
+                         "needs both [study.ranges] (the designs) and [study.tolerances] (the tolerances at each "
+                         "design)",
                    "robust")
     limits = _limits(mech, t.get("limits"))
     if method == "grid" and not ranges:

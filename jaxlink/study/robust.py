@@ -133,7 +133,8 @@ class RobustEvaluator:
             xs = np.empty((self.chunk, x.shape[1]))
             xs[:] = x0
             xs[:len(idx)] = x[idx]
-            metric_s, metric_w, metric_v, pts = (np.asarray(a_)[:len(idx)] for a_ in self._fn(jnp.asarray(xs), sig, half))
+            res = self._fn(jnp.asarray(xs), sig, half)
+            metric_s, metric_w, metric_v, pts = (np.asarray(a_)[:len(idx)] for a_ in res)
             out[idx] = self._columns(metric_s, metric_w, metric_v, pts)
         out = np.where(np.isnan(out), 0.0, out)  # Cpk may be ±inf (σ = 0), never NaN
         self.seconds += time.perf_counter() - t0
