@@ -342,7 +342,8 @@ def test_sensitivity_of_the_feasibility_and_conditional_indices(setup, tmp_path)
     from jaxlink.report import sampling as rs
 
     files = rs.write_sensitivity_all(tmp_path, mech, rep, wall_time=1.0)
-    assert {p.split("/")[-1] for p in files} == {"indices.csv", "sobol.png", "sobol_curves.png", "study.json"}
+    assert {p.split("/")[-1] for p in files} == {"indices.csv", "sobol.png", "sobol_curves.png", "study.json",
+                                                 "study.npz"}
     text = (tmp_path / "indices.csv").read_text()
     assert "nan" not in text.lower()
     assert text.splitlines()[0] == "output,input (deg),parameter,method,value (1),low (1),high (1),conditional"
@@ -364,7 +365,7 @@ def test_grid_and_samplers_keep_infeasible_designs(setup, tmp_path):
     from jaxlink.report import sampling as rs
 
     files = rs.write_sample_all(tmp_path, mech, rep, wall_time=1.0)
-    assert (tmp_path / "grid.png").is_file() and len(files) == 3
+    assert (tmp_path / "grid.png").is_file() and len(files) == 4
     lines = (tmp_path / "study.csv").read_text().splitlines()
     assert lines[0].startswith("sample,crank (mm),rod (mm),O1_x (mm),O1_y (mm),feasible,swing(theta_rod) (deg)")
     assert len(lines) == 222
@@ -422,7 +423,8 @@ def test_the_command_line_sample_grid_sensitivity(tmp_path, capsys):
     src = tmp_path / "slider.toml"
     src.write_text(FILE.replace("\n[study.tolerances]", CLI_RANGES + "\n[study.tolerances]"))
     common = ["--positions", "16", "--chunk", "1024", "--no-plot", "--progress", "off", "--seed", "3"]
-    for method, n, files in (("sample", 64, {"study.csv", "study.json"}), ("grid", 60, {"study.csv", "study.json"})):
+    files = {"study.csv", "study.json", "study.npz", "checkpoint"}
+    for method, n in (("sample", 64), ("grid", 60)):
         out = tmp_path / method
         assert main(["study", str(src), "--method", method, "--samples", "64", "--out", str(out)] + common) == 0
         assert {p.name for p in out.iterdir()} == files
@@ -432,10 +434,19 @@ def test_the_command_line_sample_grid_sensitivity(tmp_path, capsys):
         ok = x[:, 1] >= x[:, 0] + np.abs(E - x[:, 3])
         assert 0 < ok.sum() < n and [int(r["feasible"]) for r in rows] == ok.astype(int).tolist()
         assert json.loads((out / "study.json").read_text())["method"] == method
+    # --resume of the finished sample: every chunk read back, the same study.csv; another seed refused
+    out = tmp_path / "sample"
+    before = (out / "study.csv").read_text()
+    assert main(["study", str(src), "--method", "sample", "--samples", "64", "--out", str(out), "--resume"]
+                + common) == 0
+    assert (out / "study.csv").read_text() == before
+    assert main(["study", str(src), "--method", "sample", "--samples", "64", "--out", str(out), "--resume"]
+                + common[:-1] + ["4"]) == 2
+    assert "belongs to another study (different [study] seed)" in capsys.readouterr().err
     out = tmp_path / "sensitivity"
     assert main(["study", str(src), "--method", "sensitivity", "--samples", "32", "--bootstrap", "20",
                  "--out", str(out)] + common) == 0
-    assert {p.name for p in out.iterdir()} == {"indices.csv", "study.json"}
+    assert {p.name for p in out.iterdir()} == {"indices.csv", "study.json", "study.npz", "checkpoint"}
     u = np.concatenate(list(st.unit_blocks("sobol", 8, 32, 3)))
     lo, hi = np.asarray([[24.0, 36.5, -0.5, -0.5], [26.0, 39.0, 0.5, 0.5]])
     ab = np.concatenate([lo + u[:, :4] * (hi - lo), lo + u[:, 4:] * (hi - lo)])
@@ -444,4 +455,141 @@ def test_the_command_line_sample_grid_sensitivity(tmp_path, capsys):
     assert data["feasible_fraction"] == pytest.approx(ok.mean(), abs=1e-12)
     idx = [r for r in csv.DictReader((out / "indices.csv").open()) if r["output"] == "feasible"]
     assert {float(r["value (1)"]) for r in idx if r["parameter"] == "O1_x"} == {0.0}
+    # --replot draws the plots of a study written without them, from study.json and study.npz
+    assert main(["study", str(src), "--replot", str(out)]) == 0
+    assert {p.name for p in out.iterdir()} == {"indices.csv", "study.json", "study.npz", "checkpoint", "sobol.png",
+                                               "sobol_curves.png"}
     capsys.readouterr()
+
+
+class _Stop(Exception):
+    pass
+
+
+def _stop_after(k):
+    """A `progress` callback that interrupts the study after its k-th batch (a killed study)."""
+    calls = [0]
+
+    def progress(_n):
+        calls[0] += 1
+        if calls[0] == k:
+            raise _Stop
+    return progress
+
+
+def test_a_killed_study_resumes_to_the_same_result(setup, tmp_path):
+    """Monte Carlo, sample and sensitivity over two batches each, interrupted after the first
+    (the checkpoint written batch by batch), resumed: every array equals the uninterrupted run's
+    bit for bit. A resume whose key differs (another seed, another sample count, other parameters)
+    is refused with the reason, never mixed."""
+    from jaxlink.study.checkpoint import Checkpoint, resume_key
+
+    mech, inputs, study = setup
+    first = study.first_order()
+    n = 4096 + 100
+
+    def ck(name, inp, what, resume=False, m=mech, **extra):
+        return Checkpoint(tmp_path / name, resume_key(m, inp, chunk=study.chunk, what=what, **extra), resume=resume)
+
+    ref = study.monte_carlo(n, first)
+    with pytest.raises(_Stop):
+        study.monte_carlo(n, first, progress=_stop_after(1), checkpoint=ck("mc", inputs, "mc", samples=n))
+    assert {p.name for p in (tmp_path / "mc").iterdir()} == {"state.json", "state-000001.npz"}
+    res = study.monte_carlo(n, first, checkpoint=ck("mc", inputs, "mc", resume=True, samples=n))
+    for f in ref._fields:
+        assert np.array_equal(np.asarray(getattr(ref, f)), np.asarray(getattr(res, f))), f
+    # the key: a changed seed, sample count or parameter is refused, naming what differs
+    for inp, extra, m, why in ((inputs._replace(seed=9), n, mech, "seed"), (inputs, n + 1, mech, "samples"),
+                               (inputs, n, mech.replace(parameters=mech.with_parameters(rod=80.5)), "parameters")):
+        with pytest.raises(jl.MechanismError, match=f"another study .*{why}"):
+            study.monte_carlo(n, first, checkpoint=ck("mc", inp, "mc", resume=True, m=m, samples=extra))
+
+    sin = st.read_study(mech, method="sample", samples=4096 + 7, seed=4, ranges=RANGES)
+    s2 = study.moved(inputs=sin)
+    ref = st.sample(mech, study=s2)
+    with pytest.raises(_Stop):
+        st.sample(mech, study=s2, progress=_stop_after(1), checkpoint=ck("s", sin, "sample"))
+    res = st.sample(mech, study=s2, checkpoint=ck("s", sin, "sample", resume=True))
+    for f in ("values", "feasible", "responses", "nominal"):
+        assert np.array_equal(getattr(ref, f), getattr(res, f)), f
+    with pytest.raises(jl.MechanismError, match="sampler"):
+        st.sample(mech, study=s2, checkpoint=ck("s", sin._replace(sampler="halton"), "sample", resume=True))
+
+    sin = st.read_study(mech, method="sensitivity", samples=700, seed=4, ranges=RANGES, bootstrap=10)
+    s3 = study.moved(inputs=sin)
+    ref = st.sensitivity(mech, study=s3)
+    with pytest.raises(_Stop):
+        st.sensitivity(mech, study=s3, progress=_stop_after(1), checkpoint=ck("x", sin, "sensitivity"))
+    res = st.sensitivity(mech, study=s3, checkpoint=ck("x", sin, "sensitivity", resume=True))
+    for f in ("S1", "ST", "S1_low", "ST_high"):
+        assert np.array_equal(getattr(ref.indices, f), getattr(res.indices, f)), f
+    assert (res.feasible_fraction, res.complete) == (ref.feasible_fraction, ref.complete)
+
+
+def test_the_robust_design_map_against_the_closed_form_and_replot(setup, tmp_path, monkeypatch):
+    """The robust-design map over a (crank, rod) grid across the toggle, the file's tolerances at
+    every design: at every feasible design the largest σ_RSS of B.x over the cycle and the linear
+    bound of B's path deviation equal the closed form's (B.y = e is constant: ‖∂B/∂x_g‖ = |∂B.x/∂x_g|,
+    the zone's largest singular value √(1 + (∂B.x/∂O1_y)²)); Cpk = min(U − m, m − L) / 3σ of the
+    design's stroke; one design against the single-design tolerance report (1e-12); the infeasible
+    rows empty. Then `replot` draws grid.png and robust.png from study.json and study.npz alone
+    (written without plots), with the evaluator made to fail."""
+    import csv
+    import json
+
+    from jaxlink.report import replot as rp
+    from jaxlink.report import sampling as rs
+
+    mech, inputs, study = setup
+    ranges = {"crank": [24.0, 26.0], "rod": [36.5, 39.0], "O1_x": [-0.1, 0.1], "O1_y": [-0.1, 0.1]}
+    gin = st.read_study(mech, method="grid", ranges=ranges, levels={"crank": 5, "rod": 6, "O1_x": 1, "O1_y": 1},
+                        robust=True, limits={"stroke(s_B)": [50.0, "inf"]},
+                        tolerances=dict(mech.tables["study"]["tolerances"]), distribution="uniform")
+    rep = st.sample(mech, grid=True, study=study.moved(inputs=gin))
+    rob = rep.robust
+    col = {name: j for j, (name, _u) in enumerate(rob.labels)}
+    ok = rep.feasible
+    assert 5 < ok.sum() < 30 and np.all(rob.values[~ok] == 0)
+    theta = np.deg2rad(30.0 + 360.0 * np.arange(72) / 72)
+    t, r_zone, sig = 0.01, 0.01, 0.01 / math.sqrt(3)
+    for i in np.flatnonzero(ok):
+        a, b, ox, oy = rep.values[i]
+        h = oy + a * np.sin(theta) - E
+        R = np.sqrt(b * b - h * h)
+        da, db, dox, doy = np.cos(theta) - h * np.sin(theta) / R, b / R, np.ones_like(theta), -h / R
+        s = np.sqrt((da * sig) ** 2 + (db * sig) ** 2 + (dox * r_zone / 2) ** 2 + (doy * r_zone / 2) ** 2)
+        np.testing.assert_allclose(rob.values[i, col["sigma_rss(B.x)"]], s.max(), rtol=1e-9)
+        bound = t * np.abs(da) + t * np.abs(db) + r_zone * np.sqrt(1 + doy ** 2)
+        np.testing.assert_allclose(rob.values[i, col["worst_case_linear(B)"]], bound.max(), rtol=1e-9)
+        assert rob.values[i, col["sigma_rss(B.y)"]] == pytest.approx(0, abs=1e-12)
+        m = rep.responses[i, rep.labels.index(("stroke(s_B)", "mm"))]
+        cpk = (m - 50.0) / (3 * rob.values[i, col["sigma_rss(stroke(s_B))"]])
+        assert rob.values[i, col["cpk(stroke(s_B))"]] == pytest.approx(cpk, rel=1e-12)
+    i = int(np.flatnonzero(ok)[-1])
+    tin = st.read_study(mech, tolerances=dict(mech.tables["study"]["tolerances"]), distribution="uniform")
+    one = st.tolerance(mech, study=study.moved(x0=rep.values[i], inputs=tin), samples=0, worst=False)
+    for name, rows in (("stroke(s_B)", _rows(one, "stroke(s_B)")), ("B.x", _rows(one, "B.x"))):
+        np.testing.assert_allclose(rob.values[i, col[f"sigma_rss({name})"]], one.first_order.sigma_rss[rows].max(),
+                                   rtol=1e-12)
+        np.testing.assert_allclose(rob.values[i, col[f"worst_case_linear({name})"]],
+                                   one.first_order.worst_case[rows].max(), rtol=1e-12)
+    np.testing.assert_allclose(rob.values[i, col["worst_case_linear(B)"]], one.deviation_bound[1], rtol=1e-12)
+
+    files = rs.write_sample_all(tmp_path, mech, rep, wall_time=1.0, plot=False)
+    assert {p.split("/")[-1] for p in files} == {"study.csv", "study.npz", "study.json"}
+    rows = list(csv.DictReader((tmp_path / "study.csv").open()))
+    assert "cpk(stroke(s_B)) (1)" in rows[0] and "worst_case_linear(B) (mm)" in rows[0]
+    assert all((r["sigma_rss(B.x) (mm)"] == "") == (r["feasible"] == "0") for r in rows)
+    data = json.loads((tmp_path / "study.json").read_text())
+    assert data["sizes"]["designs"] == 30 and data["options"]["robust"] is True
+    assert data["robust"]["limits"] == [["stroke(s_B)", 50.0, "inf"]]
+
+    def fail(*_a, **_k):
+        raise AssertionError("replot evaluated a design")
+    monkeypatch.setattr(st.Study, "__init__", fail)
+    monkeypatch.setattr(st.Responses, "single", fail)
+    assert sorted(p.split("/")[-1] for p in rp.replot(tmp_path)) == ["grid.png", "robust.png"]
+    assert (tmp_path / "grid.png").stat().st_size > 1000 and (tmp_path / "robust.png").stat().st_size > 1000
+    back = rp.read(tmp_path)[1]
+    assert back.labels == rep.labels and back.robust.labels == rob.labels and back.inputs == rep.inputs
+    assert np.array_equal(back.robust.values, rob.values) and np.array_equal(back.values, rep.values)

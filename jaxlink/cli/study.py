@@ -20,8 +20,10 @@ def register(sub) -> None:
             "tolerance.png). sample: designs drawn over [study.ranges] by a scrambled Sobol', Halton, Latin "
             "hypercube or random sampler; grid: the full factorial over the ranges (study.csv; grid.png for two "
             "ranges). sensitivity: Sobol' S1 and ST with bootstrap intervals of every response along the cycle "
-            "and of the feasibility (indices.csv, sobol.png, sobol_curves.png). Infeasible designs are kept and "
-            "flagged. Every method writes study.json."
+            "and of the feasibility (indices.csv, sobol.png, sobol_curves.png). --robust (sample, grid): the "
+            "first-order tolerance report at every design (study.csv columns, robust.png). Infeasible designs are "
+            "kept and flagged. Every method writes study.json and study.npz (--replot redraws from them) and, "
+            "with --out, a checkpoint chunk by chunk (--resume)."
         ),
     )
     add_mechanism_arguments(p, positions=False)
@@ -40,7 +42,17 @@ def register(sub) -> None:
     p.add_argument("--seed", type=int, default=None, help="random seed (default: [study] seed, else 0)")
     p.add_argument("--chunk", type=int, default=None,
                    help="designs per batch (default: [study] chunk, else about 2^21 positions)")
-    p.add_argument("--out", metavar="DIR", default=None, help="write the files into this folder")
+    p.add_argument("--robust", action="store_true", default=None,
+                   help="sample, grid: the robust-design map, the first-order tolerance report ([study.tolerances]) "
+                        "at every design (default: [study] robust)")
+    p.add_argument("--out", metavar="DIR", default=None,
+                   help="write the files into this folder (and, chunk by chunk, the checkpoint DIR/checkpoint/)")
+    p.add_argument("--resume", action="store_true",
+                   help="continue the interrupted study of --out DIR from its checkpoint (the same result as an "
+                        "uninterrupted run; refused when the file or the study's inputs differ)")
+    p.add_argument("--replot", metavar="DIR", default=None,
+                   help="redraw every plot of the study written into DIR (study.json, study.npz) without "
+                        "computing anything")
     p.add_argument("--no-plot", action="store_true", help="do not draw the plots")
     p.add_argument("--progress", choices=("auto", "on", "off"), default="auto",
                    help="progress bar of the sampled designs (auto: when stderr is a terminal)")
@@ -52,6 +64,10 @@ def cmd_study(args) -> int:
     from .mechanism import enable_dtype, load_from_args
 
     t0 = time.perf_counter()
+    if args.replot:
+        return _replot(args)
+    if args.resume and not args.out:
+        raise MechanismError("--resume continues the study of --out DIR: give --out")
     enable_dtype(args.dtype)
     mech = load_from_args(args)
     from ..report import tolerance as _report
@@ -62,18 +78,21 @@ def cmd_study(args) -> int:
         if v is not None and v < lo:
             raise MechanismError(f"{opt} must be at least {lo}, got {v}")
     inputs = read_study(mech, method=args.method, samples=args.samples, positions=args.positions, seed=args.seed,
-                        chunk=args.chunk, sampler=args.sampler, bootstrap=args.bootstrap)
+                        chunk=args.chunk, sampler=args.sampler, bootstrap=args.bootstrap, robust=args.robust)
     study = Study(mech, inputs)
+    extra = {"chunk": study.chunk, "command_line": {"set": list(args.set), "dtype": args.dtype,
+                                                    "resume": bool(args.resume)}}
     show = sys.stderr.isatty() if args.progress == "auto" else args.progress == "on"
     if inputs.method != "tolerance":
-        return _design_space(args, mech, study, show, t0)
+        return _design_space(args, mech, study, show, t0, extra)
     bar = None
     if show and inputs.samples > 0:
         from tqdm import tqdm
 
         bar = tqdm(total=inputs.samples, desc="Monte Carlo", unit="sample", leave=False, file=sys.stderr)
     try:
-        rep = tolerance(mech, study=study, progress=None if bar is None else bar.update)
+        rep = tolerance(mech, study=study, progress=None if bar is None else bar.update,
+                        checkpoint=_checkpoint(args, mech, study, "monte_carlo"))
     finally:
         if bar is not None:
             bar.close()
@@ -85,12 +104,42 @@ def cmd_study(args) -> int:
     for w in rep.warnings:
         print(f"warning: {w}", file=sys.stderr)
     if args.out:
-        files = _report.write_all(args.out, mech, rep, wall_time=time.perf_counter() - t0, plot=not args.no_plot)
+        files = _report.write_all(args.out, mech, rep, wall_time=time.perf_counter() - t0, plot=not args.no_plot,
+                                  extra=extra)
         print("wrote " + ", ".join(files))
     return 0
 
 
-def _design_space(args, mech, study, show: bool, t0: float) -> int:
+def _checkpoint(args, mech, study, what: str):
+    """The checkpoint of `--out DIR` (DIR/checkpoint/), resumed with `--resume`; None without --out."""
+    import pathlib
+
+    from ..study.checkpoint import Checkpoint, resume_key
+
+    if not args.out:
+        return None
+    key = resume_key(mech, study.inputs, chunk=study.chunk, what=what)
+    return Checkpoint(pathlib.Path(args.out) / "checkpoint", key, resume=args.resume)
+
+
+def _replot(args) -> int:
+    """`--replot DIR`: every plot redrawn from DIR's study.json and study.npz (nothing computed)."""
+    import hashlib
+    import pathlib
+
+    from ..report.replot import read, replot
+
+    data = read(args.replot)[0]
+    src = pathlib.Path(args.file)
+    if src.is_file() and data.get("file_sha256") not in (None, hashlib.sha256(src.read_bytes()).hexdigest()):
+        print(f"warning: {src} has changed since the study in {args.replot}: the plots are the study's",
+              file=sys.stderr)
+    files = replot(args.replot)
+    print("redrew " + (", ".join(files) if files else "nothing (this study has no plot)"))
+    return 0
+
+
+def _design_space(args, mech, study, show: bool, t0: float, extra: dict) -> int:
     """`sample`, `grid` and `sensitivity`."""
     import numpy as np
 
@@ -110,10 +159,11 @@ def _design_space(args, mech, study, show: bool, t0: float) -> int:
     progress = None if bar is None else bar.update
     srep = rep = None
     try:
+        ck = _checkpoint(args, mech, study, inputs.method)
         if inputs.method == "sensitivity":
-            srep = sensitivity(mech, study=study, progress=progress)
+            srep = sensitivity(mech, study=study, progress=progress, checkpoint=ck)
         else:
-            rep = sample(mech, study=study, grid=inputs.method == "grid", progress=progress)
+            rep = sample(mech, study=study, grid=inputs.method == "grid", progress=progress, checkpoint=ck)
     finally:
         if bar is not None:
             bar.close()
@@ -132,9 +182,10 @@ def _design_space(args, mech, study, show: bool, t0: float) -> int:
     if args.out:
         wall = time.perf_counter() - t0
         if srep is not None:
-            files = _report.write_sensitivity_all(args.out, mech, srep, wall_time=wall, plot=not args.no_plot)
+            files = _report.write_sensitivity_all(args.out, mech, srep, wall_time=wall, plot=not args.no_plot,
+                                                  extra=extra)
         else:
             assert rep is not None
-            files = _report.write_sample_all(args.out, mech, rep, wall_time=wall, plot=not args.no_plot)
+            files = _report.write_sample_all(args.out, mech, rep, wall_time=wall, plot=not args.no_plot, extra=extra)
         print("wrote " + ", ".join(files))
     return 0

@@ -4,7 +4,9 @@ the input, the grid's heat maps). Computes nothing.
 
 **study.csv** (`sample`, `grid`; one row per design, in the order drawn, infeasible ones kept):
 `sample`, one column `NAME (unit)` per studied parameter, `feasible` (1 or 0), one column
-`OUTPUT (unit)` per scalar response (empty where infeasible, never `nan`).
+`OUTPUT (unit)` per scalar response (empty where infeasible, never `nan`), and with the
+robust-design map its columns (`sigma_rss(OUTPUT) (unit)`, `worst_case_linear(OUTPUT) (unit)`,
+`cpk(OUTPUT) (1)`, `jaxlink.study.robust`).
 
 **indices.csv** (`sensitivity`; long form): `output`, `input (<input unit>)` (the position's
 input for a point's x or y, empty for a scalar), `parameter` (the factor), `method` (`S1`, `ST`),
@@ -36,14 +38,18 @@ def _input_unit(mech) -> str:
 
 
 def write_study_csv(path, rep: SampleReport) -> None:
+    rob = rep.robust
+    rlabels = () if rob is None else rob.labels
     with open(path, "w", newline="", encoding="utf-8") as fh:
         w = csv.writer(fh)
         w.writerow(["sample"] + [f"{p} ({u})" for p, u in zip(rep.parameters, rep.units)] + ["feasible"]
-                   + [f"{name} ({unit})" for name, unit in rep.labels])
+                   + [f"{name} ({unit})" for name, unit in rep.labels]
+                   + [f"{name} ({unit})" for name, unit in rlabels])
         for i in range(len(rep.feasible)):
             ok = bool(rep.feasible[i])
             w.writerow([str(i)] + [_g(v) for v in rep.values[i]] + [str(int(ok))]
-                       + [_g(v) if ok else "" for v in rep.responses[i]])
+                       + [_g(v) if ok else "" for v in rep.responses[i]]
+                       + ([] if rob is None else [_g(v) if ok else "" for v in rob.values[i]]))
 
 
 def write_indices_csv(path, mech, rep: SensitivityReport) -> None:
@@ -90,50 +96,102 @@ def _base_manifest(mech, inputs, method: str) -> dict:
     }
 
 
-def write_sample_all(out_dir, mech, rep: SampleReport, *, wall_time: float, plot: bool = True) -> list:
-    """study.csv, grid.png (a grid over two ranges) and study.json into `out_dir`."""
+def _two_ranges(rep: SampleReport) -> bool:
+    return rep.grid_shape is not None and sum(n > 1 for n in rep.grid_shape) == 2
+
+
+def draw_sample_plots(d: pathlib.Path, mech, rep: SampleReport) -> list:
+    """grid.png (a grid over two ranges) and robust.png (with the robust-design map) into `d`;
+    their paths. `mech` needs only its names (`replot.MechanismNames`)."""
+    files = []
+    if _two_ranges(rep) and rep.labels:
+        files.append(d / "grid.png")
+        plot_grid(files[-1], mech, rep)
+    rob = rep.robust
+    if _two_ranges(rep) and rob is not None and rob.labels:
+        # the metrics' columns and each path's deviation bound (not the per-coordinate ones)
+        keep = [j for j, (name, _u) in enumerate(rob.labels)
+                if not (name.endswith(".x)") or name.endswith(".y)"))]
+        files.append(d / "robust.png")
+        plot_grid(files[-1], mech, rep, labels=tuple(rob.labels[j] for j in keep), values=rob.values[:, keep],
+                  title="robust-design map")
+    return files
+
+
+def draw_sensitivity_plots(d: pathlib.Path, mech, rep: SensitivityReport) -> list:
+    """sobol.png and sobol_curves.png (with points) into `d`; their paths."""
+    files = [d / "sobol.png"]
+    plot_bars(files[-1], mech, rep)
+    if rep.indices is not None and rep.inputs.points:
+        files.append(d / "sobol_curves.png")
+        plot_curves(files[-1], mech, rep)
+    return files
+
+
+def _finish(d: pathlib.Path, mech, rep, data: dict, files: list, sizes: dict, extra: dict | None) -> list:
+    from .replot import write_archive
+
+    data["sizes"] = sizes
+    data.update(extra or {})
+    data["files"] = [f.name for f in files]
+    write_archive(d, mech, rep, data)
+    files[-1].write_text(json.dumps(data, indent=2, allow_nan=False) + "\n", encoding="utf-8")
+    return [str(f) for f in files]
+
+
+def write_sample_all(out_dir, mech, rep: SampleReport, *, wall_time: float, plot: bool = True,
+                     extra: dict | None = None) -> list:
+    """study.csv, grid.png and robust.png (a grid over two ranges), study.npz and study.json into
+    `out_dir`; `extra`: more manifest keys."""
     d = pathlib.Path(out_dir)
     d.mkdir(parents=True, exist_ok=True)
     files = [d / "study.csv"]
     write_study_csv(files[0], rep)
     method = "grid" if rep.grid_shape is not None else "sample"
-    if plot and rep.grid_shape is not None and sum(n > 1 for n in rep.grid_shape) == 2 and rep.labels:
-        files.append(d / "grid.png")
-        plot_grid(files[-1], mech, rep)
-    files.append(d / "study.json")
+    if plot:
+        files += draw_sample_plots(d, mech, rep)
+    files += [d / "study.npz", d / "study.json"]
     data = _base_manifest(mech, rep.inputs, method)
     n = len(rep.feasible)
+    rob = rep.robust
     data.update({"samples": n, "grid_shape": None if rep.grid_shape is None else list(rep.grid_shape),
                  "feasible": int(rep.feasible.sum()), "infeasible": int(n - rep.feasible.sum()),
                  "certificate": rep.certificate, "responses": [f"{a} ({b})" for a, b in rep.labels],
+                 "robust": None if rob is None else {"tolerances": list(rob.tolerances),
+                                                     "columns": [f"{a} ({b})" for a, b in rob.labels],
+                                                     "limits": [[nm, _lim(lo), _lim(hi)] for nm, lo, hi in rob.limits]},
                  "warnings": list(rep.warnings), "timings_s": {k: round(v, 4) for k, v in rep.timings.items()},
-                 "wall_time_s": round(wall_time, 3), "files": [f.name for f in files]})
-    files[-1].write_text(json.dumps(data, indent=2, allow_nan=False) + "\n", encoding="utf-8")
-    return [str(f) for f in files]
+                 "wall_time_s": round(wall_time, 3)})
+    sizes = {"designs": n, "parameters": len(rep.parameters), "positions": rep.inputs.positions,
+             "scalar_responses": len(rep.labels), "robust_columns": 0 if rob is None else len(rob.labels)}
+    return _finish(d, mech, rep, data, files, sizes, extra)
 
 
-def write_sensitivity_all(out_dir, mech, rep: SensitivityReport, *, wall_time: float, plot: bool = True) -> list:
-    """indices.csv, sobol.png, sobol_curves.png (with points) and study.json into `out_dir`."""
+def _lim(v):
+    return v if np.isfinite(v) else ("inf" if v > 0 else "-inf")
+
+
+def write_sensitivity_all(out_dir, mech, rep: SensitivityReport, *, wall_time: float, plot: bool = True,
+                          extra: dict | None = None) -> list:
+    """indices.csv, sobol.png, sobol_curves.png (with points), study.npz and study.json into
+    `out_dir`; `extra`: more manifest keys."""
     d = pathlib.Path(out_dir)
     d.mkdir(parents=True, exist_ok=True)
     files = [d / "indices.csv"]
     write_indices_csv(files[0], mech, rep)
     if plot:
-        files.append(d / "sobol.png")
-        plot_bars(files[-1], mech, rep)
-        if rep.indices is not None and rep.inputs.points:
-            files.append(d / "sobol_curves.png")
-            plot_curves(files[-1], mech, rep)
-    files.append(d / "study.json")
+        files += draw_sensitivity_plots(d, mech, rep)
+    files += [d / "study.npz", d / "study.json"]
     data = _base_manifest(mech, rep.inputs, "sensitivity")
     data.update({"samples": rep.samples, "evaluations": rep.evaluations, "bootstrap": rep.inputs.bootstrap,
                  "confidence": rep.inputs.confidence, "feasible_fraction": rep.feasible_fraction,
                  "complete_samples": rep.complete, "conditional": rep.complete < rep.samples,
                  "certificate": rep.certificate, "responses": len(rep.labels),
                  "warnings": list(rep.warnings), "timings_s": {k: round(v, 4) for k, v in rep.timings.items()},
-                 "wall_time_s": round(wall_time, 3), "files": [f.name for f in files]})
-    files[-1].write_text(json.dumps(data, indent=2, allow_nan=False) + "\n", encoding="utf-8")
-    return [str(f) for f in files]
+                 "wall_time_s": round(wall_time, 3)})
+    sizes = {"base_samples": rep.samples, "designs": rep.evaluations, "factors": len(rep.factors),
+             "positions": rep.inputs.positions, "responses": len(rep.labels)}
+    return _finish(d, mech, rep, data, files, sizes, extra)
 
 
 def sample_summary(rep: SampleReport) -> str:
@@ -147,6 +205,14 @@ def sample_summary(rep: SampleReport) -> str:
         for j, (name, unit) in enumerate(rep.labels):
             lines.append(f"{name:<22} {unit:<8} {rep.nominal[j]:11.4g} {v[:, j].min():11.4g} {v[:, j].mean():11.4g} "
                          f"{v[:, j].max():11.4g}")
+    rob = rep.robust
+    if rob is not None and ok.any() and rob.labels:
+        lines.append(f"robust-design map (first order, tolerances of {', '.join(rob.tolerances)}), over the feasible "
+                     "designs:")
+        lines.append(f"{'column':<34} {'unit':<8} {'least':>11} {'mean':>11} {'largest':>11}")
+        r = rob.values[ok]
+        for j, (name, unit) in enumerate(rob.labels):
+            lines.append(f"{name:<34} {unit:<8} {r[:, j].min():11.4g} {r[:, j].mean():11.4g} {r[:, j].max():11.4g}")
     return "\n".join(lines)
 
 
@@ -247,9 +313,10 @@ def plot_curves(path, mech, rep: SensitivityReport) -> None:
     plt.close(fig)
 
 
-def plot_grid(path, mech, rep: SampleReport) -> None:
-    """A heat map of every scalar response over a grid of two ranges (the others at one level), the
-    infeasible designs masked (grey, hatched)."""
+def plot_grid(path, mech, rep: SampleReport, *, labels=None, values=None, title: str | None = None) -> None:
+    """A heat map of every scalar response (or of the columns `values` (n, C) named by `labels`:
+    the robust-design map's) over a grid of two ranges (the others at one level), the infeasible
+    designs masked (grey, hatched)."""
     plt = _plt()
     assert rep.grid_shape is not None
     a, b = [i for i, n in enumerate(rep.grid_shape) if n > 1]
@@ -257,13 +324,15 @@ def plot_grid(path, mech, rep: SampleReport) -> None:
     xv = rep.values[:, a].reshape(n1, n2)
     yv = rep.values[:, b].reshape(n1, n2)
     bad = ~rep.feasible.reshape(n1, n2)
-    S = len(rep.labels)
+    labels = rep.labels if labels is None else labels
+    values = rep.responses if values is None else values
+    S = len(labels)
     cols = min(3, S)
     rows = -(-S // cols)
     fig, axes = plt.subplots(rows, cols, figsize=(4.6 * cols, 3.8 * rows), squeeze=False)
-    for j, (name, unit) in enumerate(rep.labels):
+    for j, (name, unit) in enumerate(labels):
         ax = axes.ravel()[j]
-        z = np.ma.masked_array(rep.responses[:, j].reshape(n1, n2), bad)
+        z = np.ma.masked_array(values[:, j].reshape(n1, n2), bad | ~np.isfinite(values[:, j].reshape(n1, n2)))
         ax.set_facecolor("0.8")
         m = ax.pcolormesh(xv, yv, z, shading="nearest", cmap="viridis")
         if bad.any():
@@ -274,7 +343,8 @@ def plot_grid(path, mech, rep: SampleReport) -> None:
         ax.set_ylabel(f"{rep.parameters[b]} ({rep.units[b]})")
     for ax in axes.ravel()[S:]:
         ax.axis("off")
-    fig.suptitle(f"{mech.name}: grid of {n1} × {n2} designs, {int(rep.feasible.sum())} feasible", fontsize=10)
-    fig.tight_layout()
+    fig.suptitle(f"{mech.name}: {title + ', ' if title else ''}grid of {n1} × {n2} designs, "
+                 f"{int(rep.feasible.sum())} feasible", fontsize=10)
+    fig.tight_layout(rect=(0, 0, 1, 0.97))
     fig.savefig(path, dpi=120)
     plt.close(fig)

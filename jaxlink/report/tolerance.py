@@ -263,20 +263,36 @@ def plot_band(path, mech, rep: ToleranceReport, *, k: float = 3.0, ellipses: int
     plt.close(fig)
 
 
-def write_all(out_dir, mech, rep: ToleranceReport, *, wall_time: float, plot: bool = True) -> list:
-    """Write tolerance.csv, importance.csv, tolerance.png (when there are points) and study.json
-    into `out_dir` (created); returns the paths written."""
+def draw_plots(d: pathlib.Path, mech, rep: ToleranceReport) -> list:
+    """The study's plots into folder `d` (tolerance.png where there are points); their paths.
+    `mech` needs only its names (`replot.MechanismNames`)."""
+    files = []
+    if rep.inputs.points:
+        files.append(d / "tolerance.png")
+        plot_band(files[-1], mech, rep)
+    return files
+
+
+def write_all(out_dir, mech, rep: ToleranceReport, *, wall_time: float, plot: bool = True,
+              extra: dict | None = None) -> list:
+    """Write tolerance.csv, importance.csv, tolerance.png (when there are points), study.npz and
+    study.json into `out_dir` (created); returns the paths written. `extra`: more manifest keys
+    (the command line's options, the chunk)."""
+    from .replot import write_archive
+
     d = pathlib.Path(out_dir)
     d.mkdir(parents=True, exist_ok=True)
     files = [d / "tolerance.csv", d / "importance.csv"]
     write_tolerance_csv(files[0], mech, rep)
     write_importance_csv(files[1], mech, rep)
-    if plot and rep.inputs.points:
-        files.append(d / "tolerance.png")
-        plot_band(files[-1], mech, rep)
-    files.append(d / "study.json")
+    if plot:
+        files += draw_plots(d, mech, rep)
+    files += [d / "study.npz", d / "study.json"]
     data = manifest(mech, rep, wall_time=wall_time, files=[f.name for f in files])
+    mc = rep.monte_carlo
+    data["sizes"] = {"parameters": len(rep.parameters), "positions": rep.inputs.positions,
+                     "responses": len(rep.labels), "monte_carlo_samples": 0 if mc is None else mc.samples}
+    data.update(extra or {})
+    write_archive(d, mech, rep, data)
     files[-1].write_text(json.dumps(data, indent=2, allow_nan=False) + "\n", encoding="utf-8")
     return [str(f) for f in files]
-
-

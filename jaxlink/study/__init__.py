@@ -13,12 +13,16 @@ along the cycle and of the feasibility).
 - Sobol' estimators: `sobol_indices`, `SobolIndices`, `SobolAccumulator`;
 - responses: `Responses` (points' x, y over the cycle, stroke/swing, max speed/acceleration);
 - the analysis: `tolerance`, `Study`, `ToleranceReport`, `FirstOrder`, `MonteCarlo`, `draw`, `draws`;
-- streamed statistics: `Moments`.
+- streamed statistics: `Moments`;
+- the robust-design map (`[study] robust`): `RobustMap` (`SampleReport.robust`);
+- write-as-you-go and resume: `Checkpoint`, `resume_key`.
 
 docs/methods/tolerance.md and docs/methods/sensitivity.md give the formulas;
 docs/reference/file-format.md §17 the table.
 """
 
+from .checkpoint import Checkpoint as Checkpoint
+from .checkpoint import resume_key as resume_key
 from .design import to_values as to_values
 from .design import unit_blocks as unit_blocks
 from .inputs import Range as Range
@@ -27,6 +31,7 @@ from .inputs import Tolerance as Tolerance
 from .inputs import read_study as read_study
 from .moments import Moments as Moments
 from .responses import Responses as Responses
+from .robust import RobustMap as RobustMap
 from .sampling import SampleReport as SampleReport
 from .sampling import SensitivityReport as SensitivityReport
 from .sampling import sample as sample

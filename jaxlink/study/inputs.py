@@ -24,7 +24,9 @@ l2 = [40, 60]               # uniform over [40, 60] (sample, sensitivity); `leve
 
 `sampler` ("sobol", "lhs", "halton", "random"), `levels` (grid: an integer or NAME = n),
 `bootstrap` and `confidence` (the Sobol' intervals) belong to the design-space methods
-(docs/methods/sensitivity.md).
+(docs/methods/sensitivity.md); `robust = true` (with `sample` or `grid`, ranges and tolerances) makes
+the robust-design map, `limits = { "stroke(s)" = [4.9, 5.1] }` gives specification limits of scalar
+responses for its Cpk (docs/methods/tolerance.md).
 
 **The meaning of ±t** (t in the parameter's file unit):
 
@@ -53,7 +55,7 @@ SAMPLERS = ("sobol", "lhs", "halton", "random")
 DISTRIBUTIONS = ("normal", "uniform")
 METRICS = ("stroke", "speed", "acceleration", "deviation")
 KNOWN_KEYS = {"method", "positions", "points", "metrics", "samples", "seed", "distribution", "k", "chunk",
-              "rpm", "tolerances", "ranges", "sampler", "levels", "bootstrap", "confidence"}
+              "rpm", "tolerances", "ranges", "sampler", "levels", "bootstrap", "confidence", "robust", "limits"}
 TOLERANCE_KEYS = {"tol", "sigma", "radius", "distribution", "k"}
 DEFAULTS: dict = {"method": "tolerance", "positions": 360, "metrics": ("stroke", "deviation"), "samples": 10000,
             "seed": 0, "distribution": "normal", "k": 3.0, "sampler": "sobol", "levels": 11, "bootstrap": 100,
@@ -101,7 +103,9 @@ class StudyInputs(NamedTuple):
     `seed`, `chunk` (designs per batch, None = default), `rpm` (input speed for the speed and
     acceleration metrics; None: per radian of the input); `ranges` (tuple of `Range`), `sampler`
     (the unit-cube sequence of `sample` and `sensitivity`), `bootstrap` (resamples of the Sobol'
-    intervals), `confidence` (their level)."""
+    intervals), `confidence` (their level); `robust` (`sample`, `grid`: the robust-design map, the
+    first-order tolerance report of every design, `jaxlink.study.robust`), `limits` (tuple of
+    `(output, low, high)`: specification limits of scalar responses, file units, for Cpk)."""
 
     method: str
     tolerances: tuple
@@ -116,6 +120,8 @@ class StudyInputs(NamedTuple):
     sampler: str = "sobol"
     bootstrap: int = 100
     confidence: float = 0.95
+    robust: bool = False
+    limits: tuple = ()
 
     @property
     def factors(self) -> tuple:
@@ -192,6 +198,15 @@ def _read_study(mech, table, overrides) -> StudyInputs:
 
     ranges = _ranges(mech, t.get("ranges"), t.get("levels", DEFAULTS["levels"]))
     tol_raw = t.get("tolerances")
+    robust = t.get("robust", False)
+    if not isinstance(robust, bool):
+        raise _err(mech, f"'robust' must be true or false, got {robust!r}", "robust")
+    if robust and (method not in ("sample", "grid") or not ranges or not tol_raw):
+        raise _err(mech, "the robust-design map ('robust = true') is an option of the sample and grid methods and "
+                         "needs both [study.ranges] (the designs) and [study.tolerances] (the tolerances at each "
+                         "design)",
+                   "robust")
+    limits = _limits(mech, t.get("limits"))
     if method == "grid" and not ranges:
         raise _err(mech, "the grid method needs [study.ranges]: NAME = [low, high] (file units)", "ranges")
     if method in ("sample", "sensitivity") and not ranges and not tol_raw:
@@ -199,7 +214,7 @@ def _read_study(mech, table, overrides) -> StudyInputs:
                          "[study.tolerances]", "ranges")
     if method != "tolerance" and not tol_raw:
         return StudyInputs(method, (), positions, tuple(points), tuple(dict.fromkeys(metrics)), samples, seed,
-                           chunk, rpm, ranges, sampler, bootstrap, confidence)
+                           chunk, rpm, ranges, sampler, bootstrap, confidence, robust, limits)
     if not isinstance(tol_raw, Mapping) or not tol_raw:
         raise _err(mech, "[study.tolerances] must give at least one tolerance: NAME = t, or NAME = { tol = t, "
                          "distribution = \"uniform\" }, { sigma = s } or { radius = r } (a pivot's zone)",
@@ -214,7 +229,30 @@ def _read_study(mech, table, overrides) -> StudyInputs:
             seen.add(p)
         tolerances.append(tol)
     return StudyInputs(method, tuple(tolerances), positions, tuple(points), tuple(dict.fromkeys(metrics)),
-                       samples, seed, chunk, rpm, ranges, sampler, bootstrap, confidence)
+                       samples, seed, chunk, rpm, ranges, sampler, bootstrap, confidence, robust, limits)
+
+
+def _limits(mech, raw) -> tuple:
+    """`[study] limits`: OUTPUT = [low, high] (a scalar response's name, file units; either bound
+    may be omitted by giving ±inf as a string "-inf", "inf")."""
+    if raw is None:
+        return ()
+    if not isinstance(raw, Mapping):
+        raise _err(mech, f"'limits' must be a table OUTPUT = [low, high], got {raw!r}", "limits")
+    out = []
+    for name, entry in raw.items():
+        vals = []
+        if isinstance(entry, (list, tuple)) and len(entry) == 2:
+            for v in entry:
+                if isinstance(v, str) and v.strip() in ("inf", "+inf", "-inf"):
+                    vals.append(float(v))
+                elif isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v):
+                    vals.append(float(v))
+        if len(vals) != 2 or not vals[0] < vals[1] or not (math.isfinite(vals[0]) or math.isfinite(vals[1])):
+            raise _err(mech, f"a specification limit is [low, high] (file units, low < high; \"-inf\" or \"inf\" for "
+                             f"a one-sided limit), got {entry!r}", f"limits.{name}")
+        out.append((str(name), vals[0], vals[1]))
+    return tuple(out)
 
 
 def _ranges(mech, raw, levels_raw) -> tuple:

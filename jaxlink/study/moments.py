@@ -80,6 +80,17 @@ class Moments:
         self.high = np.maximum(self.high, high)
         self.hist += hist.astype(np.int64)
 
+    FIELDS = ("n", "mean", "m2", "m3", "m4", "low", "high", "hist")
+
+    def state(self) -> dict:
+        """Everything streamed so far (for a checkpoint; `restore` puts it back exactly)."""
+        return {k: getattr(self, k) for k in self.FIELDS}
+
+    def restore(self, state) -> None:
+        for k in self.FIELDS:
+            v = state[k]
+            setattr(self, k, int(v) if k == "n" else np.array(v))
+
     @property
     def variance(self):
         """Sample variance (n − 1 in the denominator); 0 below two samples."""

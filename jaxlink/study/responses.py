@@ -147,12 +147,13 @@ class Responses:
         q0, _ = closed_form_start(self.mech, self.dyads, self.q_file, self.phi0, p, sig, tol)
         return _feasibility.certify(self.mech, self.dyads, sig, q0, jnp.asarray(self.phis, p.dtype), p).certified
 
-    def params(self, x):
-        """The full parameter vector (SI) with the toleranced ones set to `x` (file units)."""
-        p = jnp.asarray(self.mech.parameters, x.dtype)
+    def params(self, x, base=None):
+        """The full parameter vector (SI) with the toleranced ones set to `x` (file units); the
+        others those of `base` (SI, default the file's)."""
+        p = jnp.asarray(self.mech.parameters if base is None else base, x.dtype)
         return p.at[jnp.asarray(self.index)].set(x * jnp.asarray(self.factor, x.dtype))
 
-    def single(self, x, check: str = "certify"):
+    def single(self, x, check: str = "certify", base=None):
         """(responses (M,) in file units, feasible, margin) of one design whose toleranced
         parameters are `x` (T,) (file units). Where infeasible, the responses are finite (the
         solver's last finite iterate, masked to 0 where not finite): counted, never used.
@@ -161,11 +162,12 @@ class Responses:
         `feasibility.certify`), or "screen" (its conservative estimate from the samples alone,
         `feasibility.screen`, cheaper: `margin` is then that estimate and `feasible` says only that
         every position converged — the caller certifies the designs whose estimate is below zero).
-        A mechanism not made of dyads has no margin (+inf)."""
+        A mechanism not made of dyads has no margin (+inf). `base`: the other parameters (SI,
+        default the file's; the robust-design map's designs)."""
         from ..optimize.start import closed_form_start, continuation_start
 
         mech = self.mech
-        p = self.params(x)
+        p = self.params(x, base)
         dtype = p.dtype
         tol = default_rtol(dtype) * mech.length_scale(jax.lax.stop_gradient(p))
         phis = jnp.asarray(self.phis, dtype)

@@ -34,6 +34,7 @@ from ..errors import MechanismError
 from .design import grid_shape, grid_values, to_values, unit_blocks
 from .inputs import StudyInputs
 from .responses import unit_names
+from .robust import RobustMap, robust_evaluator
 from .sobol import SobolAccumulator, SobolIndices, bootstrap_counts
 from .tolerance import Study
 
@@ -47,7 +48,8 @@ class SampleReport(NamedTuple):
       `deviation(P)`: max over the cycle of |P − P_nominal|); `responses` (n, S), 0 where infeasible;
       `nominal` (S,) the nominal's;
     - `grid_shape` (the levels per range for `grid`, else None); `certificate`; `warnings`;
-      `timings` (seconds).
+      `timings` (seconds);
+    - `robust` (`robust.RobustMap`, or None): the first-order tolerance report of every design.
     """
 
     inputs: StudyInputs
@@ -63,6 +65,7 @@ class SampleReport(NamedTuple):
     certificate: str
     warnings: list
     timings: dict
+    robust: RobustMap | None = None
 
 
 class SensitivityReport(NamedTuple):
@@ -163,12 +166,15 @@ def _units(mech, inputs) -> tuple:
 
 
 def sample(mech, inputs: StudyInputs | None = None, *, samples: int | None = None, grid: bool = False, chunk=None,
-           options=None, progress=None, study: Study | None = None) -> SampleReport:
+           options=None, progress=None, study: Study | None = None, checkpoint=None) -> SampleReport:
     """Evaluate `samples` designs drawn by the study's `sampler` over its ranges (or its
-    tolerances' distributions), or with `grid=True` the full factorial over the ranges.
+    tolerances' distributions), or with `grid=True` the full factorial over the ranges; with
+    `inputs.robust`, the first-order tolerance report at every design (`robust`).
 
     **Arguments:** as `tolerance` (`inputs`, `samples`, `chunk`, `options`, `progress` called with
-    the designs done after each batch, `study` a compiled `Study` whose parameters are the ranges').
+    the designs done after each batch, `study` a compiled `Study` whose parameters are the ranges'),
+    `checkpoint` (a `checkpoint.Checkpoint`: every batch's rows written as they come, a saved
+    study resumed).
 
     **Returns:** a `SampleReport` (see the module doc for what is done with infeasible designs).
     """
@@ -176,6 +182,7 @@ def sample(mech, inputs: StudyInputs | None = None, *, samples: int | None = Non
     study = _study(mech, inputs, study, chunk, options)
     inputs = study.inputs
     ev = _Evaluator(study)
+    rob = robust_evaluator(study) if inputs.robust else None
     T = len(inputs.parameters)
     if grid:
         if not inputs.ranges:
@@ -188,13 +195,29 @@ def sample(mech, inputs: StudyInputs | None = None, *, samples: int | None = Non
         n = inputs.samples if samples is None else int(samples)
         blocks = (to_values(inputs, study.x0, u)
                   for u in unit_blocks(inputs.sampler, T, n, inputs.seed, study.chunk))
-    xs, oks, vs = [], [], []
+    done = 0
+    saved = None if checkpoint is None else checkpoint.load()
+    if saved is not None:
+        done, state = saved
+        ev.nominal = state["nominal"]
+    xs, oks, vs, rs = [], [], [], []
     scalar = np.asarray([k is None for (_, _, k) in ev.labels], bool)
-    for x in blocks:
-        v, ok = ev(x)
+    for c, x in enumerate(blocks):
+        if c < done:
+            assert checkpoint is not None
+            z = checkpoint.load_chunk(c)
+            x, ok, v, rv = z["x"], z["feasible"], z["responses"], z["robust"]
+        else:
+            v, ok = ev(x)
+            v = v[:, scalar]
+            rv = rob(x, ok) if rob is not None else np.zeros((len(x), 0))
+            if checkpoint is not None:
+                checkpoint.save_chunk(c, x=x, feasible=ok, responses=v, robust=rv)
+                checkpoint.save(c + 1, {"nominal": ev.nominal})
         xs.append(x)
         oks.append(ok)
-        vs.append(v[:, scalar])
+        vs.append(v)
+        rs.append(rv)
         if progress is not None:
             progress(len(x))
     if ev.nominal is None:  # no design: the nominal alone
@@ -211,17 +234,24 @@ def sample(mech, inputs: StudyInputs | None = None, *, samples: int | None = Non
                         "(feasible = 0), their responses left empty")
     labels = tuple((name, unit) for (name, unit, k) in ev.labels if k is None)
     timings = {"evaluate": ev.seconds, "total": time.perf_counter() - t0}
+    robust = None
+    if rob is not None:
+        timings["robust"] = rob.seconds
+        robust = RobustMap(rob.labels, np.concatenate(rs) if rs else np.zeros((0, len(rob.labels))),
+                           tuple(p for t in inputs.tolerances for p in t.parameters), rob.limits)
     return SampleReport(inputs, inputs.parameters, _units(mech, inputs), np.asarray(study.x0), values, feasible,
-                        labels, responses, ev.nominal[scalar], shape, study.responses.certificate, warnings, timings)
+                        labels, responses, ev.nominal[scalar], shape, study.responses.certificate, warnings, timings,
+                        robust)
 
 
 def sensitivity(mech, inputs: StudyInputs | None = None, *, samples: int | None = None, chunk=None, options=None,
-                progress=None, study: Study | None = None) -> SensitivityReport:
+                progress=None, study: Study | None = None, checkpoint=None) -> SensitivityReport:
     """Sobol' S1 and ST of every response (and of the feasibility) with bootstrap intervals,
     from N = `samples` base samples of the study's `sampler` (2d columns: A and B) over its ranges
     (or its tolerances' distributions; a circular zone is one factor of two parameters).
 
-    **Arguments:** as `sample`. **Returns:** a `SensitivityReport` (see the module doc; the
+    **Arguments:** as `sample` (`checkpoint`: the estimators' sums saved after every batch, a
+    saved study resumed). **Returns:** a `SensitivityReport` (see the module doc; the
     estimators in `jaxlink.study.sobol`).
     """
     t0 = time.perf_counter()
@@ -247,7 +277,20 @@ def sensitivity(mech, inputs: StudyInputs | None = None, *, samples: int | None 
     drawn = ok_draws = complete = 0
     t_est = 0.0
     start = 0
-    for u in unit_blocks(inputs.sampler, 2 * T, N, inputs.seed, per):
+    done = 0
+    saved = None if checkpoint is None else checkpoint.load()
+    if saved is not None:
+        done, state = saved
+        ev.nominal = state["nominal"]
+        resp = SobolAccumulator(len(ev.labels), D, counts)
+        resp.restore(state["responses"])
+        feas.restore(state["feasibility"])
+        drawn, ok_draws, complete, start = state["drawn"], state["ok_draws"], state["complete"], state["start"]
+        if progress is not None:
+            progress(start * (D + 2))
+    for ci, u in enumerate(unit_blocks(inputs.sampler, 2 * T, N, inputs.seed, per)):
+        if ci < done:
+            continue
         n = len(u)
         a = to_values(inputs, study.x0, u[:, :T])
         b = to_values(inputs, study.x0, u[:, T:])
@@ -269,6 +312,9 @@ def sensitivity(mech, inputs: StudyInputs | None = None, *, samples: int | None 
         complete += int(w.sum())
         start += n
         t_est += time.perf_counter() - t1
+        if checkpoint is not None:
+            checkpoint.save(ci + 1, {"nominal": ev.nominal, "responses": resp.state(), "feasibility": feas.state(),
+                                    "drawn": drawn, "ok_draws": ok_draws, "complete": complete, "start": start})
         if progress is not None:
             progress(n * (D + 2))
     assert resp is not None and ev.nominal is not None

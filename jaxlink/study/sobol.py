@@ -87,6 +87,16 @@ class SobolAccumulator:
         self.sum_b = np.zeros(self.m)
         self.used = 0
 
+    FIELDS = ("sums", "n", "sum_a", "sum_b", "used", "shift")
+
+    def state(self) -> dict:
+        """The sums so far (for a checkpoint; `restore` puts them back exactly)."""
+        return {k: getattr(self, k) for k in self.FIELDS}
+
+    def restore(self, state) -> None:
+        for k in self.FIELDS:
+            setattr(self, k, int(state[k]) if k == "used" else np.array(state[k]))
+
     def update(self, start: int, ya, yb, yab, weight=None) -> None:
         """Add base samples `start` … `start + n − 1`: `ya`, `yb` (n, M), `yab` (D, n, M), `weight`
         (n,) of 0 and 1 (default 1)."""

@@ -179,6 +179,7 @@ class Study:
         if r.dyads is not None:
             self._margin = jax.jit(jax.value_and_grad(self._margin_of))
         self._nominal: tuple | None = None
+        self._robust_cache: dict = {}  # the robust-design map's compiled evaluators, shared with `moved` copies
 
     def moved(self, x0=None, inputs: StudyInputs | None = None) -> "Study":
         """The same study around another design `x0` (T,) (the toleranced parameters, file units)
@@ -251,9 +252,10 @@ class Study:
             ok[rows] = np.asarray(self._certify(jnp.asarray(xs)))[:len(rows)]
         return ok
 
-    def monte_carlo(self, n: int, first: FirstOrder, *, progress=None) -> MonteCarlo:
+    def monte_carlo(self, n: int, first: FirstOrder, *, progress=None, checkpoint=None) -> MonteCarlo:
         """`n` Monte Carlo samples (see the module doc); `progress(k)` is called after each batch
-        with the samples done in it."""
+        with the samples done in it. `checkpoint` (a `checkpoint.Checkpoint`): the streamed state
+        is saved after every batch, and a saved state resumed (the batches done skipped)."""
         r = self.responses
         nominal = self.nominal()[0]
         n_curve = r.n_curve
@@ -267,7 +269,18 @@ class Study:
         feasible = infeasible = 0
         blocks = -(-n // BLOCK)
         per = self.chunk // BLOCK
-        for b0 in range(0, blocks, per):
+        done = 0
+        saved = None if checkpoint is None else checkpoint.load()
+        if saved is not None:
+            done, state = saved
+            mom.restore(state["moments"])
+            dev_max, dev_sum = state["deviation_max"], state["deviation_sum"]
+            feasible, infeasible = state["feasible"], state["infeasible"]
+            if progress is not None:
+                progress(min(n, done * self.chunk))
+        for c, b0 in enumerate(range(0, blocks, per)):
+            if c < done:
+                continue
             bs = range(b0, min(blocks, b0 + per))
             dx = np.concatenate([draw(self.inputs, b) for b in bs])  # as `draws`
             take = min(n - b0 * BLOCK, len(dx))
@@ -288,6 +301,9 @@ class Study:
                 dist = np.asarray(_path_deviation(d[:, :n_curve], jnp.asarray(w), K, N))
                 dev_max = np.maximum(dev_max, dist.max(axis=0))
                 dev_sum += dist.sum(axis=0)
+            if checkpoint is not None:
+                checkpoint.save(c + 1, {"moments": mom.state(), "deviation_max": dev_max, "deviation_sum": dev_sum,
+                                        "feasible": feasible, "infeasible": infeasible})
             if progress is not None:
                 progress(take)
         M = len(nominal)
@@ -375,7 +391,7 @@ def _bonferroni(m: int) -> float:
 
 def tolerance(mech, inputs: StudyInputs | None = None, *, samples: int | None = None, chunk=None,
               options: NewtonOptions = NewtonOptions(), progress=None, study: Study | None = None,
-              worst: bool = True) -> ToleranceReport:
+              worst: bool = True, checkpoint=None) -> ToleranceReport:
     """The tolerance analysis of `mech` around its design (see the module doc).
 
     **Arguments:**
@@ -384,7 +400,8 @@ def tolerance(mech, inputs: StudyInputs | None = None, *, samples: int | None = 
     - `samples` (keyword-only): Monte Carlo samples (default the inputs'; 0: first order only);
     - `chunk`: designs per compiled batch; `options`: `NewtonOptions`; `progress`: called with
       the samples done after each Monte Carlo batch; `study`: a `Study` already compiled (warm);
-    - `worst`: search the true worst case over the tolerance box (`worstcase.worst_case`).
+    - `worst`: search the true worst case over the tolerance box (`worstcase.worst_case`);
+    - `checkpoint`: a `checkpoint.Checkpoint` of the Monte Carlo (saved batch by batch, resumed).
 
     **Returns:** a `ToleranceReport`. Raises `MechanismError` when the nominal design does not
     assemble over its whole cycle.
@@ -419,7 +436,7 @@ def tolerance(mech, inputs: StudyInputs | None = None, *, samples: int | None = 
     mc = None
     if n_mc > 0:
         t2 = time.perf_counter()
-        mc = study.monte_carlo(n_mc, first, progress=progress)
+        mc = study.monte_carlo(n_mc, first, progress=progress, checkpoint=checkpoint)
         timings["monte_carlo"] = time.perf_counter() - t2
         if mc.infeasible:
             warnings.append(
