@@ -102,7 +102,7 @@ def _two_ranges(rep: SampleReport) -> bool:
 
 def draw_sample_plots(d: pathlib.Path, mech, rep: SampleReport) -> list:
     """grid.png (a grid over two ranges) and robust.png (with the robust-design map) into `d`;
-    their paths. `mech` needs only its names (`replot.MechanismNames`)."""
+    their paths. `mech` needs only its names (`study_files.MechanismNames`)."""
     files = []
     if _two_ranges(rep) and rep.labels:
         files.append(d / "grid.png")
@@ -129,7 +129,7 @@ def draw_sensitivity_plots(d: pathlib.Path, mech, rep: SensitivityReport) -> lis
 
 
 def _finish(d: pathlib.Path, mech, rep, data: dict, files: list, sizes: dict, extra: dict | None) -> list:
-    from .replot import write_archive
+    from .study_files import write_archive
 
     data["sizes"] = sizes
     data.update(extra or {})

@@ -265,7 +265,7 @@ def plot_band(path, mech, rep: ToleranceReport, *, k: float = 3.0, ellipses: int
 
 def draw_plots(d: pathlib.Path, mech, rep: ToleranceReport) -> list:
     """The study's plots into folder `d` (tolerance.png where there are points); their paths.
-    `mech` needs only its names (`replot.MechanismNames`)."""
+    `mech` needs only its names (`study_files.MechanismNames`)."""
     files = []
     if rep.inputs.points:
         files.append(d / "tolerance.png")
@@ -278,7 +278,7 @@ def write_all(out_dir, mech, rep: ToleranceReport, *, wall_time: float, plot: bo
     """Write tolerance.csv, importance.csv, tolerance.png (when there are points), study.npz and
     study.json into `out_dir` (created); returns the paths written. `extra`: more manifest keys
     (the command line's options, the chunk)."""
-    from .replot import write_archive
+    from .study_files import write_archive
 
     d = pathlib.Path(out_dir)
     d.mkdir(parents=True, exist_ok=True)
