@@ -29,6 +29,7 @@ have a certificate.
 
 from __future__ import annotations
 
+import functools
 from typing import NamedTuple
 
 import jax
@@ -85,6 +86,41 @@ def _parabola_min(ma, mb, mc, lo, hi):
     return jnp.take_along_axis(vals, i[None], 0)[0], jnp.take_along_axis(cands, i[None], 0)[0]
 
 
+def _parabola_low(ma, mb, mc, lo, hi):
+    """`_parabola_min`'s value alone, as the least of its three candidates' values (`jnp.minimum`,
+    no argmin and gather: the same number, several times cheaper in a batch)."""
+    a = 0.5 * (ma + mc) - mb
+    b = 0.5 * (mc - ma)
+    convex = a > 0
+    t_star = jnp.clip(-b / jnp.where(convex, 2.0 * a, 1.0), lo, hi)
+
+    def val(t):
+        return a * t * t + b * t + mb
+
+    lo_, hi_ = jnp.broadcast_to(lo, a.shape), jnp.broadcast_to(hi, a.shape)
+    return jnp.minimum(jnp.minimum(val(lo_), val(hi_)), val(jnp.where(convex, t_star, lo_)))
+
+
+def interval_lower(m):
+    """`interval_minima(m)[2]` (the conservative estimate, (N,)) alone, computed without the
+    estimate's location: the same numbers (the least of the same candidates), the screen's form."""
+    prev, nxt, nxt2, nxt3 = jnp.roll(m, 1, 0), jnp.roll(m, -1, 0), jnp.roll(m, -2, 0), jnp.roll(m, -3, 0)
+    v1 = _parabola_low(prev, m, nxt, 0.0, 1.0)
+    v2 = _parabola_low(m, nxt, nxt2, -1.0, 0.0)
+    d4 = jnp.abs(prev - 4.0 * m + 6.0 * nxt - 4.0 * nxt2 + nxt3)
+    low = jnp.minimum(v1, v2) - jnp.abs(v1 - v2) - d4 / 16.0
+    return functools.reduce(jnp.minimum, [low[:, j] for j in range(low.shape[1])])  # over the dyads
+
+
+def least(v):
+    """The least element of the 1-D array `v` (as `jnp.min`; NaN where one is NaN), written
+    `v[argmin v]`: XLA's CPU backend (jaxlib 0.10) fuses a plain min-reduction with the whole
+    elementwise computation that produces its operand into one library kernel, which ran the
+    batched screen 10× slower than computing the screen itself (0.35 s against 0.03 s for 4096
+    designs × 360 positions); the arg-reduction is not fused that way."""
+    return v[jnp.argmin(v)]
+
+
 def interval_minima(m):
     """Estimated minimum of the margin on every interval between samples, from the samples.
 
@@ -116,7 +152,7 @@ def screen(mech, dyads, sigma, q_ref, phis, p):
     spaced inputs `phis` of a revolution (`interval_minima`'s `lower` of `margins_at`): < 0
     where a dyad opens, or is about to open, an unassemblable window between two checked
     inputs. Cheap: N closed-form solves."""
-    return interval_minima(margins_at(mech, dyads, sigma, q_ref, phis, p))[2]
+    return interval_lower(margins_at(mech, dyads, sigma, q_ref, phis, p))
 
 
 def certify(mech, dyads, sigma, q_ref, phis, p, *, refine: int = 8, steps: int = 40) -> Certificate:

@@ -187,7 +187,7 @@ class Responses:
                 feasible = feasible & cert.certified
                 margin = cert.margin
             else:
-                margin = jnp.min(_feasibility.screen(mech, self.dyads, sig, q0, phis, ps))
+                margin = _feasibility.least(_feasibility.screen(mech, self.dyads, sig, q0, phis, ps))
         parts = []
         assert sol.points is not None
         pts = sol.points[:, jnp.asarray(self.point_index, int)]  # (N, K, 2)

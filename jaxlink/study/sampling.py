@@ -133,8 +133,8 @@ class _Evaluator:
             ok = s._certified(xp[:k], np.asarray(ok)[:k], np.asarray(est)[:k])
             vals.append(np.asarray(v)[:k])
             oks.append(ok)
-        v = np.concatenate(vals)
-        ok = np.concatenate(oks)
+        v = np.concatenate(vals) if len(vals) > 1 else vals[0]  # one batch: no copy
+        ok = np.concatenate(oks) if len(oks) > 1 else oks[0]
         if first:
             if not ok[0]:
                 raise MechanismError("the file's design does not assemble over its whole cycle: a study needs an "
@@ -145,7 +145,8 @@ class _Evaluator:
             assert self.nominal is not None
             d = (v[:, :self.n_curve] - self.nominal[:self.n_curve]).reshape(-1, self.K, 2, self.N)
             v = np.concatenate([v, np.hypot(d[:, :, 0], d[:, :, 1]).max(axis=2)], axis=1)
-        v = np.where(ok[:, None], v, 0.0)
+        if not ok.all():
+            v = np.where(ok[:, None], v, 0.0)
         self.seconds += time.perf_counter() - t0
         return v, ok
 

@@ -86,6 +86,7 @@ class SobolAccumulator:
         self.sum_a = np.zeros(self.m)  # unweighted by the bootstrap: the mean m of every evaluation
         self.sum_b = np.zeros(self.m)
         self.used = 0
+        self._buffer: np.ndarray | None = None
 
     FIELDS = ("sums", "n", "sum_a", "sum_b", "used", "shift")
 
@@ -105,13 +106,23 @@ class SobolAccumulator:
             return
         w = np.ones(n) if weight is None else np.asarray(weight, float)
         s = self.shift
+        M, D = self.m, self.d
         ya = np.asarray(ya, float) - s
         yb = np.asarray(yb, float) - s
-        diff = np.asarray(yab, float) - s - ya  # (D, n, M): y_AB − y_A
-        def flat(z):  # (D, n, M) → (n, D M)
-            return z.transpose(1, 0, 2).reshape(n, -1)
-
-        terms = np.concatenate([ya + yb, ya * ya + yb * yb, flat(yb * diff), flat(diff), flat(diff * diff)], axis=1)
+        # the per-sample terms, written in place: (n, 3D + 2, M) = [y_A + y_B, y_A² + y_B²,
+        # y_B (y_AB_j − y_A) for each j, y_AB_j − y_A, (y_AB_j − y_A)²], flattened (n, M (3D + 2))
+        if self._buffer is None or self._buffer.shape[0] != n:  # kept: a fresh 10–100 MB array costs its page faults
+            self._buffer = np.empty((n, 2 + 3 * D, M))
+        t3 = self._buffer
+        np.add(ya, yb, out=t3[:, 0])
+        np.multiply(ya, ya, out=t3[:, 1])
+        t3[:, 1] += yb * yb
+        diff = t3[:, 2 + D:2 + 2 * D]
+        np.subtract(np.asarray(yab, float).transpose(1, 0, 2), s, out=diff)
+        diff -= ya[:, None]
+        np.multiply(yb[:, None], diff, out=t3[:, 2:2 + D])
+        np.multiply(diff, diff, out=t3[:, 2 + 2 * D:])
+        terms = t3.reshape(n, -1)
         c = np.empty((self.r + 1, n))
         c[0] = w
         c[1:] = self.counts[:, start:start + n] * w
