@@ -128,6 +128,23 @@ def test_the_certificate_finds_the_window_that_72_samples_miss():
     assert bool(np.all(solve(full, DENSE).converged))
 
 
+def test_the_screen_s_fast_form_gives_the_same_estimates():
+    """`interval_lower` (the screen: minima of the candidates, no argmin/gather) equals the third
+    output of `interval_minima` exactly, on margins with negative stretches, flat (non-convex)
+    runs and several dyads; `least` is `jnp.min` (NaN included)."""
+    rng = np.random.default_rng(3)
+    phi = np.linspace(0, 2 * np.pi, 72, endpoint=False)
+    cases = jnp.asarray(np.stack([rng.standard_normal((72, 3)),
+                                  np.stack([np.cos(phi) - 0.97, 0.5 + 0 * phi, np.sin(3 * phi) ** 2], 1),
+                                  np.round(rng.standard_normal((72, 3)), 1)]))
+    ref = jax.jit(jax.vmap(lambda m: feasibility.interval_minima(m)[2]))(cases)
+    np.testing.assert_array_equal(np.asarray(jax.jit(jax.vmap(feasibility.interval_lower))(cases)), np.asarray(ref))
+    assert np.asarray(ref).min() < 0
+    v = jnp.asarray([1.0, -2.0, 0.5, np.nan])
+    least = jax.jit(feasibility.least)
+    assert float(least(v[:3])) == -2.0 and np.isnan(float(least(v)))
+
+
 def test_a_search_returns_a_design_that_assembles_at_36000_positions(gap_file):
     ev = Evaluator(problem_from(load(gap_file)), chunk=64)
     res = run(ev, "gradient", seed=0, starts=4, presample=64, iterations=30)

@@ -150,6 +150,61 @@ def test_infeasible_samples_are_counted_near_a_toggle(setup):
 
 
 
+def test_monte_carlo_capability_against_limits(setup, tmp_path):
+    """Percent out of spec, Cp and Cpk of the stroke against limits: normal tolerances make the
+    (nearly linear) stroke normal with σ ≈ σ_RSS, so limits at nominal ± σ_RSS leave 2Φ(−1) =
+    31.7 % out (within 4 binomial standard errors); the count equals that of the draws' own
+    closed-form strokes, s = √((a + b)² − (e − y)²) − √((b − a)² − (e − y)²), taken as deviations
+    from the nominal (except samples within 2e-5 mm of a limit: the 72 samples' refined extremes);
+    Cp = (U − L) / 6s and Cpk = min(U − μ, μ − L) / 3s of the samples' mean and σ; a one-sided
+    limit has no Cp; an unknown response is an error."""
+    import csv
+    from math import erf
+
+    from jaxlink.errors import MechanismError
+    from jaxlink.report.tolerance import write_tolerance_csv
+
+    mech, inputs, study = setup
+    tol = {"crank": 0.01, "rod": 0.01, "O1": {"radius": 0.01}}
+    normal = st.read_study(mech, tolerances=tol, distribution="normal")
+    first = st.tolerance(mech, study=study.moved(inputs=normal), samples=0, worst=False)
+    k = _rows(first, "stroke(s_B)")[0]
+    nom, sig = first.nominal[k], first.first_order.sigma_rss[k]
+    limited = st.read_study(mech, tolerances=tol, distribution="normal", limits={"stroke(s_B)": [nom - sig, nom + sig]})
+    rep = st.tolerance(mech, study=study.moved(inputs=limited), worst=False)
+    mc = rep.monte_carlo
+    assert mc.feasible == 4096 and [lim[0] for lim in mc.limits] == ["stroke(s_B)"]
+    p = 1.0 - erf(1.0 / math.sqrt(2.0))  # 2 Φ(−1)
+    assert abs(mc.percent_out[0] / 100 - p) <= 4 * math.sqrt(p * (1 - p) / 4096)
+    dx = st.draws(limited, 4096)
+    b0 = math.hypot(101.64907257935190 - 21.650635094610966, 0.5)
+
+    def stroke(a, b, y):
+        return np.sqrt((a + b) ** 2 - (E - y) ** 2) - np.sqrt((b - a) ** 2 - (E - y) ** 2)
+
+    d = stroke(25.0 + dx[:, 0], b0 + dx[:, 1], dx[:, 3]) - stroke(25.0, b0, 0.0)
+    out = (d < -sig) | (d > sig)
+    near = (np.abs(np.abs(d) - sig) < 2e-5).sum()
+    assert abs(int(mc.out_of_spec[0]) - int(out.sum())) <= near < 40
+    s, mu = mc.std[k], nom + mc.mean_shift[k]
+    assert mc.cp[0] == pytest.approx(2 * sig / (6 * s), rel=1e-12)
+    assert mc.cpk[0] == pytest.approx(min(nom + sig - mu, mu - nom + sig) / (3 * s), rel=1e-12)
+    assert abs(mc.cp[0] - 1 / 3) <= 4 * mc.std_error[k] / s / 3  # s within its sampling error of σ_RSS
+    # tolerance.csv carries them on the stroke's row
+    write_tolerance_csv(tmp_path / "t.csv", mech, rep)
+    rows = {r["output"]: r for r in csv.DictReader(open(tmp_path / "t.csv", encoding="utf-8"))}
+    assert float(rows["stroke(s_B)"]["mc_cpk (1)"]) == pytest.approx(mc.cpk[0], rel=1e-9)
+    assert rows["deviation(B)"]["mc_cp (1)"] == ""
+    # a one-sided limit: no Cp, Cpk of its side; an unknown response
+    one = st.read_study(mech, tolerances=tol, distribution="normal", limits={"stroke(s_B)": ["-inf", nom]})
+    mc1 = st.tolerance(mech, study=study.moved(inputs=one), worst=False).monte_carlo
+    assert np.isnan(mc1.cp[0]) and mc1.cpk[0] == pytest.approx((nom - mu) / (3 * s), rel=1e-12)
+    assert abs(mc1.percent_out[0] / 100 - 0.5) <= 4 * math.sqrt(0.25 / 4096) + abs(mu - nom) / s
+    bad = st.read_study(mech, tolerances=tol, limits={"stroke(nope)": [0, 1]})
+    with pytest.raises(MechanismError, match="no scalar response"):
+        st.tolerance(mech, study=study.moved(inputs=bad), worst=False)
+
+
 def test_the_true_worst_case(setup, tmp_path):
     """The worst case over the box ≥ every Monte Carlo sample's deviation (uniform inputs: the
     samples lie in the box) and ≥ the linear worst case where that is reached at a corner; for the
@@ -255,6 +310,31 @@ def test_sobol_estimators_against_the_ishigami_closed_form():
     rs = st.sobol_indices(ya[w], yb[w], yab[:, w], resamples=0)
     np.testing.assert_allclose(rw.S1, rs.S1, rtol=1e-9, atol=1e-12)
     np.testing.assert_allclose(rw.ST, rs.ST, rtol=1e-9)
+
+
+def test_sobol_sums_written_in_place_equal_the_concatenated_terms():
+    """The accumulator's per-sample terms, written in place into a kept buffer, give the sums of
+    the terms built by concatenation (the form it replaced) bit for bit, batch after batch."""
+    rng = np.random.default_rng(7)
+    n, M, D, R = 50, 7, 3, 20
+    counts = st.sobol.bootstrap_counts(2 * n, R, 4)
+    shift = rng.standard_normal(M)
+    acc = st.sobol.SobolAccumulator(M, D, counts, shift=shift)
+    sums = np.zeros((R + 1, M * (2 + 3 * D)))
+    for start in (0, n):
+        ya, yb, yab = rng.standard_normal((n, M)), rng.standard_normal((n, M)), rng.standard_normal((D, n, M))
+        w = (rng.random(n) > 0.2).astype(float)
+        acc.update(start, ya, yb, yab, w)
+        a, b = ya - shift, yb - shift
+        diff = yab - shift - a
+
+        def flat(z):
+            return z.transpose(1, 0, 2).reshape(n, -1)
+
+        terms = np.concatenate([a + b, a * a + b * b, flat(b * diff), flat(diff), flat(diff * diff)], axis=1)
+        c = np.vstack([w, counts[:, start:start + n] * w])
+        sums += c @ terms
+    np.testing.assert_array_equal(acc.sums, sums)
 
 
 def _closed_form(x, theta):

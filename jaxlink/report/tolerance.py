@@ -8,7 +8,10 @@ angle unit for a rocker's swing, …), `input (<input unit>)` (empty for a scala
 `nominal (unit)`, `sigma_rss (unit)`, `worst_case_linear (unit)` and with Monte Carlo
 `mc_mean_shift (unit)`, `mc_std (unit)`, `mc_std_error (unit)`, `mc_p0.135 (unit)`,
 `mc_p99.865 (unit)` (deviations from the nominal), `mc_max_abs_deviation (unit)`, `agree` (1, or 0
-where first order and Monte Carlo disagree beyond the sampling error), and with the worst case
+where first order and Monte Carlo disagree beyond the sampling error), with `[study] limits` and
+Monte Carlo `spec_low (unit)`, `spec_high (unit)`, `mc_percent_out_of_spec (%)` (of the feasible
+samples), `mc_cp (1)` (empty for a one-sided limit) and `mc_cpk (1)` on the limited responses'
+rows (empty on the others), and with the worst case
 `worst_case (unit)` (the largest deviation over the tolerance box, computed exactly) and
 `worst_case_status` ("enumerated" | "found"). The rows `deviation(P.x)`, `deviation(P.y)` (the
 largest |change| of the coordinate over the cycle) and `deviation(P)` (the largest distance of P's
@@ -48,11 +51,25 @@ def write_tolerance_csv(path, mech, rep: ToleranceReport) -> None:
         head += ["mc_mean_shift (unit)", "mc_std (unit)", "mc_std_error (unit)",
                  f"mc_p{100 * QUANTILES[0]:g} (unit)", f"mc_p{100 * QUANTILES[1]:g} (unit)",
                  "mc_max_abs_deviation (unit)", "agree"]
+    spec = {} if mc is None else {i: q for q, (*_, i) in enumerate(mc.limits)}
+    if spec:
+        head += ["spec_low (unit)", "spec_high (unit)", "mc_percent_out_of_spec (%)", "mc_cp (1)", "mc_cpk (1)"]
     wc = rep.worst
     if wc is not None:
         head += ["worst_case (unit)", "worst_case_status"]
     worst = {} if wc is None else {n: (wc.value[q], wc.status[q]) for q, n in enumerate(wc.names)}
     N = rep.inputs.positions
+
+    def cap(i):
+        if not spec:
+            return []
+        if i not in spec:
+            return [""] * 5
+        assert mc is not None
+        q = spec[i]
+        _, lo, hi, _ = mc.limits[q]
+        return [_g(lo) if math.isfinite(lo) else "", _g(hi) if math.isfinite(hi) else "", _g(mc.percent_out[q]),
+                _g(mc.cp[q]) if math.isfinite(mc.cp[q]) else "", _g(mc.cpk[q])]
 
     def tail(name):
         return [] if wc is None else (["", ""] if name not in worst else [_g(worst[name][0]), worst[name][1]])
@@ -66,17 +83,18 @@ def write_tolerance_csv(path, mech, rep: ToleranceReport) -> None:
             if mc is not None:
                 row += [_g(mc.mean_shift[i]), _g(mc.std[i]), _g(mc.std_error[i]), _g(mc.low[i]), _g(mc.high[i]),
                         _g(mc.max_abs[i]), str(int(mc.agree[i]))]
+            row += cap(i)
             w.writerow(row + tail(name) if k is None else row + tail(None))
         lu = unit_names(mech)[0]
         for j, p in enumerate(rep.inputs.points):
             for c, a in (("x", 2 * N * j), ("y", 2 * N * j + N)):
                 row = [f"deviation({p}.{c})", lu, "", "0", "", _g(f.worst_case[a:a + N].max())]
                 if mc is not None:
-                    row += ["", "", "", "", "", _g(mc.max_abs[a:a + N].max()), ""]
+                    row += ["", "", "", "", "", _g(mc.max_abs[a:a + N].max()), ""] + cap(-1)
                 w.writerow(row + tail(f"deviation({p}.{c})"))
             row = [f"deviation({p})", lu, "", "0", "", _g(rep.deviation_bound[j])]
             if mc is not None:
-                row += [_g(mc.deviation_mean[j]), "", "", "", "", _g(mc.deviation_max[j]), ""]
+                row += [_g(mc.deviation_mean[j]), "", "", "", "", _g(mc.deviation_max[j]), ""] + cap(-1)
             w.writerow(row + tail(f"deviation({p})"))
 
 
@@ -123,7 +141,8 @@ def manifest(mech, rep: ToleranceReport, *, wall_time: float, files: list) -> di
                                else None),
         "monte_carlo": None if mc is None else {"samples": mc.samples, "feasible": mc.feasible,
                                                 "infeasible": mc.infeasible,
-                                                "disagree": int(np.count_nonzero(~mc.agree))},
+                                                "disagree": int(np.count_nonzero(~mc.agree)),
+                                                "capability": capability_json(mc)},
         "worst_case": worst_case_json(rep),
         "warnings": list(rep.warnings),
         "timings_s": {k: round(v, 4) for k, v in rep.timings.items()},
@@ -136,6 +155,17 @@ def manifest(mech, rep: ToleranceReport, *, wall_time: float, files: list) -> di
 def _mc_objectives(rep: ToleranceReport):
     n_curve = sum(1 for lab in rep.labels if lab[2] is not None)
     return monte_carlo_objectives(rep.monte_carlo, len(rep.inputs.points), rep.inputs.positions, n_curve)
+
+
+def capability_json(mc) -> list:
+    """The manifest's `monte_carlo.capability`: per limited response its limits (None: open side),
+    the feasible samples out of spec (count and percent), Cp (None for a one-sided limit), Cpk."""
+    def num(v):
+        return float(v) if math.isfinite(v) else None
+
+    return [{"output": name, "low": num(lo), "high": num(hi), "out_of_spec": int(mc.out_of_spec[q]),
+             "percent_out_of_spec": float(mc.percent_out[q]), "cp": num(mc.cp[q]), "cpk": num(mc.cpk[q])}
+            for q, (name, lo, hi, _i) in enumerate(mc.limits)]
 
 
 def worst_case_json(rep: ToleranceReport):
@@ -193,6 +223,10 @@ def summary(mech, rep: ToleranceReport) -> str:
     if mc is not None:
         lines.append(f"Monte Carlo: {mc.samples} samples, {mc.feasible} feasible, {mc.infeasible} infeasible "
                      f"(feasibility: {rep.certificate})")
+        for q, (name, lo, hi, _i) in enumerate(mc.limits):
+            cp = f"Cp {mc.cp[q]:.3g}, " if math.isfinite(mc.cp[q]) else ""
+            lines.append(f"  {name} in [{lo:g}, {hi:g}]: {mc.percent_out[q]:.3g} % of the feasible samples out of "
+                         f"spec, {cp}Cpk {mc.cpk[q]:.3g}")
     return "\n".join(lines)
 
 

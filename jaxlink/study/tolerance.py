@@ -73,7 +73,13 @@ class MonteCarlo(NamedTuple):
     `low`, `high` (the `QUANTILES`), `max_abs` (the largest |deviation|) — (M,) each, zeros when no
     sample is feasible; `deviation_max` (K,) the largest path deviation max_φ |P − P_nominal| of each
     point over the samples, `deviation_mean` (K,) its mean; `agree` (M,) False where first order
-    and Monte Carlo disagree beyond the sampling error."""
+    and Monte Carlo disagree beyond the sampling error.
+
+    Against the specification limits of `[study] limits` (scalar responses; see `capability`):
+    `limits` ((output, low, high, response index) per limited response), `out_of_spec` (L,) the
+    feasible samples outside [low, high] (counted exactly, sample by sample), `percent_out` (L,)
+    100 × that / `feasible`, `cp` (L,) (U − L) / (6 s) (NaN for a one-sided limit), `cpk` (L,)
+    min(U − μ, μ − L) / (3 s) — μ the samples' mean (nominal + `mean_shift`), s their `std`."""
 
     samples: int
     feasible: int
@@ -88,6 +94,11 @@ class MonteCarlo(NamedTuple):
     deviation_max: np.ndarray
     deviation_mean: np.ndarray
     agree: np.ndarray
+    limits: tuple = ()
+    out_of_spec: np.ndarray = np.zeros(0, np.int64)
+    percent_out: np.ndarray = np.zeros(0)
+    cp: np.ndarray = np.zeros(0)
+    cpk: np.ndarray = np.zeros(0)
 
 
 class ToleranceReport(NamedTuple):
@@ -290,6 +301,11 @@ class Study:
         mom = Moments(width)
         dev_max = np.zeros(K)
         dev_sum = np.zeros(K)
+        limits = limited_responses(self.mech, self.inputs, r.labels)
+        spec_rows = jnp.asarray([i for (_, _, _, i) in limits], int)
+        spec_low = np.asarray([lo for (_, lo, _, _) in limits])
+        spec_high = np.asarray([hi for (_, _, hi, _) in limits])
+        out_of_spec = np.zeros(len(limits), np.int64)
         feasible = infeasible = 0
         blocks = -(-n // BLOCK)
         per = self.chunk // BLOCK
@@ -300,6 +316,7 @@ class Study:
             mom.restore(state["moments"])
             dev_max, dev_sum = state["deviation_max"], state["deviation_sum"]
             feasible, infeasible = state["feasible"], state["infeasible"]
+            out_of_spec = np.asarray(state.get("out_of_spec", out_of_spec), np.int64)
             if progress is not None:
                 progress(min(n, done * self.chunk))
         for c, b0 in enumerate(range(0, blocks, per)):
@@ -325,15 +342,19 @@ class Study:
                 dist = np.asarray(_path_deviation(d[:, :n_curve], jnp.asarray(w), K, N))
                 dev_max = np.maximum(dev_max, dist.max(axis=0))
                 dev_sum += dist.sum(axis=0)
+            if limits and ok.any():
+                vs = np.asarray(v[:, spec_rows])[:take]
+                out_of_spec += (((vs < spec_low) | (vs > spec_high)) & ok[:, None]).sum(axis=0)
             if checkpoint is not None:
                 checkpoint.save(c + 1, {"moments": mom.state(), "deviation_max": dev_max, "deviation_sum": dev_sum,
-                                        "feasible": feasible, "infeasible": infeasible})
+                                        "feasible": feasible, "infeasible": infeasible, "out_of_spec": out_of_spec})
             if progress is not None:
                 progress(take)
         M = len(nominal)
+        cap = capability(limits, nominal, mom.mean, mom.std, out_of_spec, mom.n)
         if mom.n == 0:
             z = np.zeros(M)
-            return MonteCarlo(n, 0, infeasible, z, z, z, z, z, z, z, dev_max, dev_sum, np.ones(M, bool))
+            return MonteCarlo(n, 0, infeasible, z, z, z, z, z, z, z, dev_max, dev_sum, np.ones(M, bool), *cap)
         std, se, me = mom.std, mom.std_error, mom.mean_error
         zcrit = _bonferroni(M)
         floor = 1e-9 * (np.abs(nominal) + first.sigma_rss) + 1e-300  # rounding of the solve
@@ -343,7 +364,39 @@ class Study:
                      & (np.abs(mom.mean) <= zcrit * me + floor))
         return MonteCarlo(n, feasible, infeasible, mom.mean, std, se, me, mom.quantile(QUANTILES[0]),
                           mom.quantile(QUANTILES[1]), np.maximum(np.abs(mom.low), np.abs(mom.high)),
-                          dev_max, dev_sum / max(feasible, 1), agree)
+                          dev_max, dev_sum / max(feasible, 1), agree, *cap)
+
+
+def limited_responses(mech, inputs: StudyInputs, labels) -> tuple:
+    """((output, low, high, response index), …) of `[study] limits`, each a scalar response of
+    `labels` (a metric: stroke(…), swing(…), max_speed(…), …); raises `MechanismError` naming the
+    scalar responses where a limit names none of them."""
+    from ..errors import MechanismError
+
+    scalar = {name: i for i, (name, _u, k) in enumerate(labels) if k is None}
+    unknown = [name for name, _lo, _hi in inputs.limits if name not in scalar]
+    if unknown:
+        raise MechanismError(f"limits: no scalar response {', '.join(map(repr, unknown))}; the scalar responses: "
+                             f"{', '.join(scalar) or '(none)'}", file=mech.file, key="study.limits")
+    return tuple((name, lo, hi, scalar[name]) for name, lo, hi in inputs.limits)
+
+
+def capability(limits, nominal, mean_shift, std, out_of_spec, feasible: int) -> tuple:
+    """(limits, out_of_spec, percent_out, Cp, Cpk) of the limited responses from the streamed
+    statistics (`MonteCarlo`'s fields; the formulas in its doc and docs/methods/tolerance.md):
+    Cp = (U − L) / (6 s), NaN for a one-sided limit; Cpk = min(U − μ, μ − L) / (3 s) (±inf where
+    s = 0, as the robust map's `robust.process_capability`)."""
+    rows = np.asarray([i for (*_, i) in limits], int)
+    low = np.asarray([lo for (_, lo, _, _) in limits])
+    high = np.asarray([hi for (_, _, hi, _) in limits])
+    mu = np.asarray(nominal)[rows] + np.asarray(mean_shift)[rows]
+    s = np.asarray(std)[rows]
+    gap = np.minimum(high - mu, mu - low)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        cp = np.where(np.isfinite(high - low), (high - low) / (6.0 * s), np.nan)
+        cpk = np.where(s > 0, gap / (3.0 * s), np.where(gap >= 0, np.inf, -np.inf))
+    out = np.asarray(out_of_spec, np.int64)
+    return tuple(limits), out, 100.0 * out / max(feasible, 1), cp, cpk
 
 
 @functools.partial(jax.jit, static_argnums=(2, 3))
