@@ -117,3 +117,50 @@ def test_a_mechanism_argument_keeps_its_guesses_as_inputs():
 
 def _guess(m):
     return (2.0 * m.guess,)
+
+
+def _prepared_mismatches() -> list:
+    """Each call prepared in the background (`cache.prepare`, inside a command) from placeholders
+    of its shapes and dtypes — zeros, never its numbers — then made (`traced`, which takes the
+    prepared program over), against `jax.jit`: the indices of the calls that differ."""
+    bad = []
+    with cache.one_command():
+        for i, (name, fun, args, static) in enumerate(CALLS):
+            cache._LOADED.clear()
+            # the previous call prepared first: a call of another key must not take it
+            if i:
+                _, prev_fun, prev_args, prev_static = CALLS[i - 1]
+                cache.prepare(f"test-prepare-{name}", prev_fun, prev_args, prev_static)
+            placeholders = jax.tree_util.tree_map(np.zeros_like, args)
+            cache.prepare(f"test-prepare-{name}", fun, placeholders, static)
+            try:
+                got = cache.traced(f"test-prepare-{name}", fun, args, static)[0]
+            except Exception:  # noqa: BLE001 (a program of another call refusing these arguments)
+                bad.append(i)
+                continue
+            want = jax.jit(fun, static_argnums=len(args))(*args, *static)[0]
+            if got.dtype != want.dtype or not np.array_equal(np.asarray(got), np.asarray(want)):
+                bad.append(i)
+    for fast in list(cache._PENDING):  # the other calls' preparations: wait for them, unused
+        cache._prepared(fast)
+    return bad
+
+
+def test_a_prepared_call_is_its_own_program_with_its_own_numbers():
+    """The background preparation hands over the program of exactly the call made: the numbers
+    are the call's (the placeholders were zeros), and a preparation of another static option,
+    dtype or structure is not taken."""
+    assert _prepared_mismatches() == []
+    assert not cache._PENDING
+
+
+def test_a_prepared_call_under_a_blind_key_fails(monkeypatch):
+    monkeypatch.setattr(cache, "_fast_key", lambda name, fun, treedef, static, leaves:
+                        ("blind", tuple(np.shape(a) for a in leaves)))
+    assert _prepared_mismatches() != []
+
+
+def test_prepare_outside_a_command_does_nothing():
+    cache._LOADED.clear()
+    cache.prepare("test-prepare-outside", _poly, (np.zeros(2), np.zeros(())), (2,))
+    assert not cache._PENDING
