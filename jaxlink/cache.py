@@ -167,9 +167,6 @@ def one_command():
         yield
     finally:
         _ONE_COMMAND.pop()
-        if not _ONE_COMMAND:  # the command is done: what it prepared and did not call is not started
-            for fast in list(_PENDING):
-                _PENDING.pop(fast).cancel()
 
 
 def in_one_command() -> bool:
