@@ -195,8 +195,6 @@ def traced(name: str, fun, args: tuple, static: tuple = ()):
     # a call like one made before in this process (a search's many small calls) skips the key text
     fast = _fast_key(name, fun, treedef, static, leaves)
     call = _LOADED.get(fast)
-    if call is None and fast in _PENDING:  # prepared in the background (`prepare`): wait for it
-        call = _prepared(fast)
     if call is None:
         key = key_text(name, fun, treedef, static, leaves)
         call = _LOADED.get(key)
@@ -212,80 +210,6 @@ def traced(name: str, fun, args: tuple, static: tuple = ()):
                     return call(*leaves)
         _remember(fast, call)
     return call(*leaves)
-
-
-# ------------------------------------------------------------- prepared in the background
-# A command that knows which programs it will call (`check`: the start, the turn, the outputs'
-# jets, cos μ; `jaxlink.analysis.motion.prepare`) has them traced, stored and compiled in a
-# background thread while it computes something else: XLA's compilation runs without the GIL, so
-# on a second core the programs compile side by side (`docs/numbers.md`, "check latency"). The
-# compiled code is handed over through JAX's compilation cache (its in-memory cache and the
-# directory): a program is the same program whichever thread compiles it, so every answer is the
-# same as without `prepare`. Only inside `one_command`; a library session never starts a thread.
-
-# the fast key of a prepared call -> its Future ((key, callable, uses_lapack), or an exception)
-_PENDING: dict = {}
-_POOL: list = []
-
-
-def prepare(name: str, fun, args: tuple, static: tuple = ()) -> None:
-    """Start tracing, storing and compiling, in a background thread, the program that
-    `traced(name, fun, args, static)` will run; that call then waits for it instead of doing the
-    same work. `args` need only the right structure, shapes and dtypes (their values are not
-    read: a stored program is a function of its arguments). Does nothing outside `one_command`,
-    or where the call is already loaded or prepared."""
-    import jax
-
-    if not in_one_command():
-        return
-    leaves, treedef = jax.tree_util.tree_flatten(args)
-    static = tuple(static)
-    fast = _fast_key(name, fun, treedef, static, leaves)
-    if fast in _LOADED or fast in _PENDING:
-        return
-    if not _POOL:
-        from concurrent.futures import ThreadPoolExecutor
-
-        _POOL.append(ThreadPoolExecutor(max_workers=2, thread_name_prefix="jaxlink-prepare"))
-    specs = [jax.ShapeDtypeStruct(np_shape, dtype) for np_shape, dtype in _spec(leaves)]
-    _PENDING[fast] = _POOL[0].submit(_prepare_job, name, fun, treedef, static, leaves, specs)
-
-
-def _prepare_job(name, fun, treedef, static, leaves, specs):
-    import jax
-
-    key = key_text(name, fun, treedef, static, leaves)
-
-    def flat(*xs):
-        return fun(*jax.tree_util.tree_unflatten(treedef, xs), *static)
-
-    call, lapack = _load_or_store(flat, leaves, key, _trace_path(key))
-    if lapack:
-        lowered = call.lower(*specs)
-    else:
-        with _without_lapack_setup():
-            lowered = call.lower(*specs)
-    lowered.compile()  # into JAX's compilation cache, where the call's own compilation finds it
-    return key, call, lapack
-
-
-def cancel_prepared(name: str) -> None:
-    """Give up the prepared calls of `name` that have not started (a command found it will not
-    need them); one already compiling finishes."""
-    for fast in [k for k in _PENDING if k[0] == name]:
-        if _PENDING[fast].cancel():
-            del _PENDING[fast]
-
-
-def _prepared(fast):
-    """The callable of a prepared call (None if its preparation failed: `traced` does it anew)."""
-    try:
-        key, call, _ = _PENDING.pop(fast).result()
-    except Exception:  # noqa: BLE001 (whatever went wrong is met again, and reported, by `traced`)
-        return None
-    _remember(key, call)
-    _remember(fast, call)
-    return call
 
 
 def _fast_key(name: str, fun, treedef, static: tuple, leaves) -> tuple:
@@ -313,11 +237,6 @@ def _remember(key, call) -> None:
 _LAPACK_NAME = b"lapack"
 
 
-# the threads lowering without the set-up now (the patch itself is installed once and stays: it
-# skips the set-up only in such a thread, so that threads lowering side by side do not interfere)
-_NO_LAPACK = __import__("threading").local()
-
-
 @__import__("contextlib").contextmanager
 def _without_lapack_setup():
     try:
@@ -329,18 +248,11 @@ def _without_lapack_setup():
     if ensure is None:
         yield
         return
-    if not getattr(ensure, "_jaxlink_patch", False):
-        def patched(platforms, _ensure=ensure):
-            if not getattr(_NO_LAPACK, "on", False):
-                _ensure(platforms)
-
-        patched._jaxlink_patch = True  # type: ignore[attr-defined]
-        _export._ensure_backends_initialized = patched
-    _NO_LAPACK.on = True
+    _export._ensure_backends_initialized = lambda platforms: None
     try:
         yield
     finally:
-        _NO_LAPACK.on = False
+        _export._ensure_backends_initialized = ensure
 
 
 def _pack(key: str, data: bytes | bytearray) -> bytes:

@@ -171,43 +171,6 @@ def _golden(f, a, b, c0, x0, sign, iterations: int = 60):
     return np.asarray(best), np.asarray(best_x)
 
 
-def _design(mech: Mechanism, p, samples: int):
-    """`(p, phis)`: the design in float64 where JAX computes in it (the command line), JAX's float
-    (float32) otherwise, and the samples of one turn from the start (the start again at the end)."""
-    p = np.asarray(mech.parameters if p is None else p, dtype=jax.dtypes.canonicalize_dtype(np.float64))
-    start = float(mech.input_start)
-    h = 2 * np.pi / samples
-    return p, start + h * np.arange(samples + 1)
-
-
-def _cos_mu_args(mech: Mechanism, sigma, q0, x, p) -> tuple:
-    return (_arg(mech, p), sigma, q0, np.asarray(x), p)
-
-
-def prepare(mech: Mechanism, p=None, *, samples: int = 3600) -> None:
-    """Start compiling, in the background (`jaxlink.cache.prepare`: inside a command only), the
-    programs that `motion` will call for this mechanism — the turn, cos μ and, for a turn made
-    in full, the outputs' jets — while the caller computes something else (`check`: the start).
-    The answers are those of `motion` without it (the same programs, compiled elsewhere)."""
-    from ..cache import in_one_command
-    from ..cache import prepare as _prepare
-
-    dyads = _dyads.classify(mech) if in_one_command() else None
-    if dyads is None or mech.input_kind != "angle":
-        return
-    p, phis = _design(mech, p, samples)
-    _prepare("motion_turn", _turn_arrays, (_arg(mech, p), phis, p))
-    # the shapes of what the turn returns: the dyads' sides σ and the unknowns at the start
-    sigma, q0 = np.zeros(len(dyads), p.dtype), np.zeros(mech.n_unknowns, p.dtype)
-    from .stroke import prepare as _prepare_jets
-
-    _prepare_jets(mech, sigma, q0, phis, p)
-    js = tuple(j for j, d in enumerate(dyads) if d.kind == "RRR")
-    if js:
-        for x in (phis, np.zeros(2 * len(js))):  # the grid, the golden section's pairs
-            _prepare("motion_cos_mu", _cos_mus, _cos_mu_args(mech, sigma, q0, x, p), (js,))
-
-
 def motion(mech: Mechanism, p=None, *, samples: int = 3600) -> Motion | None:
     """The range of motion and the dyads' transmission angles of `mech` (design `p`, SI, default
     the file's) on the branch of its guesses; None unless the input is an angle and every block
@@ -216,16 +179,16 @@ def motion(mech: Mechanism, p=None, *, samples: int = 3600) -> Motion | None:
     dyads = _dyads.classify(mech)
     if dyads is None or mech.input_kind != "angle":
         return None
-    p, phis = _design(mech, p, samples)
+    # float64 where JAX computes in it (the command line); JAX's float (float32) otherwise
+    p = np.asarray(mech.parameters if p is None else p, dtype=jax.dtypes.canonicalize_dtype(np.float64))
     start = float(mech.input_start)
+    h = 2 * np.pi / samples
+    phis = start + h * np.arange(samples + 1)  # one turn, the start again at the end
     q_all, res, sigma, *cert = (np.asarray(x) for x in traced("motion_turn", _turn_arrays, (_arg(mech, p), phis, p)))
     ok = (res == RESULTS.converged) | (res == RESULTS.singular)
     lower = upper = None
     full = bool(ok.all())
     if not full:
-        from ..cache import cancel_prepared
-
-        cancel_prepared("stroke_jets")  # the outputs' jets are for a turn made in full
         bp = branch_points(mech, phis, _Path(q_all, res), p)
         toggles = np.sort(bp.input[np.asarray(bp.kind) == TOGGLE])
         ahead, behind = toggles[toggles > start], toggles[toggles < start + 2 * np.pi]
@@ -250,7 +213,7 @@ def motion(mech: Mechanism, p=None, *, samples: int = 3600) -> Motion | None:
     js = tuple(j for j, d in enumerate(dyads) if d.kind == "RRR")
     if js:
         def f(x):  # (len(js), len(x)), numpy (indexing a JAX array would dispatch an operation)
-            return np.asarray(traced("motion_cos_mu", _cos_mus, _cos_mu_args(mech, sigma, q0, x, p), (js,)))
+            return np.asarray(traced("motion_cos_mu", _cos_mus, (_arg(mech, p), sigma, q0, np.asarray(x), p), (js,)))
 
         grid = np.linspace(lo_end, hi_end, samples + 1)
         c = f(grid)  # (len(js), samples + 1)

@@ -83,29 +83,6 @@ def _jets(mech, idx, sigma, q_ref, phis, p):
                                             np.asarray(phis, p.dtype), p), (tuple(idx),))
 
 
-def output_indices(mech: Mechanism) -> tuple:
-    """The unknowns `outputs` considers (sliders and the like, every length unknown, and the
-    `rockers` candidates), in unknown order."""
-    rock = rockers(mech)
-    return tuple(i for i, (n, k) in enumerate(zip(mech.unknown_names, mech.unknown_kinds)) if k != "angle" or n in rock)
-
-
-def prepare(mech: Mechanism, sigma, q_ref, phis, p) -> None:
-    """Start compiling the jets `outputs` evaluates (on the grid `phis`, and one refinement
-    batch) in the background (`jaxlink.cache.prepare`; the values of `sigma` and `q_ref` are not
-    read, only their shapes and dtypes)."""
-    from ..cache import prepare as _prepare
-    from .whole_curve import _arg
-
-    idx = output_indices(mech)
-    if not idx:
-        return
-    p = np.asarray(p)
-    for xs in (phis, np.zeros(_PAD)):
-        _prepare("stroke_jets", _jets_of, (_arg(mech, p), np.asarray(sigma, p.dtype), np.asarray(q_ref, p.dtype),
-                                           np.asarray(xs, p.dtype), p), (idx,))
-
-
 class _Eval:
     """The jets at batches of inputs, one column per (output, point), padded to few shapes."""
 
@@ -179,10 +156,11 @@ def outputs(mech: Mechanism, dyads, sigma, q0, phis, p) -> list:
     centres of the least and largest value), `rise`, `fall` (input angles, rad), `time_ratio`,
     `velocity_min`, `velocity_min_at`, `velocity_max`, `velocity_max_at`."""
     del dyads  # unused (the jets classify the structure themselves)
-    idx = output_indices(mech)
-    if not idx:
+    rock = rockers(mech)
+    names = [n for n, k in zip(mech.unknown_names, mech.unknown_kinds) if k != "angle" or n in rock]
+    if not names:
         return []
-    names = [mech.unknown_names[i] for i in idx]
+    idx = tuple(mech.unknown_names.index(n) for n in names)
     ev = _Eval(mech, idx, sigma, q0, p)
     grid = np.asarray(phis, float)
     m = len(idx)

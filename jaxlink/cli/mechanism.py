@@ -476,9 +476,6 @@ def cmd_check(args) -> int:
     from ..solvers.assemble import NewtonOptions, method_for
 
     mech = load_from_args(args)
-    from ..analysis.motion import prepare
-
-    prepare(mech)  # the designer's numbers compile in the background while the start is solved
     if mech.bodies is not None:  # what `reactions` checks before it solves
         from ..model import bodies as _bodies
 
