@@ -25,8 +25,11 @@ def register(sub) -> None:
         ),
     )
     add_mechanism_arguments(p, positions=False)
-    p.add_argument("--method", default=None, choices=("tolerance", "sample", "grid", "sensitivity"),
-                   help="the study (default: [study] method, else tolerance)")
+    p.add_argument("--method", default=None, choices=("tolerance", "sample", "grid", "sensitivity", "morris",
+                                                      "regression", "dgsm", "vector", "list", "centered"),
+                   help="the study (default: [study] method, else tolerance); morris, regression, dgsm: Morris "
+                        "elementary effects, correlation/regression coefficients, derivative-based indices "
+                        "(indices.csv); vector, list, centered: Dakota's parameter studies (study.csv)")
     p.add_argument("--samples", type=int, default=None, metavar="N",
                    help="tolerance: Monte Carlo samples (default 10000; 0: first order only); sample: designs "
                         "(default 1024); sensitivity: base samples N, N (D + 2) designs (default 1024); "
@@ -40,6 +43,11 @@ def register(sub) -> None:
     p.add_argument("--seed", type=int, default=None, help="random seed (default: [study] seed, else 0)")
     p.add_argument("--chunk", type=int, default=None,
                    help="designs per batch (default: [study] chunk, else about 2^21 positions)")
+    p.add_argument("--precision", type=float, default=None, metavar="EPS",
+                   help="tolerance (Monte Carlo) and sensitivity: double the samples until the largest interval "
+                        "half-width is at most EPS (default: [study] precision, else no rule)")
+    p.add_argument("--max-samples", type=int, default=None, metavar="N",
+                   help="the stopping rule's cap on the samples (default: [study] max_samples, else 65536)")
     p.add_argument("--out", metavar="DIR", default=None, help="write the files into this folder")
     p.add_argument("--no-plot", action="store_true", help="do not draw the plots")
     p.add_argument("--progress", choices=("auto", "on", "off"), default="auto",
@@ -62,9 +70,14 @@ def cmd_study(args) -> int:
         if v is not None and v < lo:
             raise MechanismError(f"{opt} must be at least {lo}, got {v}")
     inputs = read_study(mech, method=args.method, samples=args.samples, positions=args.positions, seed=args.seed,
-                        chunk=args.chunk, sampler=args.sampler, bootstrap=args.bootstrap)
+                        chunk=args.chunk, sampler=args.sampler, bootstrap=args.bootstrap,
+                        precision=args.precision, max_samples=args.max_samples)
     study = Study(mech, inputs)
     show = sys.stderr.isatty() if args.progress == "auto" else args.progress == "on"
+    from . import study_methods
+
+    if study_methods.handles(inputs):  # morris, regression, dgsm, Dakota's studies, the stopping rule
+        return study_methods.run(args, mech, study, show, t0)
     if inputs.method != "tolerance":
         return _design_space(args, mech, study, show, t0)
     bar = None

@@ -21,7 +21,7 @@ import pathlib
 
 import numpy as np
 
-from ..study.inputs import Range
+from ..study.inputs import GIVEN, Range
 from ..study.responses import unit_names
 from ..study.sampling import SampleReport, SensitivityReport
 
@@ -96,7 +96,7 @@ def write_sample_all(out_dir, mech, rep: SampleReport, *, wall_time: float, plot
     d.mkdir(parents=True, exist_ok=True)
     files = [d / "study.csv"]
     write_study_csv(files[0], rep)
-    method = "grid" if rep.grid_shape is not None else "sample"
+    method = "grid" if rep.grid_shape is not None else rep.inputs.method if rep.inputs.method in GIVEN else "sample"
     if plot and rep.grid_shape is not None and sum(n > 1 for n in rep.grid_shape) == 2 and rep.labels:
         files.append(d / "grid.png")
         plot_grid(files[-1], mech, rep)

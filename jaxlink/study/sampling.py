@@ -31,6 +31,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..errors import MechanismError
+from .correlation import correlate
 from .design import grid_shape, grid_values, to_values, unit_blocks
 from .inputs import StudyInputs
 from .responses import unit_names
@@ -186,8 +187,8 @@ def sample(mech, inputs: StudyInputs | None = None, *, samples: int | None = Non
     else:
         shape = None
         n = inputs.samples if samples is None else int(samples)
-        blocks = (to_values(inputs, study.x0, u)
-                  for u in unit_blocks(inputs.sampler, T, n, inputs.seed, study.chunk))
+        blocks = (to_values(inputs, study.x0, correlate(inputs, u, [inputs.seed, 2, i]))
+                  for i, u in enumerate(unit_blocks(inputs.sampler, T, n, inputs.seed, study.chunk)))
     xs, oks, vs = [], [], []
     scalar = np.asarray([k is None for (_, _, k) in ev.labels], bool)
     for x in blocks:
