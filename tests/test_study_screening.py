@@ -276,7 +276,8 @@ def test_correlated_samples_and_monte_carlo(setup):
 
 def test_the_precision_stopping_rule(setup):
     """Sobol': N doubles from 8 until the largest half-width is at most the precision; the report
-    is `sensitivity`'s at that N; the round before was above it. A cap below: not converged, warned."""
+    is `sensitivity`'s at that N; the round before was above it. A cap below: not converged, warned.
+    Monte Carlo: the same rule on the mean's and σ's intervals relative to σ."""
     mech, study = setup
     mv = _moved(mech, study, method="sensitivity", samples=8, ranges=SMALL, bootstrap=30)
     rep, conv = st.converged_sensitivity(mech, study=mv, precision=0.25, max_samples=4096)
@@ -287,6 +288,14 @@ def test_the_precision_stopping_rule(setup):
     np.testing.assert_array_equal(again.indices.ST_high, rep.indices.ST_high)
     rep2, conv2 = st.converged_sensitivity(mech, study=mv, precision=1e-4, max_samples=16)
     assert not conv2.converged and conv2.samples == 16 and any("not reached" in w for w in rep2.warnings)
+    # Monte Carlo: the largest of z·se(mean)/σ and z·se(σ)/σ over the responses that vary
+    from jaxlink.study.convergence import monte_carlo_half_width
+
+    z3 = np.zeros(3)
+    mc = st.MonteCarlo(100, 100, 0, z3, np.asarray([2.0, 0.0, 1.0]), np.asarray([0.1, 0.0, 0.01]),
+                       np.asarray([0.2, 0.0, 0.05]), z3, z3, z3, z3, z3, np.ones(3, bool))
+    assert monte_carlo_half_width(mc, 0.95) == pytest.approx(1.959963984540054 * 0.1)
+    assert monte_carlo_half_width(mc._replace(feasible=0), 0.95) == np.inf
 
 
 def test_vector_list_centered_studies_from_the_command_line(tmp_path, capsys):

@@ -232,7 +232,8 @@ def _read_study(mech, table, overrides) -> StudyInputs:
     if method in DRAWN and not ranges and not tol_raw:
         raise _err(mech, f"the {method} method needs [study.ranges] (NAME = [low, high], file units) or "
                          "[study.tolerances]", "ranges")
-    more: dict[str, Any] = dict(precision=precision, max_samples=max_samples, designs=designs, morris_levels=morris_levels)
+    more: dict[str, Any] = dict(precision=precision, max_samples=max_samples, designs=designs,
+                                morris_levels=morris_levels)
     if method != "tolerance" and not tol_raw:
         out = StudyInputs(method, (), positions, tuple(points), tuple(dict.fromkeys(metrics)), samples, seed,
                           chunk, rpm, ranges, sampler, bootstrap, confidence, **more)
