@@ -298,38 +298,36 @@ def test_the_precision_stopping_rule(setup):
     assert monte_carlo_half_width(mc._replace(feasible=0), 0.95) == np.inf
 
 
-def test_vector_list_centered_studies_from_the_command_line(tmp_path, capsys):
-    """Dakota's studies in one batched call: the designs of study.csv (vector: n + 1 points on the
-    line to the final point; list: as given; centered: the design then ±k steps per parameter),
-    each row's feasibility against the closed-form condition; a Morris study's indices.csv."""
+def test_vector_list_centered_studies(setup, tmp_path, capsys):
+    """Dakota's studies in one batched call: the designs (vector: n + 1 points on the line to the
+    final point; list: as given; centered, from the command line: the design then ±k steps per
+    parameter), each row's feasibility against the closed-form condition; a Morris study's
+    indices.csv from the command line."""
     from jaxlink.cli import main
 
+    mech, study = setup
+    vec = st.read_study(mech, method="vector", steps=4, final={"crank": 25.0, "rod": 34.0, "O1_x": 0.0, "O1_y": 2.0})
+    lst = st.read_study(mech, method="list", list={"crank": [25, 25, 30], "rod": [80, 30, 80], "O1_x": [0, 0, 0],
+                                                   "O1_y": [0, 0, 1]})
+    for inp, want in ((vec, np.stack([25 + 0 * np.arange(5), np.linspace(80, 34, 5), 0 * np.arange(5),
+                                      np.linspace(0, 2, 5)], 1)),
+                      (lst, np.asarray([[25.0, 80, 0, 0], [25, 30, 0, 0], [30, 80, 0, 1]]))):
+        r = st.parameter_study(mech, study=study.moved(inputs=inp))
+        np.testing.assert_allclose(r.values, want, atol=1e-9)
+        assert np.array_equal(r.feasible, want[:, 1] >= want[:, 0] + np.abs(E - want[:, 3]))
+        assert 0 < r.feasible.sum() < len(want)
     src = tmp_path / "slider.toml"
     base = FILE + "seed = 2\n"
-    tables = {
-        "vector": 'method = "vector"\nsteps = 4\n[study.final]\nrod = 34.0\nO1_y = 2.0\n',
-        "list": 'method = "list"\n[study.list]\ncrank = [25, 25, 30]\nrod = [80, 30, 80]\n',
-        "centered": 'method = "centered"\nsteps = 2\n[study.step]\ncrank = 0.5\nrod = 1.0\n',
-    }
-    expect = {
-        "vector": np.stack([np.linspace(80.0, 34.0, 5), np.linspace(0.0, 2.0, 5)], 1),
-        "list": np.asarray([[25.0, 80], [25, 30], [30, 80]]),
-        "centered": np.asarray([[25, 80], [24, 80], [24.5, 80], [25.5, 80], [26, 80],
-                                [25, 78], [25, 79], [25, 81], [25, 82]], float),
-    }
-    for method, text in tables.items():
-        src.write_text(base + text)
-        out = tmp_path / method
-        assert main(["study", str(src), "--method", method, "--out", str(out), "--no-plot", "--progress", "off"]) == 0
-        rows = list(csv.DictReader((out / "study.csv").open()))
-        names = list(rows[0])[1:3]
-        x = np.asarray([[float(r[n]) for n in names] for r in rows])
-        np.testing.assert_allclose(x, expect[method], atol=1e-9)
-        full = {"crank": 25.0 + 0 * x[:, 0], "rod": 80.0 + 0 * x[:, 0], "O1_y": 0 * x[:, 0]}
-        full.update({n.split(" ")[0]: x[:, k] for k, n in enumerate(names)})
-        ok = full["rod"] >= full["crank"] + np.abs(E - full["O1_y"])
-        assert [int(r["feasible"]) for r in rows] == ok.astype(int).tolist()
-        assert json.loads((out / "study.json").read_text())["method"] == method
+    src.write_text(base + 'method = "centered"\nsteps = 2\n[study.step]\ncrank = 0.5\nrod = 22.0\n')
+    out = tmp_path / "centered"
+    assert main(["study", str(src), "--out", str(out), "--no-plot", "--progress", "off"]) == 0
+    rows = list(csv.DictReader((out / "study.csv").open()))
+    x = np.asarray([[float(r["crank (mm)"]), float(r["rod (mm)"])] for r in rows])
+    want = np.asarray([[25, 80], [24, 80], [24.5, 80], [25.5, 80], [26, 80], [25, 36], [25, 58], [25, 102],
+                       [25, 124]], float)
+    np.testing.assert_allclose(x, want, atol=1e-9)
+    assert [int(r["feasible"]) for r in rows] == (want[:, 1] >= want[:, 0] + E).astype(int).tolist()
+    assert json.loads((out / "study.json").read_text())["method"] == "centered"
     src.write_text(base + 'method = "morris"\nsamples = 6\n[study.ranges]\ncrank = [24.0, 26.0]\nrod = [36.5, 39.0]\n')
     out = tmp_path / "morris"
     assert main(["study", str(src), "--out", str(out), "--progress", "off"]) == 0
