@@ -31,7 +31,7 @@ import optax
 from . import distance as _dist
 from .assembly import Assembly, certify
 from .target import Target, arclength_resample
-from .topology import MAX_JOINTS, Topology, as_arrays
+from .topology import CRANK, Topology, as_arrays
 from .tracer import trace, trace_exact
 
 SCREEN_T = 64
@@ -71,6 +71,14 @@ def _sorted_radii(curve, closed: bool):
     return jnp.sort(r / jnp.sqrt(jnp.mean(r * r)))
 
 
+def _desc(points: np.ndarray, closed: bool) -> np.ndarray:
+    """`_sorted_radii` in NumPy (the target's descriptor)."""
+    c = arclength_resample(points, DESC_N, closed)
+    c = c - c.mean(0)
+    r = np.sqrt(np.sum(c * c, axis=-1) + 1e-12)
+    return np.sort(r / np.sqrt(np.mean(r * r))).astype(np.float32)
+
+
 def _subarcs(closed: bool):
     if closed:
         return np.array([[0.0, 2 * np.pi]], np.float32)
@@ -81,7 +89,7 @@ def _subarcs(closed: bool):
 def _screen(key, parents, active, traced, target_desc, *, closed: bool):
     """Descriptor distances (B, S) of random poses (B, J, 2) over the sub-arcs; inf where a dyad does not close."""
     b = parents.shape[0]
-    poses = jax.random.uniform(key, (b, MAX_JOINTS, 2), _DT, -1.0, 1.0)
+    poses = jax.random.uniform(key, (b, CRANK + 1 + parents.shape[1], 2), _DT, -1.0, 1.0)
     th = jnp.asarray(2 * np.pi * np.arange(SCREEN_T + 1) / SCREEN_T, _DT)
     pos, marg = jax.vmap(trace, in_axes=(0, 0, 0, None))(parents, active, poses, th)
     curves = pos[jnp.arange(b), :, traced]                    # (B, T+1, 2), the last = the first
@@ -200,13 +208,14 @@ def search(target: Target, topos: list[Topology], *, time_limit: float, seed: in
     closed = target.closed
     arr = as_arrays(topos)
     tpts = _dist.normalise(arclength_resample(target.points, TARGET_N, closed))[0]
-    tdesc = np.asarray(_sorted_radii(jnp.asarray(arclength_resample(target.points, DESC_N + 1, closed), _DT), closed))
+    tdesc = _desc(target.points, closed)
     trank = jnp.asarray(_dist.normalise(arclength_resample(target.points, RANK_T, closed))[0], _DT)
     ttarget = jnp.asarray(tpts, _DT)
     arcs_all = _subarcs(closed)
     key = jax.random.PRNGKey(seed)
     found: list[Candidate] = []
     rnd = 0
+    first_round = 0.0
     while True:
         rnd += 1
         picks_pose, picks_arc, picks_topo = [], [], []
@@ -255,7 +264,10 @@ def search(target: Target, topos: list[Topology], *, time_limit: float, seed: in
         if log is not None:
             best = min((c.match.distance for c in found), default=float("inf"))
             log(f"round {rnd}: {len(found)} candidates, best distance {best:.4f}, {time.perf_counter() - t0:.1f} s")
-        if time.perf_counter() - t0 > time_limit * 0.5 * (1 + 1 / rnd) or time.perf_counter() - t0 > time_limit:
-            break
+        el = time.perf_counter() - t0
+        if el + (el - first_round) / max(rnd - 1, 1) * (rnd > 1) + (rnd == 1) * 0.5 * el > time_limit:
+            break  # another round (as long as the last ones, the first's compiling aside) would overrun
+        if rnd == 1:
+            first_round = el
     found.sort(key=lambda c: c.match.distance)
     return found

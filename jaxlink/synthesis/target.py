@@ -9,8 +9,9 @@ length unit, open or closed.
   (SVG's y points down: the curve is mirrored against the drawing; `flip_y` turns it back);
   each Bézier segment is sampled at 32 points.
 
-`closed` by default when the first and the last point coincide within 1 % of the size (the
-diagonal of the bounding box).
+`closed` by default when the gap from the last point back to the first is at most 1 % of the size
+(the diagonal of the bounding box) or at most 1.5 × the median step between points (a loop
+sampled without repeating its first point).
 """
 
 from __future__ import annotations
@@ -46,10 +47,13 @@ class Target(NamedTuple):
 
 
 def is_closed(points: np.ndarray) -> bool:
-    """The default: first and last points within `CLOSE_FRACTION` of the bounding box's diagonal."""
+    """The default (module doc): the closing gap within `CLOSE_FRACTION` of the bounding box's
+    diagonal or within 1.5 median steps."""
     pts = np.asarray(points, float)
     size = float(np.linalg.norm(pts.max(0) - pts.min(0)))
-    return bool(np.linalg.norm(pts[0] - pts[-1]) <= CLOSE_FRACTION * size)
+    gap = float(np.linalg.norm(pts[0] - pts[-1]))
+    step = float(np.median(np.linalg.norm(np.diff(pts, axis=0), axis=1)))
+    return bool(gap <= CLOSE_FRACTION * size or gap <= 1.5 * step)
 
 
 def make_target(points, *, closed: bool | None = None, unit: str = "", source: str = "<array>") -> Target:

@@ -8,8 +8,8 @@ two different bodies it adds two binary links. So the four-bar with its coupler 
 Stephenson six-bars and, growing further, eight-bars are all such lists (`grow`). The traced point
 is any moving joint.
 
-Every topology here is padded to `MAX_DYADS` dyads so that all of them share one batched program
-(`as_arrays`): padding dyads are inactive.
+The topologies of one search are padded to the same number of dyads so that all of them share one
+batched program (`as_arrays`): padding dyads are inactive.
 """
 
 from __future__ import annotations
@@ -120,15 +120,16 @@ def topologies(max_links: int = 8) -> list[Topology]:
 class TopologyArrays(NamedTuple):
     """Topologies as padded arrays, one row per topology (a batch shares one program)."""
 
-    parents: np.ndarray  # (…, MAX_DYADS, 2) int32
-    active: np.ndarray   # (…, MAX_DYADS) bool
+    parents: np.ndarray  # (…, D, 2) int32
+    active: np.ndarray   # (…, D) bool
     traced: np.ndarray   # (…,) int32
 
 
 def as_arrays(topos: list[Topology]) -> TopologyArrays:
-    """Stack topologies, padding each to `MAX_DYADS` dyads (inactive, attached to C and F1)."""
-    par = np.zeros((len(topos), MAX_DYADS, 2), np.int32)
-    act = np.zeros((len(topos), MAX_DYADS), bool)
+    """Stack topologies, padding each to the most dyads among them (inactive, attached to C and F1)."""
+    nd = max(len(t.dyads) for t in topos)
+    par = np.zeros((len(topos), nd, 2), np.int32)
+    act = np.zeros((len(topos), nd), bool)
     for i, t in enumerate(topos):
         if len(t.dyads) > MAX_DYADS:
             raise ValueError(f"{t.name}: more than {MAX_DYADS} dyads")

@@ -1,7 +1,8 @@
 r"""Tracing a dyadic linkage (`topology`) from one pose: batched in JAX for the search, exactly
 in NumPy float64 for the reported answers.
 
-A candidate is its **pose**: every joint's position at input offset θ = 0, shape (MAX_JOINTS, 2).
+A candidate is its **pose**: every joint's position at input offset θ = 0, shape (4 + D, 2) for D
+dyads (the frame joints F0–F2, the crank joint, the dyads' joints).
 The pose fixes the lengths (the crank r = |C − F0|, each dyad's l₁ = |J − P₁|, l₂ = |J − P₂|) and
 the branches (σ = sign((P₂ − P₁) × (J − P₁))). At input offset θ the crank joint is
 F0 + r (cos(α + θ), sin(α + θ)), α its angle in the pose, and each dyad's joint is
@@ -20,7 +21,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .topology import CRANK, MAX_DYADS, Topology
+from .topology import CRANK, Topology
 
 
 def _margin(l1, l2, d2):
@@ -32,7 +33,7 @@ def _norm(v):
 
 
 def trace(parents, active, pose, thetas):
-    """Positions (T, MAX_JOINTS, 2) and margins (T, MAX_DYADS) (1 where inactive) of one
+    """Positions (T, J, 2) and margins (T, D) (1 where inactive) of one
     candidate over the input offsets `thetas` (T,). A dyad that does not close puts its joint on
     the line P₁P₂ (h = 0): finite, its margin negative. Pure; `vmap` over candidates."""
     f0 = pose[0]
@@ -44,7 +45,7 @@ def trace(parents, active, pose, thetas):
     pos = jnp.broadcast_to(pose, (thetas.shape[0],) + pose.shape)
     pos = pos.at[:, CRANK].set(crank)
     margins = []
-    for k in range(MAX_DYADS):
+    for k in range(parents.shape[0]):
         j = CRANK + 1 + k
         p1, p2 = parents[k, 0], parents[k, 1]
         w0 = pose[p2] - pose[p1]
