@@ -101,8 +101,8 @@ def test_planted_four_bar_closed_and_replay(tmp_path):
     toml = tmp_path / "best.toml"
     toml.write_text(best.sketch.toml())
     out = tmp_path / "replay.csv"
-    rc = cli_main(["kinematics", str(toml), "--start", repr(best.start_deg), "--step", repr(360 / best.count),
-                   "--count", str(best.count), "--outputs", "position", "--units", "file", "--csv", str(out)])
+    rc = cli_main(["kinematics", str(toml), "--start", repr(best.start_deg), "--step", repr(360 / best.n_inputs),
+                   "--count", str(best.n_inputs), "--outputs", "position", "--units", "file", "--csv", str(out)])
     assert rc == 0
     rows = list(csv.DictReader(out.open()))
     curve = np.array([[float(x["P_x_mm"]), float(x["P_y_mm"])] for x in rows])

@@ -35,7 +35,8 @@ def register(sub) -> None:
     p.add_argument("--count", type=int, default=1000, metavar="N",
                    help="crank positions the reported curve is traced at (default 1000)")
     p.add_argument("--flip-y", action="store_true", help="mirror the target's y (an SVG drawn with y down)")
-    p.add_argument("--out", metavar="DIR", default="synthesis", help="write the files into this folder (default synthesis)")
+    p.add_argument("--out", metavar="DIR", default="synthesis",
+                   help="write the files into this folder (default synthesis)")
     p.add_argument("--no-plot", action="store_true", help="do not draw the plot")
     p.set_defaults(func=cmd_synthesize)
 
@@ -63,7 +64,7 @@ def cmd_synthesize(args) -> int:
     for f in write_all(args.out, res, plot_it=not args.no_plot):
         print(f"wrote {f}")
     b = res.best
-    span = (f"--start {b.start_deg!r} --step {360 / b.count!r} --count {b.count}" if res.target.closed
-            else f"--start {b.start_deg!r} --stop {b.stop_deg!r} --count {b.count}")
+    span = (f"--start {b.start_deg!r} --step {360 / b.n_inputs!r} --count {b.n_inputs}" if res.target.closed
+            else f"--start {b.start_deg!r} --stop {b.stop_deg!r} --count {b.n_inputs}")
     print(f"replay      jaxlink kinematics {args.out}/synthesized.toml {span} --outputs position")
     return 0

@@ -30,7 +30,7 @@ def to_json(res) -> dict:
         "wall_s": res.wall_s,
         "designs": [{
             "rank": i, "topology": d.topology, "joints": d.joints, "links": d.links,
-            "distance": d.distance, "start_deg": d.start_deg, "stop_deg": d.stop_deg, "count": d.count,
+            "distance": d.distance, "start_deg": d.start_deg, "stop_deg": d.stop_deg, "count": d.n_inputs,
             "scale": d.scale, "rotation_deg": d.rotation_deg, "translation": list(d.translation),
             "margin": d.margin, "lengths": d.lengths, "found_s": d.found_s, "pareto": d.pareto,
             "joint_positions": d.sketch.tables()["sketch"]["joints"],

@@ -25,14 +25,14 @@ class Design(NamedTuple):
     - `topology`: its name; `joints`, `links` (the frame counted as a link);
     - `distance`: the distance to the target (`jaxlink.synthesis.distance`, n = `n_points`);
     - `start_deg`, `stop_deg`: the crank's angle (the file's input, degrees) at the traced interval's
-      ends (a closed target: a whole turn, `stop_deg` = `start_deg` + 360); `count`: the inputs
-      the distance was computed at (a closed target: `count` steps of 360/count degrees from
-      `start_deg`; an open one: `count` inputs from `start_deg` to `stop_deg`, both included);
+      ends (a closed target: a whole turn, `stop_deg` = `start_deg` + 360); `n_inputs`: the inputs
+      the distance was computed at (a closed target: `n_inputs` steps of 360/n_inputs degrees from
+      `start_deg`; an open one: `n_inputs` inputs from `start_deg` to `stop_deg`, both included);
     - `scale`, `rotation_deg`, `translation`: the placement of the search's normalised mechanism
       onto the target (x ↦ k R(φ) x + t);
     - `margin`: the smallest reach margin of its dyads over the interval (`assembly`);
     - `lengths`: the crank's and every dyad link's length (target unit);
-    - `sketch`: the mechanism (`jaxlink.Sketch`), `curve`: the traced path (count, 2);
+    - `sketch`: the mechanism (`jaxlink.Sketch`), `curve`: the traced path (n_inputs, 2);
     - `found_s`: seconds from the start of the search to this answer; `pareto`: no other answer
       has both fewer or as many joints and a smaller distance.
     """
@@ -43,7 +43,7 @@ class Design(NamedTuple):
     distance: float
     start_deg: float
     stop_deg: float
-    count: int
+    n_inputs: int
     scale: float
     rotation_deg: float
     translation: tuple[float, float]
@@ -93,9 +93,9 @@ def synthesize(target: Any, *, closed: bool | None = None, time_limit: float = 6
     (N, 2) array or a `Target`), up to `max_links` links, within about `time_limit` seconds.
     `closed`: match a closed loop over a whole crank turn, or an open path over a sub-interval
     (default: from the target, `jaxlink.synthesis.target`). `topologies`: names of the built-in
-    topologies to search (`jaxlink.synthesis.topology.topologies`; default all up to `max_links`). Returns the best design of each
-    topology, best first (`Synthesis.best`); `seed` makes it repeatable for a given time limit's
-    number of rounds. Computes in float64 for the answers (NumPy) whatever JAX's x64 setting."""
+    topologies to search (`jaxlink.synthesis.topology.topologies`; default all up to `max_links`).
+    Returns the best design of each topology, best first (`Synthesis.best`); `seed` makes it
+    repeatable for a given number of rounds. Computes in float64 for the answers (NumPy) whatever JAX's x64 setting."""
     t0 = time.perf_counter()
     if isinstance(target, Target):
         tgt = target if closed is None else target._replace(closed=bool(closed))

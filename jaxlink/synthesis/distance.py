@@ -153,21 +153,20 @@ def _safe_norm(v, eps):
     return jnp.sqrt(jnp.sum(v * v, axis=-1) + eps * eps)
 
 
-def arclength_weights(curve, closed: bool, eps: float = 1e-9):
-    """Each sample's share of the polyline's arclength (trapezoid; sums to 1). `closed` static."""
+def arclength_weights(curve, closed, eps: float = 1e-9):
+    """Each sample's share of the polyline's arclength (trapezoid; sums to 1). `closed`: a bool or
+    a traced 0/1 (the closing segment counts or not)."""
     nxt = jnp.roll(curve, -1, axis=0)
     seg = _safe_norm(nxt - curve, eps)  # seg[i]: i → i+1 (the last one closes the loop)
-    if closed:
-        w = 0.5 * (seg + jnp.roll(seg, 1))
-    else:
-        seg = seg.at[-1].set(0.0)
-        w = 0.5 * (seg + jnp.concatenate([jnp.zeros(1, seg.dtype), seg[:-1]]))
+    seg = seg.at[-1].multiply(jnp.asarray(closed, seg.dtype))
+    w = 0.5 * (seg + jnp.roll(seg, 1))
     return w / jnp.sum(w)
 
 
-def soft_chamfer(curve, target, closed: bool, tau: float = 0.01, eps: float = 1e-6):
+def soft_chamfer(curve, target, closed, tau: float = 0.01, eps: float = 1e-6):
     """The smooth surrogate of the chamfer distance between `curve` (T, 2), a sampled trace, and
-    the normalised target (M, 2) (module doc). `closed`, `tau`, `eps` static. Pure; `vmap` it."""
+    the normalised target (M, 2) (module doc). `closed` as in `arclength_weights`; `tau`, `eps`
+    static. Pure; `vmap` it."""
     w = arclength_weights(curve, closed)
     mean = jnp.sum(w[:, None] * curve, axis=0)
     c = curve - mean

@@ -10,7 +10,9 @@ One **round** (repeated with fresh candidates until the time limit):
    invariant); the `screen_keep` per topology nearest to the target's descriptor go on;
 2. **rank**: those, traced at 64 inputs, by a chamfer distance at 32 rotations; the best `refine`
    per topology are rotated to their best angle;
-3. **refine**: Adam (optax) on the pose (and the sub-interval's start and length for an open
+3. **refine**: from the second round on, half of each topology's slots restart from the two best
+   refined poses so far (the first as it is, the others jittered by `jitter` × its RMS radius);
+   Adam (optax) on the pose (and the sub-interval's start and length for an open
    target) against the surrogate `distance.soft_chamfer`, plus a penalty keeping every dyad's
    margin above `MARGIN_FLOOR` at the samples; all candidates of all topologies in one batch;
 4. **score**: each refined candidate traced exactly (`tracer.trace_exact`, float64) at `n_trace`
@@ -117,11 +119,15 @@ def _normalised(c, w):
     return c / jnp.sqrt(jnp.sum(w * jnp.sum(c * c, axis=1)) + 1e-30)
 
 
-@functools.partial(jax.jit, static_argnames=("closed",))
-def _rank(parents, active, traced, poses, arcs, target, *, closed: bool):
-    """(chamfer at the best of `_ROT` rotations, that rotation) of each candidate over its sub-arc."""
-    n = RANK_T
-    u = jnp.arange(n, dtype=_DT) / (n if closed else n - 1)
+def _u(n: int, closed: bool) -> np.ndarray:
+    """Fractions of the interval sampled: a closed turn without its end, an open one with both."""
+    return (np.arange(n) / (n if closed else n - 1)).astype(np.float32)
+
+
+@jax.jit
+def _rank(parents, active, traced, poses, arcs, target, closed, u):
+    """(chamfer at the best of `_ROT` rotations, that rotation) of each candidate over its sub-arc.
+    `closed` a 0/1 array (one program for open and closed targets), `u` from `_u`."""
 
     def one(par, act, tr, pose, arc):
         pos, marg = trace(par, act, pose, arc[0] + arc[1] * u)
@@ -140,19 +146,18 @@ def _rank(parents, active, traced, poses, arcs, target, *, closed: bool):
     return jax.vmap(one)(parents, active, traced, poses, arcs)
 
 
-def _loss(params, par, act, tr, target, closed: bool, u):
+def _loss(params, par, act, tr, target, closed, u):
     pose, arc = params
-    start, span = arc[0], (jnp.asarray(2 * np.pi, _DT) if closed else arc[1])
+    start, span = arc[0], jnp.where(closed > 0, jnp.asarray(2 * np.pi, arc.dtype), arc[1])
     pos, marg = trace(par, act, pose, start + span * u)
     fit = _dist.soft_chamfer(pos[:, tr], target, closed, tau=0.01)
     pen = jnp.mean(jnp.sum(jax.nn.relu(MARGIN_FLOOR - marg) ** 2, axis=-1))
-    shorter = 0.0 if closed else jax.nn.relu(span - 2 * np.pi) ** 2 + jax.nn.relu(0.05 - span) ** 2
+    shorter = (1 - closed) * (jax.nn.relu(span - 2 * np.pi) ** 2 + jax.nn.relu(0.05 - span) ** 2)
     return fit + 100.0 * pen + 100.0 * shorter
 
 
-@functools.partial(jax.jit, static_argnames=("closed", "steps"))
-def _refine(parents, active, traced, poses, arcs, target, lr, *, closed: bool, steps: int):
-    u = jnp.arange(REFINE_T, dtype=_DT) / (REFINE_T if closed else REFINE_T - 1)
+@functools.partial(jax.jit, static_argnames=("steps",))
+def _refine(parents, active, traced, poses, arcs, target, lr, closed, u, *, steps: int):
     opt = optax.adam(lr)
 
     def one(par, act, tr, pose, arc):
@@ -201,7 +206,7 @@ def score(topo: Topology, pose: np.ndarray, start: float, span: float, target: T
 def search(target: Target, topos: list[Topology], *, time_limit: float, seed: int = 0,
            samples: int = 8192, screen_keep: int = 128, refine: int = 8, steps: int = 300,
            n_trace: int = 1000, n_points: int = _dist.N_POINTS, per_topology: int = 2,
-           lr: float = 0.01, t0: float | None = None, log=None) -> list[Candidate]:
+           lr: float = 0.01, jitter: float = 0.02, t0: float | None = None, log=None) -> list[Candidate]:
     """Rounds of screen → rank → refine → score until `time_limit` seconds (at least one round).
     Returns every scored candidate that assembles, best first."""
     t0 = time.perf_counter() if t0 is None else t0
@@ -212,10 +217,14 @@ def search(target: Target, topos: list[Topology], *, time_limit: float, seed: in
     trank = jnp.asarray(_dist.normalise(arclength_resample(target.points, RANK_T, closed))[0], _DT)
     ttarget = jnp.asarray(tpts, _DT)
     arcs_all = _subarcs(closed)
+    flag = np.float32(closed)
     key = jax.random.PRNGKey(seed)
     found: list[Candidate] = []
     rnd = 0
-    first_round = 0.0
+    round_start = time.perf_counter()
+    rng = np.random.default_rng(seed)
+    elites: dict[int, list] = {}       # per topology: the best two refined (pose, arc) so far
+    elite_vals: dict[int, list] = {}
     while True:
         rnd += 1
         picks_pose, picks_arc, picks_topo = [], [], []
@@ -226,8 +235,7 @@ def search(target: Target, topos: list[Topology], *, time_limit: float, seed: in
             trc = np.repeat(arr.traced[ti:ti + 1], samples, 0)
             poses, d = _screen(sub, par, act, trc, tdesc, closed=closed)
             d = np.asarray(d)
-            flat = np.argsort(d, axis=None)[:screen_keep]
-            flat = flat[np.isfinite(d.ravel()[flat])]
+            flat = np.argsort(d, axis=None)[:screen_keep]  # a fixed count: the same shapes every round
             ci, ai = np.unravel_index(flat, d.shape)
             picks_pose.append(np.asarray(poses)[ci])
             picks_arc.append(arcs_all[ai])
@@ -235,27 +243,38 @@ def search(target: Target, topos: list[Topology], *, time_limit: float, seed: in
         pose = np.concatenate(picks_pose)
         arc = np.concatenate(picks_arc)
         tix = np.concatenate(picks_topo)
-        if len(tix) == 0:
-            if time.perf_counter() - t0 > time_limit:
-                break
-            continue
-        val, phi = _rank(arr.parents[tix], arr.active[tix], arr.traced[tix], pose, arc, trank, closed=closed)
+        val, phi = _rank(arr.parents[tix], arr.active[tix], arr.traced[tix], pose, arc, trank, flag,
+                         _u(RANK_T, closed))
         val, phi = np.asarray(val), np.asarray(phi)
-        sel = []
-        for ti in range(len(topos)):
-            idx = np.flatnonzero((tix == ti) & np.isfinite(val))
-            sel += list(idx[np.argsort(val[idx])][:refine])
-        sel = np.array(sel, int)
-        if len(sel) == 0:
-            continue
+        # `refine` per topology (the same shapes every round); the inf ones are dropped after
+        sel = np.concatenate([np.flatnonzero(tix == ti)[np.argsort(val[tix == ti], kind="stable")][:refine]
+                              for ti in range(len(topos))])
         # rotate each pose so that its curve is near the target's orientation; the offsets stay
         poses0 = _rotate(pose[sel], phi[sel]).astype(np.float32)
+        arcs0 = arc[sel].copy()
+        rank_ok = np.isfinite(val[sel])
+        # restarts: the last half of each topology's slots refine again the best refined so far, jittered
+        for ti, el in elites.items():
+            slots = np.flatnonzero(tix[sel] == ti)[refine - refine // 2:]
+            for k, slot in enumerate(slots):
+                ep, ea = el[k % len(el)]
+                scale = np.sqrt(np.mean(np.sum((ep - ep.mean(0)) ** 2, -1)))
+                poses0[slot] = ep + rng.normal(0.0, jitter * scale, ep.shape) * (k > 0)
+                arcs0[slot] = ea + (rng.normal(0.0, jitter, 2) * (k > 0) if not closed else 0.0)
+                rank_ok[slot] = True
         p, a, v = _refine(arr.parents[tix[sel]], arr.active[tix[sel]], arr.traced[tix[sel]], poses0,
-                          arc[sel], ttarget, lr, closed=closed, steps=steps)
+                          arcs0, ttarget, np.float32(lr), flag, _u(REFINE_T, closed), steps=steps)
         p, a, v = np.asarray(p, float), np.asarray(a, float), np.asarray(v)
         for ti in range(len(topos)):
+            idx = np.flatnonzero((tix[sel] == ti) & np.isfinite(v) & rank_ok)
+            pool = [(v[i], p[i].astype(np.float32), a[i].astype(np.float32)) for i in idx]
+            pool += elite_vals.get(ti, [])
+            pool.sort(key=lambda e: e[0])
+            elite_vals[ti] = pool[:2]
+            elites[ti] = [(e[1], e[2]) for e in pool[:2]]
+        for ti in range(len(topos)):
             idx = np.flatnonzero(tix[sel] == ti)
-            idx = idx[np.isfinite(v[idx])]
+            idx = idx[np.isfinite(v[idx]) & rank_ok[idx]]
             for i in idx[np.argsort(v[idx])][:per_topology]:
                 start, span = float(a[i, 0]), (2 * np.pi if closed else float(a[i, 1]))
                 m, asm = score(topos[ti], p[i], start, span, target, n_trace=n_trace, n_points=n_points)
@@ -264,10 +283,9 @@ def search(target: Target, topos: list[Topology], *, time_limit: float, seed: in
         if log is not None:
             best = min((c.match.distance for c in found), default=float("inf"))
             log(f"round {rnd}: {len(found)} candidates, best distance {best:.4f}, {time.perf_counter() - t0:.1f} s")
-        el = time.perf_counter() - t0
-        if el + (el - first_round) / max(rnd - 1, 1) * (rnd > 1) + (rnd == 1) * 0.5 * el > time_limit:
-            break  # another round (as long as the last ones, the first's compiling aside) would overrun
-        if rnd == 1:
-            first_round = el
+        now = time.perf_counter()
+        dur, round_start = now - round_start, now
+        if now - t0 + (0.5 if rnd == 1 else 1.0) * dur > time_limit:
+            break  # another round, as long as this one (the first: half, its compiling aside), would overrun
     found.sort(key=lambda c: c.match.distance)
     return found
