@@ -155,3 +155,31 @@ def test_svg_target(tmp_path, d, closed):
     assert t.closed is closed and np.all(np.isfinite(t.points))
     if not closed:
         assert np.allclose(t.points[-1], [15, 0]) and np.allclose(t.points[16], [5, 2.5])  # q's midpoint
+
+
+def test_six_bar_sketch_replays_the_tracer(tmp_path):
+    """A Stephenson six-bar (6 dyads, plates on the crank, coupler, rocker and dyad) written as a
+    sketch: `jaxlink kinematics` traces the tracer's path (no search: the written-file check alone)."""
+    from jaxlink.synthesis.mechanism import placed_pose, to_sketch
+
+    topo = next(t for t in T.topologies() if t.name == "stephenson-rocker-crank")
+    rng = np.random.default_rng(1)
+    for _ in range(5000):
+        pose = rng.uniform(-1, 1, (T.CRANK + 1 + len(topo.dyads), 2))
+        if trace_exact(topo, pose, np.linspace(0, 2 * np.pi, 73))[1].min() > 0.05 and certify(
+                topo, pose, 0.0, 2 * np.pi).ok:
+            break
+    else:  # pragma: no cover
+        pytest.fail("no assemblable six-bar drawn")
+    m = D.Match(0.0, 0.4, 25.0, np.array([3.0, -2.0]))
+    placed = placed_pose(topo, pose, 0.0, m)
+    f = tmp_path / "six.toml"
+    f.write_text(to_sketch(topo, placed, unit="mm").toml())
+    start = math.degrees(math.atan2(*(placed[T.CRANK] - placed[0])[::-1]))
+    out = tmp_path / "six.csv"
+    assert cli_main(["kinematics", str(f), "--start", repr(start), "--step", "5", "--outputs", "position",
+                     "--units", "file", "--csv", str(out)]) == 0
+    rows = list(csv.DictReader(out.open()))
+    got = np.array([[float(x["P_x_mm"]), float(x["P_y_mm"])] for x in rows])
+    want = D.place(trace_exact(topo, pose, np.radians(5.0 * np.arange(72)))[0][:, topo.traced], m)
+    assert np.max(np.abs(got - want)) < 1e-9 * 25
