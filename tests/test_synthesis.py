@@ -49,6 +49,11 @@ def test_distance_invariance_and_zero():
     m2 = D.match(placed, moved, closed=True)
     assert abs(m2.distance - m1.distance) < 1e-12 and min(m2.rotation, 2 * np.pi - m2.rotation) < 1e-7
     assert D.match(c, c, closed=True).distance < 1e-15
+    # the ordered distance: point i against point i, the rotation in closed form
+    od, phi = D.ordered_distance(c @ rot.T * 2.0 + [1.0, 1.0], c)
+    assert od < 1e-13 and abs(phi + a) < 1e-12
+    od, _ = D.ordered_distance(np.roll(c, 5, axis=0), c)
+    assert od > 0.01
 
 
 def _independent(curve_a, curve_b, n=200):
@@ -88,33 +93,40 @@ def _floor(points, closed, n=D.N_POINTS):
 
 
 def test_planted_four_bar_closed_and_replay(tmp_path):
+    """`jaxlink synthesize` on a four-bar's coupler curve: at the discretisation floor, the files
+    written, and `jaxlink kinematics` on the written file traces the reported distance."""
+    import json
+
     target = _coupler(np.linspace(0, 2 * np.pi, 400, endpoint=False)) * 40 + [100, 50]
     f = tmp_path / "target.csv"
     f.write_text("x_mm,y_mm\n" + "\n".join(f"{float(x)!r},{float(y)!r}" for x, y in target))
     tgt = load_target(f)
     assert tgt.closed and tgt.unit == "mm"
-    r = synthesize(tgt, topologies=["four-bar"], time_limit=0.1, samples=1024, count=400,
-                   screen_keep=32, refine=4, steps=200)
-    best = r.best
-    assert best.distance <= 1.5 * _floor(tgt.points, True)
+    out_dir = tmp_path / "syn"
+    assert cli_main(["synthesize", str(f), "--topologies", "four-bar", "--time-limit", "1", "--count", "400",
+                     "--out", str(out_dir)]) == 0
+    res = json.loads((out_dir / "synthesis.json").read_text())
+    best = res["designs"][0]
+    assert (out_dir / "synthesis.png").stat().st_size > 0 and best["topology"] == "four-bar"
+    assert best["distance"] <= 1.5 * _floor(tgt.points, True)
+    assert best["stop_deg"] - best["start_deg"] == 360.0 and best["margin"] > 0
     # replay: `jaxlink kinematics` on the written file traces the same distance
-    toml = tmp_path / "best.toml"
-    toml.write_text(best.sketch.toml())
     out = tmp_path / "replay.csv"
-    rc = cli_main(["kinematics", str(toml), "--start", repr(best.start_deg), "--step", repr(360 / best.n_inputs),
-                   "--count", str(best.n_inputs), "--outputs", "position", "--units", "file", "--csv", str(out)])
+    rc = cli_main(["kinematics", str(out_dir / "synthesized.toml"), "--start", repr(best["start_deg"]),
+                   "--step", repr(360 / best["count"]), "--count", str(best["count"]), "--outputs", "position",
+                   "--units", "file", "--csv", str(out)])
     assert rc == 0
     rows = list(csv.DictReader(out.open()))
     curve = np.array([[float(x["P_x_mm"]), float(x["P_y_mm"])] for x in rows])
-    assert abs(D.match(curve, tgt.points, closed=True).distance - best.distance) < 1e-9
+    assert abs(D.match(curve, tgt.points, closed=True).distance - best["distance"]) < 1e-9
 
 
 def test_planted_open_arc_by_subinterval():
     arc = _coupler(np.linspace(1.0, 3.5, 300))
     tgt = make_target(arc * 2.0, closed=False)
     assert not tgt.closed
-    r = synthesize(tgt, topologies=["four-bar"], time_limit=0.1, samples=1024, count=400,
-                   screen_keep=32, refine=4, steps=200)
+    # rank and refine: the shapes of the closed run above (one program for both); a smaller screen
+    r = synthesize(tgt, topologies=["four-bar"], time_limit=0.1, count=400, samples=1024)
     best = r.best
     assert best.stop_deg - best.start_deg < 300
     assert best.distance <= 1.5 * _floor(tgt.points, False)
