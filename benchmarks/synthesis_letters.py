@@ -38,9 +38,8 @@ import numpy as np  # noqa: E402
 
 jax.config.update("jax_enable_x64", True)
 
-from jaxlink.synthesis.api import synthesize  # noqa: E402
-from jaxlink.synthesis.distance import match  # noqa: E402
-from jaxlink.synthesis.target import make_target  # noqa: E402
+import jaxlink as jl  # noqa: E402
+from jaxlink.synthesis import match  # noqa: E402
 
 
 def link_curve(entry, n: int = 2000):
@@ -95,11 +94,11 @@ def main() -> int:
           f"{'time_s':>8}{'LInK':>9}{'joints':>7}{'stored':>8}")
     for ch in which:
         i = ord(ch) - 65
-        tgt = make_target(letters[i], source=f"letter {ch}")
         t0 = time.perf_counter()
-        r = synthesize(tgt, time_limit=args.time_limit, seed=args.seed, max_links=args.max_links,
-                       samples=args.samples)
+        r = jl.synthesize(letters[i], time_limit=args.time_limit, seed=args.seed, max_links=args.max_links,
+                          samples=args.samples)
         wall = time.perf_counter() - t0
+        tgt = r.target
         fb = [d for d in r.designs if d.topology == "four-bar"]
         theirs = stored = None
         if link is not None:
