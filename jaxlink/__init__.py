@@ -12,7 +12,9 @@ The public API (everything else is internal and may change):
 - kinematics: `transfer`, `Transfer`, `time_derivatives`;
 - kinetostatics: `reactions`, `solve_reactions`, `Reactions`, `body_motion`, `BodyMotion`;
 - dwell (a slider that stands still): `dwell_metrics`, `solve_stroke`, `dwell_roles`, `StrokeScale`, `DwellRoles`;
-- subpackages: `jaxlink.optimize` (design search), `jaxlink.cam` (cam-follower dynamics).
+- path synthesis (topology and dimensions for a target path): `synthesize`;
+- subpackages: `jaxlink.optimize` (design search), `jaxlink.cam` (cam-follower dynamics),
+  `jaxlink.synthesis` (the distance, targets, topologies).
 
 Every function takes `(mech, phis, …, p)` in that order. The library follows the dtype of its
 inputs: call `jax.config.update("jax_enable_x64", True)` for float64 (the command line does).
@@ -51,5 +53,6 @@ from .solvers.assemble import solve as solve
 from .solvers.assemble import solve_path as solve_path
 from .solvers.branch_points import BranchPoints as BranchPoints
 from .solvers.branch_points import branch_points as branch_points
+from .synthesis.api import synthesize as synthesize
 
 __version__ = "0.1.0"

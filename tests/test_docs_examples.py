@@ -212,7 +212,7 @@ def _public(module):
     return sorted(n for n in names if not n.startswith("_"))
 
 
-@pytest.mark.parametrize("module", ["jaxlink", "jaxlink.optimize", "jaxlink.cam", "jaxlink.study"])
+@pytest.mark.parametrize("module", ["jaxlink", "jaxlink.optimize", "jaxlink.cam", "jaxlink.study", "jaxlink.synthesis"])
 def test_python_api_names_every_export(module):
     import importlib
 

@@ -28,6 +28,7 @@ COMMAND_MODULES = (
     "jaxlink.cli.reactions",
     "jaxlink.cli.optimize",
     "jaxlink.cli.study",
+    "jaxlink.cli.synthesize",
 )
 
 

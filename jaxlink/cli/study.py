@@ -27,8 +27,11 @@ def register(sub) -> None:
         ),
     )
     add_mechanism_arguments(p, positions=False)
-    p.add_argument("--method", default=None, choices=("tolerance", "sample", "grid", "sensitivity"),
-                   help="the study (default: [study] method, else tolerance)")
+    p.add_argument("--method", default=None, choices=("tolerance", "sample", "grid", "sensitivity", "morris",
+                                                      "regression", "dgsm", "vector", "list", "centered"),
+                   help="the study (default: [study] method, else tolerance); morris, regression, dgsm: Morris "
+                        "elementary effects, correlation/regression coefficients, derivative-based indices "
+                        "(indices.csv); vector, list, centered: Dakota's parameter studies (study.csv)")
     p.add_argument("--samples", type=int, default=None, metavar="N",
                    help="tolerance: Monte Carlo samples (default 10000; 0: first order only); sample: designs "
                         "(default 1024); sensitivity: base samples N, N (D + 2) designs (default 1024); "
@@ -53,6 +56,11 @@ def register(sub) -> None:
     p.add_argument("--replot", metavar="DIR", default=None,
                    help="redraw every plot of the study written into DIR (study.json, study.npz) without "
                         "computing anything")
+    p.add_argument("--precision", type=float, default=None, metavar="EPS",
+                   help="tolerance (Monte Carlo) and sensitivity: double the samples until the largest interval "
+                        "half-width is at most EPS (default: [study] precision, else no rule)")
+    p.add_argument("--max-samples", type=int, default=None, metavar="N",
+                   help="the stopping rule's cap on the samples (default: [study] max_samples, else 65536)")
     p.add_argument("--no-plot", action="store_true", help="do not draw the plots")
     p.add_argument("--progress", choices=("auto", "on", "off"), default="auto",
                    help="progress bar of the sampled designs (auto: when stderr is a terminal)")
@@ -78,11 +86,20 @@ def cmd_study(args) -> int:
         if v is not None and v < lo:
             raise MechanismError(f"{opt} must be at least {lo}, got {v}")
     inputs = read_study(mech, method=args.method, samples=args.samples, positions=args.positions, seed=args.seed,
-                        chunk=args.chunk, sampler=args.sampler, bootstrap=args.bootstrap, robust=args.robust)
+                        chunk=args.chunk, sampler=args.sampler, bootstrap=args.bootstrap, robust=args.robust,
+                        precision=args.precision, max_samples=args.max_samples)
     study = Study(mech, inputs)
     extra = {"chunk": study.chunk, "command_line": {"set": list(args.set), "dtype": args.dtype,
                                                     "resume": bool(args.resume)}}
     show = sys.stderr.isatty() if args.progress == "auto" else args.progress == "on"
+    from . import study_methods
+
+    if study_methods.handles(inputs):  # morris, regression, dgsm, Dakota's studies, the stopping rule
+        if args.resume:
+            raise MechanismError(f"--resume covers tolerance, sample, grid and sensitivity without a stopping rule; "
+                                 f"not {inputs.method!r}" + (" with --precision" if inputs.precision else "")
+                                 + ": run it again without --resume")
+        return study_methods.run(args, mech, study, show, t0)
     if inputs.method != "tolerance":
         return _design_space(args, mech, study, show, t0, extra)
     bar = None

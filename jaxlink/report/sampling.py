@@ -23,7 +23,7 @@ import pathlib
 
 import numpy as np
 
-from ..study.inputs import Range
+from ..study.inputs import GIVEN, Range
 from ..study.responses import unit_names
 from ..study.sampling import SampleReport, SensitivityReport
 
@@ -147,7 +147,7 @@ def write_sample_all(out_dir, mech, rep: SampleReport, *, wall_time: float, plot
     d.mkdir(parents=True, exist_ok=True)
     files = [d / "study.csv"]
     write_study_csv(files[0], rep)
-    method = "grid" if rep.grid_shape is not None else "sample"
+    method = "grid" if rep.grid_shape is not None else rep.inputs.method if rep.inputs.method in GIVEN else "sample"
     if plot:
         files += draw_sample_plots(d, mech, rep)
     files += [d / "study.npz", d / "study.json"]

@@ -15,7 +15,13 @@ along the cycle and of the feasibility).
 - the analysis: `tolerance`, `Study`, `ToleranceReport`, `FirstOrder`, `MonteCarlo`, `draw`, `draws`;
 - streamed statistics: `Moments`;
 - the robust-design map (`[study] robust`): `RobustMap` (`SampleReport.robust`);
-- write-as-you-go and resume: `Checkpoint`, `resume_key`.
+- write-as-you-go and resume: `Checkpoint`, `resume_key`;
+- screening and more sensitivity: `morris` (elementary effects, `morris_indices`, `trajectories`),
+  `regression` (correlation and regression coefficients, `regression_indices`), `dgsm`
+  (derivative-based measures from the exact gradients, `dgsm_indices`);
+- correlated inputs: `iman_conover` (`[study.correlation]`);
+- the stopping rule: `converged_sensitivity`, `converged_tolerance`, `Convergence`;
+- Dakota's parameter studies: `parameter_study` (`vector`, `list`, `centered`).
 
 docs/methods/tolerance.md and docs/methods/sensitivity.md give the formulas;
 docs/reference/file-format.md §17 the table.
@@ -23,17 +29,37 @@ docs/reference/file-format.md §17 the table.
 
 from .checkpoint import Checkpoint as Checkpoint
 from .checkpoint import resume_key as resume_key
+from .convergence import Convergence as Convergence
+from .convergence import converged_sensitivity as converged_sensitivity
+from .convergence import converged_tolerance as converged_tolerance
+from .correlation import iman_conover as iman_conover
 from .design import to_values as to_values
 from .design import unit_blocks as unit_blocks
+from .dgsm import DGSMIndices as DGSMIndices
+from .dgsm import DGSMReport as DGSMReport
+from .dgsm import dgsm as dgsm
+from .dgsm import dgsm_indices as dgsm_indices
 from .inputs import Range as Range
 from .inputs import StudyInputs as StudyInputs
 from .inputs import Tolerance as Tolerance
 from .inputs import read_study as read_study
 from .moments import Moments as Moments
+from .morris import MorrisIndices as MorrisIndices
+from .morris import MorrisReport as MorrisReport
+from .morris import box_values as box_values
+from .morris import morris as morris
+from .morris import morris_indices as morris_indices
+from .morris import trajectories as trajectories
+from .parameter_studies import parameter_study as parameter_study
+from .regression import RegressionIndices as RegressionIndices
+from .regression import RegressionReport as RegressionReport
+from .regression import regression as regression
+from .regression import regression_indices as regression_indices
 from .responses import Responses as Responses
 from .robust import RobustMap as RobustMap
 from .sampling import SampleReport as SampleReport
 from .sampling import SensitivityReport as SensitivityReport
+from .sampling import evaluate as evaluate
 from .sampling import sample as sample
 from .sampling import sensitivity as sensitivity
 from .sobol import SobolAccumulator as SobolAccumulator

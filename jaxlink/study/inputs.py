@@ -50,18 +50,24 @@ from typing import Any, Mapping, NamedTuple
 
 from ..errors import MechanismError
 
-METHODS = ("tolerance", "sample", "grid", "sensitivity")
+METHODS = ("tolerance", "sample", "grid", "sensitivity", "morris", "regression", "dgsm", "vector", "list", "centered")
+#: the methods over the ranges (or the tolerances' distributions) that draw their own designs
+DRAWN = ("sample", "sensitivity", "morris", "regression", "dgsm")
+#: Dakota's parameter studies: designs given by the file (`parameter_studies.read_designs`)
+GIVEN = ("vector", "list", "centered")
 SAMPLERS = ("sobol", "lhs", "halton", "random")
 DISTRIBUTIONS = ("normal", "uniform")
 METRICS = ("stroke", "speed", "acceleration", "deviation")
 KNOWN_KEYS = {"method", "positions", "points", "metrics", "samples", "seed", "distribution", "k", "chunk",
-              "rpm", "tolerances", "ranges", "sampler", "levels", "bootstrap", "confidence", "robust", "limits"}
+              "rpm", "tolerances", "ranges", "sampler", "levels", "bootstrap", "confidence", "robust", "limits",
+              "correlation", "precision", "max_samples", "final", "steps", "list", "step"}
 TOLERANCE_KEYS = {"tol", "sigma", "radius", "distribution", "k"}
 DEFAULTS: dict = {"method": "tolerance", "positions": 360, "metrics": ("stroke", "deviation"), "samples": 10000,
             "seed": 0, "distribution": "normal", "k": 3.0, "sampler": "sobol", "levels": 11, "bootstrap": 100,
             "confidence": 0.95}
 #: the default number of samples of the other methods (`sensitivity`: base samples N, N (D + 2) designs)
-DEFAULT_SAMPLES = {"tolerance": 10000, "sample": 1024, "sensitivity": 1024, "grid": 0}
+DEFAULT_SAMPLES = {"tolerance": 10000, "sample": 1024, "sensitivity": 1024, "grid": 0, "morris": 64,
+                   "regression": 1024, "dgsm": 256, "vector": 0, "list": 0, "centered": 0}
 
 
 class Tolerance(NamedTuple):
@@ -105,7 +111,11 @@ class StudyInputs(NamedTuple):
     (the unit-cube sequence of `sample` and `sensitivity`), `bootstrap` (resamples of the Sobol'
     intervals), `confidence` (their level); `robust` (`sample`, `grid`: the robust-design map, the
     first-order tolerance report of every design, `jaxlink.study.robust`), `limits` (tuple of
-    `(output, low, high)`: specification limits of scalar responses, file units, for Cpk)."""
+    `(output, low, high)`: specification limits of scalar responses, file units, for Cpk);
+    `correlation` (the rank correlations between inputs:
+    `(name, name, rho)` triples, `correlation.py`), `precision` and `max_samples` (the stopping rule,
+    `convergence.py`; None: no rule), `designs` (the rows of a `vector`, `list` or `centered` study,
+    file units, `parameter_studies.py`), `morris_levels` (the Morris grid's levels p)."""
 
     method: str
     tolerances: tuple
@@ -122,6 +132,11 @@ class StudyInputs(NamedTuple):
     confidence: float = 0.95
     robust: bool = False
     limits: tuple = ()
+    correlation: tuple = ()
+    precision: float | None = None
+    max_samples: int = 65536
+    designs: tuple = ()
+    morris_levels: int = 4
 
     @property
     def factors(self) -> tuple:
@@ -156,8 +171,7 @@ def _read_study(mech, table, overrides) -> StudyInputs:
             raise _err(mech, f"unknown key '{k}'; known keys: {', '.join(sorted(KNOWN_KEYS))}", k)
     method = t.get("method", DEFAULTS["method"])
     if method not in METHODS:
-        raise _err(mech, f"'method' must be one of {', '.join(map(repr, METHODS))} (Dakota's vector, list "
-                         f"and centered studies are not yet built), got {method!r}", "method")
+        raise _err(mech, f"'method' must be one of {', '.join(map(repr, METHODS))}, got {method!r}", "method")
     positions = _integer(mech, t, "positions", 8, 100_000)
     if "samples" not in t:
         t["samples"] = DEFAULT_SAMPLES[method]
@@ -196,7 +210,29 @@ def _read_study(mech, table, overrides) -> StudyInputs:
     if not isinstance(metrics, (list, tuple)) or any(m not in METRICS for m in metrics):
         raise _err(mech, f"'metrics' must be a list of {', '.join(map(repr, METRICS))}, got {metrics!r}", "metrics")
 
+    morris_levels = 4
+    if method == "morris":  # `levels`: the Morris grid's p (one integer), not the grid's
+        morris_levels = _integer(mech, {"levels": t.pop("levels", 4)}, "levels", 2, 1000)
+        if morris_levels % 2:
+            raise _err(mech, f"'levels' of a Morris study must be even (Δ = p / (2 (p − 1))), got {morris_levels}",
+                       "levels")
     ranges = _ranges(mech, t.get("ranges"), t.get("levels", DEFAULTS["levels"]))
+    designs: tuple = ()
+    if method in GIVEN:
+        from .given import read_designs
+
+        names, rows = read_designs(mech, method, t, _err)
+        ranges = tuple(Range(p, (p,), mech.kinds[p], float(rows[:, j].min()), float(rows[:, j].max()), 1)
+                       for j, p in enumerate(names))
+        designs = tuple(tuple(float(v) for v in r) for r in rows)
+    elif any(k in t for k in ("final", "steps", "list", "step")):
+        k = next(k for k in ("final", "steps", "list", "step") if k in t)
+        raise _err(mech, f"'{k}' belongs to the vector, list and centered studies, not to {method!r}", k)
+    precision = _number(mech, t, "precision") if "precision" in t else None
+    if precision is not None and not (0 < precision < 1 and method in ("tolerance", "sensitivity")):
+        raise _err(mech, f"'precision' (the stopping rule of tolerance's Monte Carlo and sensitivity) must lie "
+                         f"between 0 and 1 with one of those methods, got {precision:g} with {method!r}", "precision")
+    max_samples = _integer(mech, t, "max_samples", 2, 10**10) if "max_samples" in t else 65536
     tol_raw = t.get("tolerances")
     robust = t.get("robust", False)
     if not isinstance(robust, bool):
@@ -209,12 +245,15 @@ def _read_study(mech, table, overrides) -> StudyInputs:
     limits = _limits(mech, t.get("limits"))
     if method == "grid" and not ranges:
         raise _err(mech, "the grid method needs [study.ranges]: NAME = [low, high] (file units)", "ranges")
-    if method in ("sample", "sensitivity") and not ranges and not tol_raw:
+    if method in DRAWN and not ranges and not tol_raw:
         raise _err(mech, f"the {method} method needs [study.ranges] (NAME = [low, high], file units) or "
                          "[study.tolerances]", "ranges")
+    more: dict[str, Any] = dict(precision=precision, max_samples=max_samples, designs=designs,
+                                morris_levels=morris_levels)
     if method != "tolerance" and not tol_raw:
-        return StudyInputs(method, (), positions, tuple(points), tuple(dict.fromkeys(metrics)), samples, seed,
-                           chunk, rpm, ranges, sampler, bootstrap, confidence, robust, limits)
+        out = StudyInputs(method, (), positions, tuple(points), tuple(dict.fromkeys(metrics)), samples, seed,
+                          chunk, rpm, ranges, sampler, bootstrap, confidence, robust, limits, **more)
+        return _correlated(mech, out, t)
     if not isinstance(tol_raw, Mapping) or not tol_raw:
         raise _err(mech, "[study.tolerances] must give at least one tolerance: NAME = t, or NAME = { tol = t, "
                          "distribution = \"uniform\" }, { sigma = s } or { radius = r } (a pivot's zone)",
@@ -228,8 +267,9 @@ def _read_study(mech, table, overrides) -> StudyInputs:
                 raise _err(mech, f"'{p}' carries two tolerances", f"tolerances.{name}")
             seen.add(p)
         tolerances.append(tol)
-    return StudyInputs(method, tuple(tolerances), positions, tuple(points), tuple(dict.fromkeys(metrics)),
-                       samples, seed, chunk, rpm, ranges, sampler, bootstrap, confidence, robust, limits)
+    out = StudyInputs(method, tuple(tolerances), positions, tuple(points), tuple(dict.fromkeys(metrics)),
+                      samples, seed, chunk, rpm, ranges, sampler, bootstrap, confidence, robust, limits, **more)
+    return _correlated(mech, out, t)
 
 
 def _limits(mech, raw) -> tuple:
@@ -253,6 +293,16 @@ def _limits(mech, raw) -> tuple:
                              f"a one-sided limit), got {entry!r}", f"limits.{name}")
         out.append((str(name), vals[0], vals[1]))
     return tuple(out)
+
+
+
+def _correlated(mech, inputs: StudyInputs, t) -> StudyInputs:
+    """`inputs` with the `[study.correlation]` of `t` (checked: `correlation.read_correlation`)."""
+    if "correlation" not in t:
+        return inputs
+    from .correlation import read_correlation
+
+    return inputs._replace(correlation=read_correlation(mech, inputs, t["correlation"], _err))
 
 
 def _ranges(mech, raw, levels_raw) -> tuple:

@@ -31,6 +31,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..errors import MechanismError
+from .correlation import correlate
 from .design import grid_shape, grid_values, to_values, unit_blocks
 from .inputs import StudyInputs
 from .responses import unit_names
@@ -97,6 +98,16 @@ class SensitivityReport(NamedTuple):
     certificate: str
     warnings: list
     timings: dict
+
+
+def evaluate(study: Study, x) -> tuple:
+    """The responses of designs `x` (n, T: the study's parameters in file units) as `sample` computes
+    them: (responses (n, M) in the labels' units — with each point's path deviation appended when the
+    study asks for it —, feasible (n,) over the whole cycle, labels (M,)). The file's design is the
+    reference of the deviations; infeasible rows are kept (flagged), never dropped."""
+    ev = _Evaluator(study)
+    v, ok = ev(np.asarray(x, dtype=float))
+    return v, ok, ev.labels
 
 
 class _Evaluator:
@@ -194,8 +205,8 @@ def sample(mech, inputs: StudyInputs | None = None, *, samples: int | None = Non
     else:
         shape = None
         n = inputs.samples if samples is None else int(samples)
-        blocks = (to_values(inputs, study.x0, u)
-                  for u in unit_blocks(inputs.sampler, T, n, inputs.seed, study.chunk))
+        blocks = (to_values(inputs, study.x0, correlate(inputs, u, [inputs.seed, 2, i]))
+                  for i, u in enumerate(unit_blocks(inputs.sampler, T, n, inputs.seed, study.chunk)))
     done = 0
     saved = None if checkpoint is None else checkpoint.load()
     if saved is not None:

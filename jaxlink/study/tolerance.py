@@ -151,6 +151,10 @@ def draw(inputs: StudyInputs, block: int, size: int = BLOCK) -> np.ndarray:
             cols.append(rng.uniform(-t.half_width, t.half_width, size))
         else:
             cols.append(t.sigma * rng.standard_normal(size))
+    if inputs.correlation:  # Iman–Conover on its own stream: the independent draws are unchanged
+        from .correlation import correlate
+
+        return correlate(inputs, np.stack(cols, axis=1), [inputs.seed, block, 1])
     return np.stack(cols, axis=1)
 
 

@@ -1,0 +1,146 @@
+"""Path synthesis on the LINK-ABC letters (Nobari et al. 2024): per letter the best design found
+within a time limit, its distance (jaxlink.synthesis.distance: the symmetric chamfer of the
+normalised, arclength-resampled curves at the best rotation, n = 200), joints and time; beside it
+LInK's published mechanism for the letter (`alpha_res.npy`: adjacency, joint positions, frame
+flags, θ0, θ1), traced here from θ0 to θ1 (2000 inputs, the crank's absolute angle, each
+dyad on the branch of the stored pose) and scored with the same metric, and the chamfer distance LInK
+stored for it. (The stored (2000, 2) curve beside them is not the mechanism's path: it lies within
+0.0000–0.0008 of the closed letters, the target as LInK transformed it.)
+
+The letters have no licence: they are read from a path (`--letters`, default `$JAXLINK_LINKABC`,
+e.g. /work/data/linkabc/alphabet.npy, a (26, 200, 2) array, A..Z) and never copied into the
+repository; LInK's mechanisms from `alpha_res.npy` beside it when present. The four-bar is
+always searched, so the answer is never worse than the best four-bar found.
+
+    python benchmarks/synthesis_letters.py --letters /work/data/linkabc/alphabet.npy \
+        --only CDILOSUV --time-limit 100 [--cores 2]
+
+Writes benchmarks/results/synthesis_letters.json (the table, the settings, the machine).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import sys
+import time
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).parent))
+from _cores import pin_from_argv  # noqa: E402
+
+pin_from_argv()
+
+import jax  # noqa: E402
+import numpy as np  # noqa: E402
+
+jax.config.update("jax_enable_x64", True)
+
+import jaxlink as jl  # noqa: E402
+from jaxlink.synthesis import match  # noqa: E402
+
+
+def link_curve(entry, n: int = 2000):
+    """The path of LInK's mechanism (its last joint) for θ from θ0 to θ1: (n, 2), and whether every
+    dyad closed. Joint 0 the crank's pivot, joint 1 the crank at angle θ; each later moving joint on
+    its first two earlier neighbours, on the side (cross-product sign) of the stored pose."""
+    a, x, nt = (np.asarray(v, float) for v in entry[0][:3])
+    th0, th1 = float(entry[0][3]), float(entry[0][4])
+    nj = int((a.sum(-1) > 0).sum())
+    a, x, fixed = a[:nj, :nj], x[:nj], nt[:nj, 0] > 0
+    th = np.linspace(th0, th1, n)
+    pos = np.repeat(x[None], n, 0)
+    pos[:, 1] = x[0] + np.hypot(*(x[1] - x[0])) * np.stack([np.cos(th), np.sin(th)], -1)
+    ok = True
+    for k in range(2, nj):
+        if fixed[k]:
+            continue
+        i, j = np.flatnonzero(a[k, :k])[:2]
+        l1, l2 = np.hypot(*(x[k] - x[i])), np.hypot(*(x[k] - x[j]))
+        w0, v0 = x[j] - x[i], x[k] - x[i]
+        sg = 1.0 if w0[0] * v0[1] - w0[1] * v0[0] >= 0 else -1.0
+        w = pos[:, j] - pos[:, i]
+        d2 = (w * w).sum(-1)
+        d = np.sqrt(d2)
+        aa = (l1 * l1 - l2 * l2 + d2) / (2 * d)
+        h2 = l1 * l1 - aa * aa
+        ok &= bool(np.all(h2 >= 0))
+        perp = np.stack([-w[:, 1], w[:, 0]], -1)
+        pos[:, k] = pos[:, i] + (aa / d)[:, None] * w + (sg * np.sqrt(np.maximum(h2, 0)) / d)[:, None] * perp
+    return pos[:, nj - 1], ok
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--letters", default=os.environ.get("JAXLINK_LINKABC"), help="alphabet.npy (26, 200, 2)")
+    ap.add_argument("--only", default=None, help="letters to run, e.g. CDILOSUV (default all)")
+    ap.add_argument("--time-limit", type=float, default=100.0, help="seconds per letter (default 100)")
+    ap.add_argument("--max-links", type=int, default=8)
+    ap.add_argument("--samples", type=int, default=8192)
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--cores", type=int, default=None, help="pin to this many cores")
+    ap.add_argument("--out", default=str(Path(__file__).parent / "results" / "synthesis_letters.json"))
+    args = ap.parse_args()
+    if not args.letters:
+        ap.error("give --letters PATH or set JAXLINK_LINKABC")
+    letters = np.load(args.letters)
+    res_path = Path(args.letters).with_name("alpha_res.npy")
+    link = np.load(res_path, allow_pickle=True) if res_path.exists() else None
+    which = [c for c in (args.only or "ABCDEFGHIJKLMNOPQRSTUVWXYZ")]
+    rows = []
+    print(f"{'letter':<7}{'closed':<7}{'topology':<26}{'joints':>7}{'distance':>10}{'four-bar':>10}"
+          f"{'time_s':>8}{'LInK':>9}{'joints':>7}{'stored':>8}")
+    for ch in which:
+        i = ord(ch) - 65
+        t0 = time.perf_counter()
+        r = jl.synthesize(letters[i], time_limit=args.time_limit, seed=args.seed, max_links=args.max_links,
+                          samples=args.samples)
+        wall = time.perf_counter() - t0
+        tgt = r.target
+        fb = [d for d in r.designs if d.topology == "four-bar"]
+        theirs = stored = None
+        if link is not None:
+            curve, ok = link_curve(link[i])
+            theirs = match(curve, letters[i], closed=tgt.closed).distance if ok else None
+            stored = float(link[i][1][0])
+        b = r.best if r.designs else None
+        row = {"letter": ch, "closed": tgt.closed, "topology": b.topology if b else None,
+               "joints": b.joints if b else None, "links": b.links if b else None,
+               "distance": b.distance if b else None, "four_bar": fb[0].distance if fb else None,
+               "time_s": wall, "found_s": b.found_s if b else None, "link_distance": theirs,
+               "link_stored_chamfer": stored,
+               "link_joints": int((np.asarray(link[i][0][0]).sum(-1) > 0).sum()) if link is not None else None}
+        rows.append(row)
+        print(f"{ch:<7}{str(tgt.closed):<7}{row['topology'] or '-':<26}{row['joints'] or 0:>7}"
+              f"{row['distance'] or float('nan'):>10.4f}{row['four_bar'] or float('nan'):>10.4f}{wall:>8.1f}"
+              f"{theirs if theirs is not None else float('nan'):>9.4f}{row['link_joints'] or 0:>7}"
+              f"{stored if stored is not None else float('nan'):>8.4f}", flush=True)
+    d = np.array([r["distance"] for r in rows if r["distance"] is not None])
+    ld = np.array([r["link_distance"] for r in rows if r["link_distance"] is not None])
+    summary = {"letters": len(rows), "mean": float(d.mean()) if len(d) else None,
+               "median": float(np.median(d)) if len(d) else None,
+               "link_mean": float(ld.mean()) if len(ld) else None,
+               "link_median": float(np.median(ld)) if len(ld) else None,
+               "four_bar_mean": float(np.mean([r["four_bar"] for r in rows if r["four_bar"] is not None] or [np.nan])),
+               "worse_than_four_bar": int(sum(r["distance"] > r["four_bar"] for r in rows
+                                              if r["distance"] is not None and r["four_bar"] is not None)),
+               "better_than_link": int(sum(r["distance"] < r["link_distance"] for r in rows
+                                           if r["distance"] is not None and r["link_distance"] is not None)),
+               "max_time_s": max(r["time_s"] for r in rows)}
+    print(f"mean {summary['mean']:.4f}  median {summary['median']:.4f}  (LInK's mechanisms, same metric: mean "
+          f"{summary['link_mean']}, median {summary['link_median']}); better than LInK on "
+          f"{summary['better_than_link']}/{len(rows)}; slowest {summary['max_time_s']:.1f} s")
+    out = {"benchmark": "synthesis_letters", "settings": vars(args) | {"letters": "LINK-ABC (not stored)"},
+           "machine": {"cpus": len(os.sched_getaffinity(0)), "platform": platform.platform(),
+                       "device": str(jax.devices()[0])},
+           "rows": rows, "summary": summary}
+    Path(args.out).parent.mkdir(parents=True, exist_ok=True)
+    Path(args.out).write_text(json.dumps(out, indent=2) + "\n")
+    print(f"wrote {args.out}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,70 @@
+"""`jaxlink synthesize`: a linkage whose point follows a target path (jaxlink/synthesis/)."""
+
+from __future__ import annotations
+
+import sys
+
+
+def register(sub) -> None:
+    p = sub.add_parser(
+        "synthesize", help="find a linkage (topology and dimensions) whose point traces a target path",
+        description=(
+            "Path synthesis: one-degree-of-freedom revolute linkages grown by dyads (the four-bar, Watt and "
+            "Stephenson six-bars) whose traced point follows TARGET (a .csv of x, y, a .npy (N, 2) array or an "
+            ".svg path) up to translation, rotation and scale, scored by the symmetric chamfer distance of the "
+            "normalised curves (docs/methods/synthesis.md). Writes the best mechanism as a sketch file that "
+            "`jaxlink kinematics` replays, every topology's best, a JSON of the ranked designs and a plot."
+        ),
+    )
+    p.add_argument("target", metavar="TARGET", help="the target path: .csv, .npy or .svg")
+    g = p.add_mutually_exclusive_group()
+    g.add_argument("--closed", dest="closed", action="store_const", const=True, default=None,
+                   help="a closed loop, matched by a whole crank turn")
+    g.add_argument("--open", dest="closed", action="store_const", const=False,
+                   help="an open path, matched by a sub-interval of the crank turn")
+    p.add_argument("--time-limit", type=float, default=60.0, metavar="S",
+                   help="seconds for the search (default 60; at least one round runs)")
+    p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+    p.add_argument("--max-links", type=int, default=8, help="most links, the frame counted (default 8)")
+    p.add_argument("--topologies", default=None, metavar="NAMES",
+                   help="comma-separated topology names to search (default: all up to --max-links)")
+    p.add_argument("--samples", type=int, default=8192, metavar="N",
+                   help="random candidates per topology and round (default 8192)")
+    p.add_argument("--points", type=int, default=200, metavar="N",
+                   help="points of the arclength resampling in the distance (default 200)")
+    p.add_argument("--count", type=int, default=1000, metavar="N",
+                   help="crank positions the reported curve is traced at (default 1000)")
+    p.add_argument("--flip-y", action="store_true", help="mirror the target's y (an SVG drawn with y down)")
+    p.add_argument("--out", metavar="DIR", default="synthesis",
+                   help="write the files into this folder (default synthesis)")
+    p.add_argument("--no-plot", action="store_true", help="do not draw the plot")
+    p.set_defaults(func=cmd_synthesize)
+
+
+def cmd_synthesize(args) -> int:
+    import jax
+
+    jax.config.update("jax_enable_x64", True)
+    from ..errors import MechanismError
+    from ..report.synthesis import table, write_all
+    from ..synthesis.api import synthesize
+    from ..synthesis.target import load_target
+
+    if args.points < 8 or args.count < 8 or args.samples < 1:
+        raise MechanismError("--points and --count must be >= 8, --samples >= 1")
+    tgt = load_target(args.target, closed=args.closed, flip_y=args.flip_y)
+    names = [n.strip() for n in args.topologies.split(",") if n.strip()] if args.topologies else None
+    res = synthesize(tgt, time_limit=args.time_limit, seed=args.seed, max_links=args.max_links,
+                     topologies=names, n_points=args.points, count=args.count, samples=args.samples,
+                     log=lambda s: print(s, file=sys.stderr))
+    if not res.designs:
+        print("no design assembled over its interval: give more --time-limit or --samples", file=sys.stderr)
+        return 1
+    print(table(res))
+    for f in write_all(args.out, res, plot_it=not args.no_plot):
+        print(f"wrote {f}")
+    b = res.best
+    span = (f"--start {b.start_deg!r} --step {360 / b.n_inputs!r} --count {b.n_inputs}" if res.target.closed
+            else f"--start {b.start_deg!r} --stop {b.stop_deg!r} --count {b.n_inputs}")
+    print(f"replay      jaxlink kinematics {args.out}/synthesized.toml {span} --outputs position")
+    return 0

@@ -1,0 +1,99 @@
+"""Formatting a synthesis (`jaxlink.synthesis.api.Synthesis`): the table, the JSON of the ranked
+designs, the plot of the target over the traced curve with the linkage, the mechanism file."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+
+
+def table(res) -> str:
+    """One line per design: topology, joints, links, distance, crank interval, time found."""
+    lines = [f"target      {res.target.source}: {len(res.target.points)} points, "
+             f"{'closed' if res.target.closed else 'open'}" + (f", in {res.target.unit}" if res.target.unit else ""),
+             f"{'rank':>4}  {'topology':<26}{'joints':>7}{'links':>6}{'distance':>11}"
+             f"{'start_deg':>11}{'stop_deg':>11}{'found_s':>9}  pareto"]
+    for i, d in enumerate(res.designs, 1):
+        lines.append(f"{i:>4}  {d.topology:<26}{d.joints:>7}{d.links:>6}{d.distance:>11.5f}"
+                     f"{d.start_deg:>11.3f}{d.stop_deg:>11.3f}{d.found_s:>9.1f}  {'*' if d.pareto else ''}")
+    lines.append(f"wall time   {res.wall_s:.1f} s")
+    return "\n".join(lines)
+
+
+def to_json(res) -> dict:
+    """The JSON of the ranked designs (docs/reference/cli.md, `jaxlink synthesize`)."""
+    t = res.target
+    return {
+        "target": {"source": t.source, "points": len(t.points), "closed": t.closed, "unit": t.unit},
+        "wall_s": res.wall_s,
+        "designs": [{
+            "rank": i, "topology": d.topology, "joints": d.joints, "links": d.links,
+            "distance": d.distance, "start_deg": d.start_deg, "stop_deg": d.stop_deg, "count": d.n_inputs,
+            "scale": d.scale, "rotation_deg": d.rotation_deg, "translation": list(d.translation),
+            "margin": d.margin, "lengths": d.lengths, "found_s": d.found_s, "pareto": d.pareto,
+            "joint_positions": d.sketch.tables()["sketch"]["joints"],
+            "links_joints": d.sketch.tables()["sketch"]["links"],
+            "frame": d.sketch.tables()["sketch"]["frame"],
+        } for i, d in enumerate(res.designs, 1)],
+    }
+
+
+def write_json(path, res) -> None:
+    Path(path).write_text(json.dumps(to_json(res), indent=2) + "\n")
+
+
+def plot(path, res) -> None:
+    """The target over the best design's traced curve, the linkage drawn at the interval's start."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    d = res.best
+    t = res.target.points
+    sk = d.sketch.tables()["sketch"]
+    fig, ax = plt.subplots(figsize=(6.4, 6.0))
+    tt = np.concatenate([t, t[:1]]) if res.target.closed else t
+    ax.plot(tt[:, 0], tt[:, 1], color="0.6", lw=4, alpha=0.6, label="target")
+    c = np.concatenate([d.curve, d.curve[:1]]) if res.target.closed else d.curve
+    ax.plot(c[:, 0], c[:, 1], color="C0", lw=1.5, label=f"traced ({d.topology})")
+    js = sk["joints"]
+    for names in sk["links"].values():
+        pts = np.array([js[n] for n in names] + ([js[names[0]]] if len(names) > 2 else []))
+        ax.plot(pts[:, 0], pts[:, 1], color="C1", lw=1.2)
+    for n, (x, y) in js.items():
+        frame = n in sk["frame"]
+        ax.plot([x], [y], marker="^" if frame else "o", color="k" if frame else "C1", ms=6 if frame else 4)
+        ax.annotate(n, (x, y), textcoords="offset points", xytext=(4, 4), fontsize=7)
+    unit = d.sketch.length_unit
+    ax.set_xlabel(f"x [{unit}]")
+    ax.set_ylabel(f"y [{unit}]")
+    ax.set_aspect("equal")
+    ax.set_title(f"{d.topology}: distance {d.distance:.4f}, crank {d.start_deg:.1f}° to {d.stop_deg:.1f}°",
+                 fontsize=9)
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path)
+    plt.close(fig)
+
+
+def write_all(out_dir, res, *, plot_it: bool = True) -> list[Path]:
+    """`synthesized.toml` (the best design), `designs/RANK-TOPOLOGY.toml` (each), `synthesis.json`,
+    `synthesis.png` in `out_dir`."""
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    files = [out / "synthesized.toml"]
+    files[0].write_text(res.best.sketch.toml())
+    (out / "designs").mkdir(exist_ok=True)
+    for i, d in enumerate(res.designs, 1):
+        f = out / "designs" / f"{i}-{d.topology}.toml"
+        f.write_text(d.sketch.toml())
+        files.append(f)
+    write_json(out / "synthesis.json", res)
+    files.append(out / "synthesis.json")
+    if plot_it:
+        plot(out / "synthesis.png", res)
+        files.append(out / "synthesis.png")
+    return files

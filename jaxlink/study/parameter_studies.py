@@ -1,0 +1,67 @@
+"""Dakota's parameter studies: the designs a `vector`, `list` or `centered` study evaluates, read
+from `[study]` (file units), every one evaluated in one batched call (`parameter_study`) and
+reported as a `sample` study's (`SampleReport`: study.csv, one row per design, its feasibility
+flag and its scalar responses).
+
+- `vector` (Dakota's `vector_parameter_study`): `final = { NAME = value, … }` and `steps = n`
+  (default 10): the n + 1 designs x_k = x₀ + (k / n) (x_final − x₀), k = 0 … n, from the file's
+  design x₀ to the final point along a straight line (the parameters not named keep the file's
+  values);
+- `list` (`list_parameter_study`): `list = { NAME = [v₁, v₂, …], … }` (columns of equal length):
+  those designs, in order;
+- `centered` (`centered_parameter_study`): `step = { NAME = Δ, … }` (Δ > 0) and `steps = k`
+  (default 1): the file's design first, then for each named parameter in order the 2k designs
+  x₀ + i Δ e_j, i = −k … −1, 1 … k (one parameter moved at a time): 1 + 2 k T designs.
+
+The studied parameters are the named ones; each becomes a `Range` over the values it takes (its
+`low`, `high` the least and largest, for the manifest), so the study's compiled batch is that of
+a `sample` study over them. The designs are read by `given.read_designs` into
+`StudyInputs.designs`.
+"""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+from .inputs import StudyInputs
+from .sampling import SampleReport, _Evaluator, _study, _units
+
+
+def parameter_study(mech, inputs: StudyInputs | None = None, *, chunk=None, options=None, progress=None,
+                    study=None):
+    """Evaluate the designs of a `vector`, `list` or `centered` study (`inputs.designs`, see the
+    module doc) in batches of `chunk` (one batched call where they fit one).
+
+    **Arguments:** as `sample`. **Returns:** a `SampleReport` (`grid_shape` None), its rows the
+    designs in the order above; an infeasible design kept and flagged, as `sample`'s.
+    """
+    t0 = time.perf_counter()
+    study = _study(mech, inputs, study, chunk, options)
+    inputs = study.inputs
+    if inputs.method not in ("vector", "list", "centered") or not inputs.designs:
+        raise ValueError("parameter_study needs the inputs of a vector, list or centered study")
+    ev = _Evaluator(study)
+    values = np.asarray(inputs.designs, float)
+    scalar = np.asarray([k is None for (_, _, k) in ev.labels], bool)
+    vs, oks = [], []
+    for a in range(0, len(values), study.chunk):
+        v, ok = ev(values[a:a + study.chunk])
+        vs.append(v[:, scalar])
+        oks.append(ok)
+        if progress is not None:
+            progress(len(ok))
+    assert ev.nominal is not None
+    feasible = np.concatenate(oks)
+    responses = np.concatenate(vs)
+    warnings = []
+    bad = int(np.count_nonzero(~feasible))
+    if bad:
+        warnings.append(f"{bad} of {len(feasible)} designs do not assemble over the whole cycle on the nominal's "
+                        f"branch ({study.responses.certificate}): kept and flagged (feasible = 0), their responses "
+                        "left empty")
+    labels = tuple((name, unit) for (name, unit, k) in ev.labels if k is None)
+    timings = {"evaluate": ev.seconds, "total": time.perf_counter() - t0}
+    return SampleReport(inputs, inputs.parameters, _units(mech, inputs), np.asarray(study.x0), values, feasible,
+                        labels, responses, ev.nominal[scalar], None, study.responses.certificate, warnings, timings)

@@ -1,0 +1,21 @@
+"""Path synthesis: a linkage — its topology and its dimensions — whose point follows a target path.
+
+- `target`: the target curve read from CSV, NPY or SVG; arclength resampling;
+- `distance`: the field's distance (symmetric chamfer of the normalised curves at the best
+  rotation), the placement, the ordered distance, the smooth surrogate;
+- `topology`: one-DOF revolute linkages grown by dyads (four-bar, Watt and Stephenson six-bars);
+- `tracer`: batched (JAX) and exact (NumPy) tracing from a pose, the dyads' reach margins;
+- `assembly`: the check that a candidate assembles over its whole interval on its branch;
+- `search`: screen → rank → refine → score rounds;
+- `mechanism`: a candidate as a sketch file; `api`: `synthesize`.
+
+`jaxlink.synthesize` is the entry point; `jaxlink.synthesis.distance.match` the metric.
+"""
+
+from .api import Design as Design
+from .api import Synthesis as Synthesis
+from .api import synthesize as synthesize
+from .distance import Match as Match
+from .distance import match as match
+from .target import Target as Target
+from .target import load_target as load_target

@@ -1,0 +1,123 @@
+"""`jaxlink.synthesize`: a linkage whose point traces a target path — topology and dimensions."""
+
+from __future__ import annotations
+
+import math
+import time
+from pathlib import Path
+from typing import Any, Callable, NamedTuple
+
+import numpy as np
+
+from ..errors import MechanismError
+from ..model.sketch import Sketch
+from . import distance as _dist
+from .mechanism import crank_angle, placed_pose, to_sketch
+from .search import Candidate, interval_offsets, search
+from .target import Target, load_target, make_target
+from .topology import topologies as builtin_topologies
+from .tracer import lengths
+
+
+class Design(NamedTuple):
+    """One answer, in the target's coordinates and unit.
+
+    - `topology`: its name; `joints`, `links` (the frame counted as a link);
+    - `distance`: the distance to the target (`jaxlink.synthesis.distance`, n = `n_points`);
+    - `start_deg`, `stop_deg`: the crank's angle (the file's input, degrees) at the traced interval's
+      ends (a closed target: a whole turn, `stop_deg` = `start_deg` + 360); `n_inputs`: the inputs
+      the distance was computed at (a closed target: `n_inputs` steps of 360/n_inputs degrees from
+      `start_deg`; an open one: `n_inputs` inputs from `start_deg` to `stop_deg`, both included);
+    - `scale`, `rotation_deg`, `translation`: the placement of the search's normalised mechanism
+      onto the target (x ↦ k R(φ) x + t);
+    - `margin`: the smallest reach margin of its dyads over the interval (`assembly`);
+    - `lengths`: the crank's and every dyad link's length (target unit);
+    - `sketch`: the mechanism (`jaxlink.Sketch`), `curve`: the traced path (n_inputs, 2);
+    - `found_s`: seconds from the start of the search to this answer; `pareto`: no other answer
+      has both fewer or as many joints and a smaller distance.
+    """
+
+    topology: str
+    joints: int
+    links: int
+    distance: float
+    start_deg: float
+    stop_deg: float
+    n_inputs: int
+    scale: float
+    rotation_deg: float
+    translation: tuple[float, float]
+    margin: float
+    lengths: dict
+    sketch: Sketch
+    curve: np.ndarray
+    found_s: float
+    pareto: bool
+
+
+class Synthesis(NamedTuple):
+    """`target`; `designs`: the best answer of each topology, best first; `wall_s`: the search's time."""
+
+    target: Target
+    designs: list[Design]
+    wall_s: float
+
+    @property
+    def best(self) -> Design:
+        return self.designs[0]
+
+
+def _design(c: Candidate, target: Target, n_trace: int, name: str) -> Design:
+    m = c.match
+    placed = placed_pose(c.topology, c.pose, c.start, m)
+    a0 = crank_angle(placed)
+    start = math.degrees(a0)
+    span = 2 * math.pi if target.closed else c.span
+    th = interval_offsets(c.start, c.span, n_trace, target.closed)
+    from .tracer import trace_exact
+
+    curve = _dist.place(trace_exact(c.topology, c.pose, th)[0][:, c.topology.traced], m)
+    sk = to_sketch(c.topology, placed, name=name, unit=target.unit,
+                   description=f"{c.topology.name}, synthesized for {target.source} (distance {m.distance:.6g})")
+    return Design(c.topology.name, c.topology.n_joints, c.topology.n_links, float(m.distance), start,
+                  start + math.degrees(span), n_trace, float(m.scale), math.degrees(m.rotation),
+                  (float(m.translation[0]), float(m.translation[1])), float(c.assembly.margin),
+                  {k: v * m.scale for k, v in lengths(c.topology, c.pose).items()}, sk, curve, c.found_s, False)
+
+
+def synthesize(target: Any, *, closed: bool | None = None, time_limit: float = 60.0, seed: int = 0,
+               max_links: int = 8, topologies: list[str] | None = None, n_points: int = _dist.N_POINTS,
+               count: int = 1000, samples: int = 8192, name: str = "synthesized",
+               log: Callable[[str], None] | None = None, **search_options) -> Synthesis:
+    """Find linkages whose traced point follows `target` (a path to a .csv/.npy/.svg file, an
+    (N, 2) array or a `Target`), up to `max_links` links, within about `time_limit` seconds.
+    `closed`: match a closed loop over a whole crank turn, or an open path over a sub-interval
+    (default: from the target, `jaxlink.synthesis.target`). `topologies`: names of the built-in
+    topologies to search (`jaxlink.synthesis.topology.topologies`; default all up to `max_links`).
+    Returns the best design of each topology, best first (`Synthesis.best`); `seed` makes it
+    repeatable for a given number of rounds. Computes in float64 for the answers (NumPy) whatever JAX's x64 setting."""
+    t0 = time.perf_counter()
+    if isinstance(target, Target):
+        tgt = target if closed is None else target._replace(closed=bool(closed))
+    elif isinstance(target, (str, Path)):
+        tgt = load_target(target, closed=closed)
+    else:
+        tgt = make_target(target, closed=closed)
+    topos = builtin_topologies(max_links)
+    if topologies is not None:
+        known = {t.name: t for t in builtin_topologies(99)}
+        bad = [n for n in topologies if n not in known]
+        if bad:
+            raise MechanismError(f"unknown topology {bad[0]!r}; the topologies are {', '.join(known)}")
+        topos = [known[n] for n in topologies]
+    found = search(tgt, topos, time_limit=time_limit, seed=seed, samples=samples, n_trace=count,
+                   n_points=n_points, t0=t0, log=log, **search_options)
+    best: dict[str, Candidate] = {}
+    for c in found:
+        if c.topology.name not in best:
+            best[c.topology.name] = c
+    designs = [_design(c, tgt, count, name) for c in best.values()]
+    designs.sort(key=lambda d: d.distance)
+    designs = [d._replace(pareto=not any(o.joints <= d.joints and o.distance < d.distance for o in designs))
+               for d in designs]
+    return Synthesis(tgt, designs, time.perf_counter() - t0)

@@ -1,0 +1,291 @@
+"""The search: screen many random candidates of every topology on the batched tracer, refine the
+best by gradient on the smooth surrogate, check and score the refined ones exactly.
+
+One **round** (repeated with fresh candidates until the time limit):
+
+1. **screen**: `samples` random poses per topology (every joint uniform in [−1, 1]²), traced at
+   `SCREEN_T` inputs over a turn; each sub-interval (a closed target: the whole turn; an open one:
+   16 starts × 4 lengths, a quarter to a whole turn), if every dyad closes at its samples, is
+   resampled to 32 points by arclength, normalised, and described by its sorted radii (a rotation
+   invariant); the `screen_keep` per topology nearest to the target's descriptor go on;
+2. **rank**: those, traced at 64 inputs, by a chamfer distance at 32 rotations; the best `refine`
+   per topology are rotated to their best angle;
+3. **refine**: from the second round on, half of each topology's slots restart from the two best
+   refined poses so far (the first as it is, the others jittered by `jitter` × its RMS radius);
+   Adam (optax) on the pose (and the sub-interval's start and length for an open
+   target) against the surrogate `distance.soft_chamfer`, plus a penalty keeping every dyad's
+   margin above `MARGIN_FLOOR` at the samples; all candidates of all topologies in one batch;
+4. **score**: each refined candidate traced exactly (`tracer.trace_exact`, float64) at `n_trace`
+   inputs, checked over its whole interval (`assembly.certify`) and matched (`distance.match`).
+"""
+
+from __future__ import annotations
+
+import functools
+import time
+from typing import NamedTuple
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import optax
+
+from . import distance as _dist
+from .assembly import Assembly, certify
+from .target import Target, arclength_resample
+from .topology import CRANK, Topology, as_arrays
+from .tracer import trace, trace_exact
+
+SCREEN_T = 64
+DESC_N = 32
+RANK_T = 64
+REFINE_T = 128
+TARGET_N = 100
+MARGIN_FLOOR = 0.02
+_STARTS = 16
+_SPANS = (0.25, 0.5, 0.75, 1.0)
+_ROT = 32
+_DT = jnp.float32
+
+
+class Candidate(NamedTuple):
+    """A scored mechanism: its `topology`, `pose` (joint positions at input offset 0, the search's
+    own coordinates), input offsets `start`, `span` (rad) of the traced interval, the exact
+    `match` (distance and placement), the `assembly` check, and when it was found (s)."""
+
+    topology: Topology
+    pose: np.ndarray
+    start: float
+    span: float
+    match: _dist.Match
+    assembly: Assembly
+    found_s: float
+
+
+def _sorted_radii(curve, closed: bool):
+    """The descriptor: sorted distances from the centroid of the arclength-resampled, normalised curve."""
+    seg = jnp.sqrt(jnp.sum(jnp.diff(curve, axis=0) ** 2, axis=-1) + 1e-12)
+    s = jnp.concatenate([jnp.zeros(1, curve.dtype), jnp.cumsum(seg)])
+    q = s[-1] * (jnp.arange(DESC_N) / (DESC_N if closed else DESC_N - 1))
+    c = jnp.stack([jnp.interp(q, s, curve[:, 0]), jnp.interp(q, s, curve[:, 1])], axis=-1)
+    c = c - c.mean(0)
+    r = jnp.sqrt(jnp.sum(c * c, axis=-1) + 1e-12)
+    return jnp.sort(r / jnp.sqrt(jnp.mean(r * r)))
+
+
+def _desc(points: np.ndarray, closed: bool) -> np.ndarray:
+    """`_sorted_radii` in NumPy (the target's descriptor)."""
+    c = arclength_resample(points, DESC_N, closed)
+    c = c - c.mean(0)
+    r = np.sqrt(np.sum(c * c, axis=-1) + 1e-12)
+    return np.sort(r / np.sqrt(np.mean(r * r))).astype(np.float32)
+
+
+def _subarcs(closed: bool):
+    if closed:
+        return np.array([[0.0, 2 * np.pi]], np.float32)
+    return np.array([[2 * np.pi * i / _STARTS, 2 * np.pi * f] for i in range(_STARTS) for f in _SPANS], np.float32)
+
+
+@functools.partial(jax.jit, static_argnames=("closed",))
+def _screen(key, parents, active, traced, target_desc, *, closed: bool):
+    """Descriptor distances (B, S) of random poses (B, J, 2) over the sub-arcs; inf where a dyad does not close."""
+    b = parents.shape[0]
+    poses = jax.random.uniform(key, (b, CRANK + 1 + parents.shape[1], 2), _DT, -1.0, 1.0)
+    th = jnp.asarray(2 * np.pi * np.arange(SCREEN_T + 1) / SCREEN_T, _DT)
+    pos, marg = jax.vmap(trace, in_axes=(0, 0, 0, None))(parents, active, poses, th)
+    curves = pos[jnp.arange(b), :, traced]                    # (B, T+1, 2), the last = the first
+    ok = jnp.min(marg, axis=-1) > 0                            # (B, T+1)
+    arcs = jnp.asarray(_subarcs(closed))
+    u = jnp.linspace(0.0, 1.0, 33 if not closed else SCREEN_T + 1, dtype=_DT)
+
+    def one(curve, okk, arc):
+        x = (arc[0] + arc[1] * u) / (2 * np.pi) * SCREEN_T
+        i0 = jnp.floor(x).astype(jnp.int32)
+        f = (x - i0)[:, None]
+        i0 = i0 % SCREEN_T
+        pts = (1 - f) * curve[i0] + f * curve[i0 + 1]
+        valid = jnp.all(okk[i0] & okk[i0 + 1])
+        d = jnp.mean(jnp.abs(_sorted_radii(pts, closed) - target_desc))
+        return jnp.where(valid, d, jnp.inf)
+
+    d = jax.vmap(lambda c, o: jax.vmap(lambda a: one(c, o, a))(arcs))(curves, ok)
+    return poses, d
+
+
+def _normalised(c, w):
+    mean = jnp.sum(w[:, None] * c, axis=0)
+    c = c - mean
+    return c / jnp.sqrt(jnp.sum(w * jnp.sum(c * c, axis=1)) + 1e-30)
+
+
+def _u(n: int, closed: bool) -> np.ndarray:
+    """Fractions of the interval sampled: a closed turn without its end, an open one with both."""
+    return (np.arange(n) / (n if closed else n - 1)).astype(np.float32)
+
+
+@jax.jit
+def _rank(parents, active, traced, poses, arcs, target, closed, u):
+    """(chamfer at the best of `_ROT` rotations, that rotation) of each candidate over its sub-arc.
+    `closed` a 0/1 array (one program for open and closed targets), `u` from `_u`."""
+
+    def one(par, act, tr, pose, arc):
+        pos, marg = trace(par, act, pose, arc[0] + arc[1] * u)
+        c = pos[:, tr]
+        w = _dist.arclength_weights(c, closed)
+        c = _normalised(c, w)
+        phis = 2 * np.pi * jnp.arange(_ROT, dtype=_DT) / _ROT
+        rot = jnp.stack([jnp.stack([jnp.cos(phis), -jnp.sin(phis)], -1),
+                         jnp.stack([jnp.sin(phis), jnp.cos(phis)], -1)], -2)  # (R, 2, 2)
+        rc = jnp.einsum("rij,tj->rti", rot, c)
+        d = jnp.sqrt(jnp.sum((rc[:, :, None] - target[None, None]) ** 2, -1) + 1e-12)
+        val = jnp.sum(w * d.min(2), axis=1) + d.min(1).mean(1)
+        k = jnp.argmin(val)
+        return jnp.where(jnp.min(marg) > 0, val[k], jnp.inf), phis[k]
+
+    return jax.vmap(one)(parents, active, traced, poses, arcs)
+
+
+def _loss(params, par, act, tr, target, closed, u):
+    pose, arc = params
+    start, span = arc[0], jnp.where(closed > 0, jnp.asarray(2 * np.pi, arc.dtype), arc[1])
+    pos, marg = trace(par, act, pose, start + span * u)
+    fit = _dist.soft_chamfer(pos[:, tr], target, closed, tau=0.01)
+    pen = jnp.mean(jnp.sum(jax.nn.relu(MARGIN_FLOOR - marg) ** 2, axis=-1))
+    shorter = (1 - closed) * (jax.nn.relu(span - 2 * np.pi) ** 2 + jax.nn.relu(0.05 - span) ** 2)
+    return fit + 100.0 * pen + 100.0 * shorter
+
+
+@functools.partial(jax.jit, static_argnames=("steps",))
+def _refine(parents, active, traced, poses, arcs, target, lr, closed, u, *, steps: int):
+    opt = optax.adam(lr)
+
+    def one(par, act, tr, pose, arc):
+        params = (pose, arc)
+        state = opt.init(params)
+        g = jax.value_and_grad(_loss)
+
+        def step(carry, _):
+            params, state = carry
+            v, grads = g(params, par, act, tr, target, closed, u)
+            grads = jax.tree_util.tree_map(lambda x: jnp.where(jnp.isfinite(x), x, 0.0), grads)
+            upd, state = opt.update(grads, state, params)
+            return (optax.apply_updates(params, upd), state), v
+
+        (params, _), vals = jax.lax.scan(step, (params, state), None, length=steps)
+        return params[0], params[1], vals[-1]
+
+    return jax.vmap(one)(parents, active, traced, poses, arcs)
+
+
+def _rotate(poses, phi):
+    c, s = np.cos(phi)[:, None], np.sin(phi)[:, None]
+    x, y = poses[..., 0], poses[..., 1]
+    return np.stack([c * x - s * y, s * x + c * y], axis=-1)
+
+
+def interval_offsets(start: float, span: float, n: int, closed: bool) -> np.ndarray:
+    """The input offsets of the scored trace: a closed curve n inputs over a turn (the last one
+    before the first again), an open one n inputs from start to start + span, both ends included."""
+    if closed:
+        return start + 2 * np.pi * np.arange(n) / n
+    return start + span * np.linspace(0.0, 1.0, n)
+
+
+def score(topo: Topology, pose: np.ndarray, start: float, span: float, target: Target, *,
+          n_trace: int, n_points: int) -> tuple[_dist.Match, Assembly]:
+    """The exact distance and the assembly check of one candidate (float64)."""
+    th = interval_offsets(start, span, n_trace, target.closed)
+    pos, marg = trace_exact(topo, pose, th)
+    asm = certify(topo, pose, start, 2 * np.pi if target.closed else span)
+    if not np.all(marg > 0):
+        return _dist.Match(np.inf, 0.0, 1.0, np.zeros(2)), asm
+    return _dist.match(pos[:, topo.traced], target.points, closed=target.closed, n=n_points), asm
+
+
+def search(target: Target, topos: list[Topology], *, time_limit: float, seed: int = 0,
+           samples: int = 8192, screen_keep: int = 128, refine: int = 8, steps: int = 300,
+           n_trace: int = 1000, n_points: int = _dist.N_POINTS, per_topology: int = 2,
+           lr: float = 0.01, jitter: float = 0.02, t0: float | None = None, log=None) -> list[Candidate]:
+    """Rounds of screen → rank → refine → score until `time_limit` seconds (at least one round).
+    Returns every scored candidate that assembles, best first."""
+    t0 = time.perf_counter() if t0 is None else t0
+    closed = target.closed
+    arr = as_arrays(topos)
+    tpts = _dist.normalise(arclength_resample(target.points, TARGET_N, closed))[0]
+    tdesc = _desc(target.points, closed)
+    trank = jnp.asarray(_dist.normalise(arclength_resample(target.points, RANK_T, closed))[0], _DT)
+    ttarget = jnp.asarray(tpts, _DT)
+    arcs_all = _subarcs(closed)
+    flag = np.float32(closed)
+    key = jax.random.PRNGKey(seed)
+    found: list[Candidate] = []
+    rnd = 0
+    round_start = time.perf_counter()
+    rng = np.random.default_rng(seed)
+    elites: dict[int, list] = {}       # per topology: the best two refined (pose, arc) so far
+    elite_vals: dict[int, list] = {}
+    while True:
+        rnd += 1
+        picks_pose, picks_arc, picks_topo = [], [], []
+        for ti in range(len(topos)):
+            key, sub = jax.random.split(key)
+            par = np.repeat(arr.parents[ti:ti + 1], samples, 0)
+            act = np.repeat(arr.active[ti:ti + 1], samples, 0)
+            trc = np.repeat(arr.traced[ti:ti + 1], samples, 0)
+            poses, d = _screen(sub, par, act, trc, tdesc, closed=closed)
+            d = np.asarray(d)
+            flat = np.argsort(d, axis=None)[:screen_keep]  # a fixed count: the same shapes every round
+            ci, ai = np.unravel_index(flat, d.shape)
+            picks_pose.append(np.asarray(poses)[ci])
+            picks_arc.append(arcs_all[ai])
+            picks_topo.append(np.full(len(ci), ti))
+        pose = np.concatenate(picks_pose)
+        arc = np.concatenate(picks_arc)
+        tix = np.concatenate(picks_topo)
+        val, phi = _rank(arr.parents[tix], arr.active[tix], arr.traced[tix], pose, arc, trank, flag,
+                         _u(RANK_T, closed))
+        val, phi = np.asarray(val), np.asarray(phi)
+        # `refine` per topology (the same shapes every round); the inf ones are dropped after
+        sel = np.concatenate([np.flatnonzero(tix == ti)[np.argsort(val[tix == ti], kind="stable")][:refine]
+                              for ti in range(len(topos))])
+        # rotate each pose so that its curve is near the target's orientation; the offsets stay
+        poses0 = _rotate(pose[sel], phi[sel]).astype(np.float32)
+        arcs0 = arc[sel].copy()
+        rank_ok = np.isfinite(val[sel])
+        # restarts: the last half of each topology's slots refine again the best refined so far, jittered
+        for ti, el in elites.items():
+            slots = np.flatnonzero(tix[sel] == ti)[refine - refine // 2:]
+            for k, slot in enumerate(slots):
+                ep, ea = el[k % len(el)]
+                scale = np.sqrt(np.mean(np.sum((ep - ep.mean(0)) ** 2, -1)))
+                poses0[slot] = ep + rng.normal(0.0, jitter * scale, ep.shape) * (k > 0)
+                arcs0[slot] = ea + (rng.normal(0.0, jitter, 2) * (k > 0) if not closed else 0.0)
+                rank_ok[slot] = True
+        p, a, v = _refine(arr.parents[tix[sel]], arr.active[tix[sel]], arr.traced[tix[sel]], poses0,
+                          arcs0, ttarget, np.float32(lr), flag, _u(REFINE_T, closed), steps=steps)
+        p, a, v = np.asarray(p, float), np.asarray(a, float), np.asarray(v)
+        for ti in range(len(topos)):
+            idx = np.flatnonzero((tix[sel] == ti) & np.isfinite(v) & rank_ok)
+            pool = [(v[i], p[i].astype(np.float32), a[i].astype(np.float32)) for i in idx]
+            pool += elite_vals.get(ti, [])
+            pool.sort(key=lambda e: e[0])
+            elite_vals[ti] = pool[:2]
+            elites[ti] = [(e[1], e[2]) for e in pool[:2]]
+        for ti in range(len(topos)):
+            idx = np.flatnonzero(tix[sel] == ti)
+            idx = idx[np.isfinite(v[idx]) & rank_ok[idx]]
+            for i in idx[np.argsort(v[idx])][:per_topology]:
+                start, span = float(a[i, 0]), (2 * np.pi if closed else float(a[i, 1]))
+                m, asm = score(topos[ti], p[i], start, span, target, n_trace=n_trace, n_points=n_points)
+                if np.isfinite(m.distance) and asm.ok:
+                    found.append(Candidate(topos[ti], p[i], start, span, m, asm, time.perf_counter() - t0))
+        if log is not None:
+            best = min((c.match.distance for c in found), default=float("inf"))
+            log(f"round {rnd}: {len(found)} candidates, best distance {best:.4f}, {time.perf_counter() - t0:.1f} s")
+        now = time.perf_counter()
+        dur, round_start = now - round_start, now
+        if now - t0 + (0.5 if rnd == 1 else 1.0) * dur > time_limit:
+            break  # another round, as long as this one (the first: half, its compiling aside), would overrun
+    found.sort(key=lambda c: c.match.distance)
+    return found

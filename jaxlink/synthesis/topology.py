@@ -1,0 +1,140 @@
+"""One-degree-of-freedom revolute linkages grown by dyads.
+
+A topology places its joints in order: frame joints `F0, F1, F2` (indices 0–2; F0 is the crank's
+pivot), the crank joint `C` (index 3) turning about F0, then each further joint attached to two
+earlier joints by two lengths and a branch sign (a dyad: circle–circle intersection). A dyad whose
+two parents lie on one rigid body adds a point of that body (a ternary link, a coupler point); on
+two different bodies it adds two binary links. So the four-bar with its coupler point, the Watt and
+Stephenson six-bars and, growing further, eight-bars are all such lists (`grow`). The traced point
+is any moving joint.
+
+The topologies of one search are padded to the same number of dyads so that all of them share one
+batched program (`as_arrays`): padding dyads are inactive.
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import numpy as np
+
+N_FRAME = 3
+CRANK = 3
+MAX_DYADS = 6
+MAX_JOINTS = CRANK + 1 + MAX_DYADS
+FRAME_BODY = -1
+
+
+class Topology(NamedTuple):
+    """A dyadic linkage. `dyads[k] = (p1, p2)`: joint `CRANK + 1 + k` is attached to joints p1 and
+    p2; `traced`: the joint whose path is matched."""
+
+    name: str
+    dyads: tuple[tuple[int, int], ...]
+    traced: int
+
+    @property
+    def n_joints(self) -> int:
+        """Joints of the linkage (the frame joints it uses included)."""
+        return len(self.used_frame()) + 1 + len(self.dyads)
+
+    @property
+    def n_links(self) -> int:
+        """Links, the frame included."""
+        return 1 + len(bodies(self))
+
+    def used_frame(self) -> list[int]:
+        return sorted({0} | {p for d in self.dyads for p in d if p < N_FRAME})
+
+
+def grow(topo: Topology, p1: int, p2: int, *, name: str | None = None, trace: bool = True) -> Topology:
+    """The topology with one more joint attached to joints p1 and p2 (traced when `trace`)."""
+    j = CRANK + 1 + len(topo.dyads)
+    if not (0 <= p1 < j and 0 <= p2 < j) or p1 == p2:
+        raise ValueError(f"a dyad attaches to two different earlier joints, got {p1}, {p2}")
+    if p1 < N_FRAME and p2 < N_FRAME:
+        raise ValueError("a dyad on two frame joints does not move")
+    return Topology(name or topo.name, topo.dyads + ((p1, p2),), j if trace else topo.traced)
+
+
+def bodies(topo: Topology) -> list[tuple[int, ...]]:
+    """The moving rigid bodies, each a tuple of joints (its first joint its reference; the crank
+    first): a dyad on two joints of one body adds a point of it, else two binary links."""
+    out: list[list[int]] = [[0, CRANK]]
+    frame = set(range(N_FRAME))
+    for k, (p1, p2) in enumerate(topo.dyads):
+        j = CRANK + 1 + k
+        home = [b for b in out if p1 in b and p2 in b]
+        if home:
+            home[0].append(j)
+        elif p1 in frame and p2 in frame:  # pragma: no cover - refused by grow
+            raise ValueError("a dyad on two frame joints")
+        else:
+            out.append([p1, j])
+            out.append([p2, j])
+    return [tuple(b) for b in out]
+
+
+def _four_bar() -> Topology:
+    t = Topology("four-bar", (), CRANK)
+    t = grow(t, CRANK, 1, trace=False)  # B: the coupler on the rocker F1–B   (joint 4)
+    return grow(t, CRANK, 4)            # P: the coupler point on C–B          (joint 5)
+
+
+def _six_bar(name: str, x1: str, x2: str) -> Topology:
+    """The four-bar and a dyad D between a point X1 of one body and a point X2 of another, traced at a
+    point E on the link X1–D. Points: the coupler's P, a new point of the crank (on F0–C) or of the
+    rocker (on F1–B), the frame's F2."""
+    t = _four_bar()
+    t = Topology(name, t.dyads, t.traced)
+    at = {}
+    for body in (x1, x2):
+        if body == "coupler":
+            at[body] = 5
+        elif body == "frame":
+            at[body] = 2
+        elif body == "crank":
+            t = grow(t, 0, CRANK, trace=False)
+            at[body] = CRANK + len(t.dyads)
+        elif body == "rocker":
+            t = grow(t, 1, 4, trace=False)
+            at[body] = CRANK + len(t.dyads)
+    t = grow(t, at[x1], at[x2], trace=False)
+    d = CRANK + len(t.dyads)
+    return grow(t, at[x1], d)
+
+
+def topologies(max_links: int = 8) -> list[Topology]:
+    """The built-in topologies up to `max_links` links (the frame included): the four-bar with a
+    coupler point; the six-bars — Watt (the two ternary links adjacent) with the dyad between
+    coupler and crank, coupler and rocker, rocker and frame, crank and frame; Stephenson (not
+    adjacent) between coupler and frame, rocker and crank."""
+    out = [_four_bar()]
+    six = [("watt-coupler-crank", "coupler", "crank"), ("watt-coupler-rocker", "coupler", "rocker"),
+           ("watt-rocker-frame", "rocker", "frame"), ("watt-crank-frame", "crank", "frame"),
+           ("stephenson-coupler-frame", "coupler", "frame"), ("stephenson-rocker-crank", "rocker", "crank")]
+    out += [_six_bar(*s) for s in six]
+    return [t for t in out if t.n_links <= max_links]
+
+
+class TopologyArrays(NamedTuple):
+    """Topologies as padded arrays, one row per topology (a batch shares one program)."""
+
+    parents: np.ndarray  # (…, D, 2) int32
+    active: np.ndarray   # (…, D) bool
+    traced: np.ndarray   # (…,) int32
+
+
+def as_arrays(topos: list[Topology]) -> TopologyArrays:
+    """Stack topologies, padding each to the most dyads among them (inactive, attached to C and F1)."""
+    nd = max(len(t.dyads) for t in topos)
+    par = np.zeros((len(topos), nd, 2), np.int32)
+    act = np.zeros((len(topos), nd), bool)
+    for i, t in enumerate(topos):
+        if len(t.dyads) > MAX_DYADS:
+            raise ValueError(f"{t.name}: more than {MAX_DYADS} dyads")
+        par[i, :, 0], par[i, :, 1] = CRANK, 1
+        for k, (p1, p2) in enumerate(t.dyads):
+            par[i, k] = (p1, p2)
+            act[i, k] = True
+    return TopologyArrays(par, act, np.array([t.traced for t in topos], np.int32))

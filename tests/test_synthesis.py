@@ -1,0 +1,197 @@
+"""Path synthesis (jaxlink/synthesis/): the distance against closed forms and an independent scipy
+computation, recovery of planted four-bar coupler curves (closed, and open by a sub-interval), the
+replay of the written file through `jaxlink kinematics`, and the rejection of a candidate that
+fails to assemble between two samples."""
+
+import csv
+import math
+
+import numpy as np
+import pytest
+from scipy.interpolate import interp1d
+from scipy.spatial.distance import cdist
+
+from jaxlink.cli import main as cli_main
+from jaxlink.synthesis import distance as D
+from jaxlink.synthesis import topology as T
+from jaxlink.synthesis.api import synthesize
+from jaxlink.synthesis.assembly import certify
+from jaxlink.synthesis.search import score
+from jaxlink.synthesis.target import arclength_resample, load_target, make_target
+from jaxlink.synthesis.tracer import trace_exact
+
+FOUR_BAR = T.topologies()[0]
+# a crank-rocker: F0 = 0, F1 = (1, 0), crank 0.3, coupler point P off the coupler C–B
+POSE = np.array([[0, 0], [1.0, 0], [0, 0], [0.3, 0.0], [1.1, 0.8], [0.5, 0.9]])
+
+
+def _coupler(thetas):
+    return trace_exact(FOUR_BAR, POSE, thetas)[0][:, FOUR_BAR.traced]
+
+
+def _ellipse(a, b, n=4000):
+    t = 2 * np.pi * np.arange(n) / n
+    return np.stack([a * np.cos(t), b * np.sin(t)], 1)
+
+
+def test_distance_invariance_and_zero():
+    c = _coupler(np.linspace(0, 2 * np.pi, 500, endpoint=False))
+    e = _ellipse(1.0, 0.5, 700) + [0.2, 0.1]
+    m0 = D.match(e, c, closed=True)
+    a = 0.7
+    rot = np.array([[math.cos(a), -math.sin(a)], [math.sin(a), math.cos(a)]])
+    moved = 3.7 * c @ rot.T + [12.0, -5.0]
+    m1 = D.match(e, moved, closed=True)
+    assert abs(m1.distance - m0.distance) < 1e-12
+    assert abs(m1.scale / m0.scale - 3.7) < 1e-9
+    # the placement puts the curve onto the target: placed, its best rotation is 0 and D the same
+    placed = D.place(e, m1)
+    m2 = D.match(placed, moved, closed=True)
+    assert abs(m2.distance - m1.distance) < 1e-12 and min(m2.rotation, 2 * np.pi - m2.rotation) < 1e-7
+    assert D.match(c, c, closed=True).distance < 1e-15
+    # the ordered distance: point i against point i, the rotation in closed form
+    od, phi = D.ordered_distance(c @ rot.T * 2.0 + [1.0, 1.0], c)
+    assert od < 1e-13 and abs(phi + a) < 1e-12
+    od, _ = D.ordered_distance(np.roll(c, 5, axis=0), c)
+    assert od > 0.01
+
+
+def _independent(curve_a, curve_b, n=200):
+    """The chamfer at the best rotation, computed another way: scipy's interpolation, every
+    distance (cdist), a 0.01° grid of rotations."""
+    def res(c):
+        c = np.concatenate([c, c[:1]])
+        s = np.concatenate([[0], np.cumsum(np.hypot(*np.diff(c, axis=0).T))])
+        pts = interp1d(s, c, axis=0)(s[-1] * np.arange(n) / n)
+        pts = pts - pts.mean(0)
+        return pts / np.sqrt((pts ** 2).sum(1).mean())
+
+    a, b = res(curve_a), res(curve_b)
+    def f(phi):
+        r = np.array([[np.cos(phi), -np.sin(phi)], [np.sin(phi), np.cos(phi)]])
+        d = cdist(a @ r.T, b)
+        return d.min(1).mean() + d.min(0).mean()
+
+    coarse = np.radians(np.arange(0, 360, 0.5))
+    phi0 = coarse[np.argmin([f(p) for p in coarse])]
+    return min(f(p) for p in phi0 + np.radians(np.arange(-0.5, 0.5, 0.001)))
+
+
+def test_distance_circle_ellipse_against_scipy():
+    circ, ell = _ellipse(1.0, 1.0), _ellipse(2.0, 1.0)
+    d = D.match(circ, ell, closed=True).distance
+    ref = _independent(circ, ell)
+    assert d <= ref + 1e-12 and ref - d < 1e-4  # ours is the exact minimum over φ; the grid's is above it
+    assert 0.05 < d < 0.5
+
+
+def _floor(points, closed, n=D.N_POINTS):
+    """The discretisation floor: the target against itself resampled half a spacing along."""
+    fine = arclength_resample(points, 20 * n, closed)
+    return D.chamfer(D.normalise(arclength_resample(fine, n, closed))[0],
+                     D.normalise(arclength_resample(np.roll(fine, -10, axis=0), n, closed))[0])
+
+
+def test_planted_four_bar_closed_and_replay(tmp_path):
+    """`jaxlink synthesize` on a four-bar's coupler curve: at the discretisation floor, the files
+    written, and `jaxlink kinematics` on the written file traces the reported distance."""
+    import json
+
+    target = _coupler(np.linspace(0, 2 * np.pi, 400, endpoint=False)) * 40 + [100, 50]
+    f = tmp_path / "target.csv"
+    f.write_text("x_mm,y_mm\n" + "\n".join(f"{float(x)!r},{float(y)!r}" for x, y in target))
+    tgt = load_target(f)
+    assert tgt.closed and tgt.unit == "mm"
+    out_dir = tmp_path / "syn"
+    assert cli_main(["synthesize", str(f), "--topologies", "four-bar", "--time-limit", "1", "--count", "400",
+                     "--out", str(out_dir)]) == 0
+    res = json.loads((out_dir / "synthesis.json").read_text())
+    best = res["designs"][0]
+    assert (out_dir / "synthesis.png").stat().st_size > 0 and best["topology"] == "four-bar"
+    assert best["distance"] <= 1.5 * _floor(tgt.points, True)
+    assert best["stop_deg"] - best["start_deg"] == 360.0 and best["margin"] > 0
+    # replay: `jaxlink kinematics` on the written file traces the same distance
+    out = tmp_path / "replay.csv"
+    rc = cli_main(["kinematics", str(out_dir / "synthesized.toml"), "--start", repr(best["start_deg"]),
+                   "--step", repr(360 / best["count"]), "--count", str(best["count"]), "--outputs", "position",
+                   "--units", "file", "--csv", str(out)])
+    assert rc == 0
+    rows = list(csv.DictReader(out.open()))
+    curve = np.array([[float(x["P_x_mm"]), float(x["P_y_mm"])] for x in rows])
+    assert abs(D.match(curve, tgt.points, closed=True).distance - best["distance"]) < 1e-9
+
+
+def test_planted_open_arc_by_subinterval():
+    arc = _coupler(np.linspace(1.0, 3.5, 300))
+    tgt = make_target(arc * 2.0, closed=False)
+    assert not tgt.closed
+    # rank and refine: the shapes of the closed run above (one program for both); a smaller screen
+    r = synthesize(tgt, topologies=["four-bar"], time_limit=0.1, count=400, samples=1024)
+    best = r.best
+    assert best.stop_deg - best.start_deg < 300
+    assert best.distance <= 1.5 * _floor(tgt.points, False)
+
+
+def test_fails_between_samples_is_rejected():
+    # F0 = 0, F1 = (−1, 0), crank 0.3 along +x at θ = 0: |B0 − C| = 1.3 is largest at θ = 0; links of
+    # 1.3 − ε together cannot reach there. Sampled at θ = ±h/2 the dyad closes.
+    n = 64
+    h = 2 * np.pi / n
+    dmax, dsample = 1.3, math.sqrt(1.0 + 0.09 + 0.6 * math.cos(h / 2))
+    reach = 0.5 * (dmax + dsample)          # between the sampled and the true largest distance
+    l1 = 0.6
+    pose = np.zeros((6, 2))
+    pose[1], pose[3] = (-1.0, 0.0), (0.3 * math.cos(h / 2), 0.3 * math.sin(h / 2))
+    c = pose[3]
+    w = pose[1] - c
+    d = np.hypot(*w)
+    l2 = reach - l1
+    a = (l1 ** 2 - l2 ** 2 + d ** 2) / (2 * d)
+    hh = math.sqrt(l1 ** 2 - a ** 2)
+    pose[4] = c + a / d * w + hh / d * np.array([-w[1], w[0]])
+    pose[5] = c + 0.5 * (pose[4] - c) + [0.0, 0.2]
+    offsets = h * np.arange(n)                     # inputs h/2 + k h: both sides of θ = 0, never on it
+    assert trace_exact(FOUR_BAR, pose, offsets)[1].min() > 0
+    asm = certify(FOUR_BAR, pose, 0.0, 2 * np.pi)
+    assert not asm.ok and asm.margin < 0
+    assert abs(((asm.where + h / 2 + np.pi) % (2 * np.pi)) - np.pi) < h / 2   # found at θ = 0
+    tgt = make_target(_coupler(offsets), closed=True)
+    assert not score(FOUR_BAR, pose, 0.0, 2 * np.pi, tgt, n_trace=n, n_points=100)[1].ok
+
+
+@pytest.mark.parametrize("d, closed", [("M 0 0 L 10 0 C 10 5 5 10 0 10 Z", True), ("M 0 0 q 5 5 10 0 h 5", False)])
+def test_svg_target(tmp_path, d, closed):
+    f = tmp_path / "t.svg"
+    f.write_text(f'<svg xmlns="http://www.w3.org/2000/svg"><path d="{d}"/></svg>')
+    t = load_target(f)
+    assert t.closed is closed and np.all(np.isfinite(t.points))
+    if not closed:
+        assert np.allclose(t.points[-1], [15, 0]) and np.allclose(t.points[16], [5, 2.5])  # q's midpoint
+
+
+def test_six_bar_sketch_replays_the_tracer(tmp_path):
+    """A Stephenson six-bar (6 dyads, plates on the crank, coupler, rocker and dyad) written as a
+    sketch: `jaxlink kinematics` traces the tracer's path (no search: the written-file check alone)."""
+    from jaxlink.synthesis.mechanism import placed_pose, to_sketch
+
+    topo = next(t for t in T.topologies() if t.name == "stephenson-rocker-crank")
+    rng = np.random.default_rng(1)
+    for _ in range(5000):
+        pose = rng.uniform(-1, 1, (T.CRANK + 1 + len(topo.dyads), 2))
+        if trace_exact(topo, pose, np.linspace(0, 2 * np.pi, 73))[1].min() > 0.05 and certify(
+                topo, pose, 0.0, 2 * np.pi).ok:
+            break
+    else:  # pragma: no cover
+        pytest.fail("no assemblable six-bar drawn")
+    m = D.Match(0.0, 0.4, 25.0, np.array([3.0, -2.0]))
+    placed = placed_pose(topo, pose, 0.0, m)
+    f = tmp_path / "six.toml"
+    f.write_text(to_sketch(topo, placed, unit="mm").toml())
+    start = math.degrees(math.atan2(*(placed[T.CRANK] - placed[0])[::-1]))
+    out = tmp_path / "six.csv"
+    assert cli_main(["kinematics", str(f), "--start", repr(start), "--step", "5", "--outputs", "position",
+                     "--units", "file", "--csv", str(out)]) == 0
+    rows = list(csv.DictReader(out.open()))
+    got = np.array([[float(x["P_x_mm"]), float(x["P_y_mm"])] for x in rows])
+    want = D.place(trace_exact(topo, pose, np.radians(5.0 * np.arange(72)))[0][:, topo.traced], m)
+    assert np.max(np.abs(got - want)) < 1e-9 * 25
