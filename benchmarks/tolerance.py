@@ -58,13 +58,18 @@ def run_case(name: str, samples: int) -> dict:
     study = st.Study(mech, inputs)
     first = study.first_order()
     cold_first = time.perf_counter() - t0
-    times = []
-    for _ in range(7):
+    st.tolerance(mech, study=study, samples=0)  # compile the true worst case's search too
+    times, with_worst = [], []
+    for _ in range(7):  # the first-order report alone (the goal's), then with the true worst case
+        t = time.perf_counter()
+        st.tolerance(mech, study=study, samples=0, worst=False)
+        times.append(time.perf_counter() - t)
         t = time.perf_counter()
         st.tolerance(mech, study=study, samples=0)
-        times.append(time.perf_counter() - t)
+        with_worst.append(time.perf_counter() - t)
     out = {"case": name, "parameters": len(inputs.parameters), "positions": 360, "responses": len(first.sigma_rss),
-           "first_order_cold_s": cold_first, "first_order_warm_s": statistics.median(times)}
+           "first_order_cold_s": cold_first, "first_order_warm_s": statistics.median(times),
+           "with_worst_case_warm_s": statistics.median(with_worst)}
     if samples:
         study.monte_carlo(study.chunk, first)  # compile
         t = time.perf_counter()
@@ -246,11 +251,11 @@ def main() -> None:
         out = subprocess.run([sys.executable, __file__, "--stream-one", n], capture_output=True, text=True, check=True)
         stream.append(json.loads(out.stdout.strip().splitlines()[-1]))
     robust = [run_robust(name, args.designs) for name in ROBUST_CASES] if args.designs else []
-    print(f"{'case':<16} {'T':>3} {'M':>6} {'1st order cold s':>17} {'warm s':>8} {'MC samples/s':>13}")
+    print(f"{'case':<16} {'T':>3} {'M':>6} {'1st order cold s':>17} {'warm s':>8} {'+worst s':>9} {'MC samples/s':>13}")
     for r in rows:
         mc = f"{r['mc_samples_per_s']:13.0f}" if "mc_samples_per_s" in r else f"{'–':>13}"
         print(f"{r['case']:<16} {r['parameters']:>3} {r['responses']:>6} {r['first_order_cold_s']:17.2f} "
-              f"{r['first_order_warm_s']:8.4f} {mc}")
+              f"{r['first_order_warm_s']:8.4f} {r['with_worst_case_warm_s']:9.4f} {mc}")
     if pyl:
         print(f"\nMonte Carlo of {pyl['samples']} samples × 360 positions, four lengths uniform ±0.05 mm: jaxlink "
               f"{pyl['jaxlink_samples_per_s']:.0f} samples/s warm, pylinkage analyze_tolerance "
