@@ -23,7 +23,8 @@ from __future__ import annotations
 
 import functools
 import time
-from typing import NamedTuple
+from concurrent.futures import ThreadPoolExecutor
+from typing import Callable, NamedTuple
 
 import jax
 import jax.numpy as jnp
@@ -46,6 +47,48 @@ _STARTS = 16
 _SPANS = (0.25, 0.5, 0.75, 1.0)
 _ROT = 32
 _DT = jnp.float32
+#: XLA options of the screen and the rank (run once a round: compiling them fast matters more than running them fast)
+_QUICK = {"xla_backend_optimization_level": 0}
+
+
+class Programs(NamedTuple):
+    """The three compiled programs of a search (`programs`): callables on the dynamic arguments."""
+
+    screen: Callable
+    rank: Callable
+    refine: Callable
+
+
+def programs(n_topos: int, n_dyads: int, closed: bool, *, samples: int, screen_keep: int, refine: int,
+             steps: int, quick_refine: bool = False) -> Programs:
+    """Compile the screen, the rank and the refinement for these shapes, all three at once (XLA
+    compiles in parallel threads; on a cold start compiling is most of a short search's time).
+    The screen and the rank compile at XLA's lowest optimisation level (about half the compile
+    time, their run time about the same); the refinement too when `quick_refine` (it then runs
+    about twice as long: for short searches)."""
+    nj = CRANK + 1 + n_dyads
+    i32, f32 = np.int32, np.float32
+
+    def args(b):
+        return np.zeros((b, n_dyads, 2), i32), np.zeros((b, n_dyads), bool), np.zeros(b, i32)
+
+    keep = min(screen_keep, samples * len(_subarcs(closed)))
+    nk, nr = keep * n_topos, min(refine, keep) * n_topos
+    arc = np.zeros((nk, 2), f32)
+    jobs = [
+        (_screen, (jax.random.PRNGKey(0), *args(samples), np.zeros(DESC_N, f32)), {"closed": closed}, _QUICK),
+        (_rank, (*args(nk), np.zeros((nk, nj, 2), f32), arc, np.zeros((RANK_T, 2), f32), f32(closed),
+                 _u(RANK_T, closed)), {}, _QUICK),
+        (_refine, (*args(nr), np.zeros((nr, nj, 2), f32), arc[:nr], np.zeros((TARGET_N, 2), f32), f32(0.01),
+                   f32(closed), _u(REFINE_T, closed)), {"steps": steps}, _QUICK if quick_refine else None),
+    ]
+
+    def build(job):
+        fun, a, static, options = job
+        return fun.lower(*a, **static).compile(options)
+
+    with ThreadPoolExecutor(len(jobs)) as ex:
+        return Programs(*ex.map(build, jobs))
 
 
 class Candidate(NamedTuple):
@@ -206,12 +249,17 @@ def score(topo: Topology, pose: np.ndarray, start: float, span: float, target: T
 def search(target: Target, topos: list[Topology], *, time_limit: float, seed: int = 0,
            samples: int = 8192, screen_keep: int = 128, refine: int = 8, steps: int = 300,
            n_trace: int = 1000, n_points: int = _dist.N_POINTS, per_topology: int = 2,
-           lr: float = 0.01, jitter: float = 0.02, t0: float | None = None, log=None) -> list[Candidate]:
+           lr: float = 0.01, jitter: float = 0.02, quick_refine: bool | None = None, t0: float | None = None,
+           log=None) -> list[Candidate]:
     """Rounds of screen → rank → refine → score until `time_limit` seconds (at least one round).
-    Returns every scored candidate that assembles, best first."""
+    `quick_refine` (`programs`; default: when `time_limit` ≤ 15 s) trades the refinement's run
+    time for its compile time. Returns every scored candidate that assembles, best first."""
     t0 = time.perf_counter() if t0 is None else t0
     closed = target.closed
     arr = as_arrays(topos)
+    prog = programs(len(topos), arr.parents.shape[1], closed, samples=samples, screen_keep=screen_keep,
+                    refine=refine, steps=steps,
+                    quick_refine=time_limit <= 15.0 if quick_refine is None else quick_refine)
     tpts = _dist.normalise(arclength_resample(target.points, TARGET_N, closed))[0]
     tdesc = _desc(target.points, closed)
     trank = jnp.asarray(_dist.normalise(arclength_resample(target.points, RANK_T, closed))[0], _DT)
@@ -233,7 +281,7 @@ def search(target: Target, topos: list[Topology], *, time_limit: float, seed: in
             par = np.repeat(arr.parents[ti:ti + 1], samples, 0)
             act = np.repeat(arr.active[ti:ti + 1], samples, 0)
             trc = np.repeat(arr.traced[ti:ti + 1], samples, 0)
-            poses, d = _screen(sub, par, act, trc, tdesc, closed=closed)
+            poses, d = prog.screen(sub, par, act, trc, tdesc)
             d = np.asarray(d)
             flat = np.argsort(d, axis=None)[:screen_keep]  # a fixed count: the same shapes every round
             ci, ai = np.unravel_index(flat, d.shape)
@@ -243,7 +291,7 @@ def search(target: Target, topos: list[Topology], *, time_limit: float, seed: in
         pose = np.concatenate(picks_pose)
         arc = np.concatenate(picks_arc)
         tix = np.concatenate(picks_topo)
-        val, phi = _rank(arr.parents[tix], arr.active[tix], arr.traced[tix], pose, arc, trank, flag,
+        val, phi = prog.rank(arr.parents[tix], arr.active[tix], arr.traced[tix], pose, arc, trank, flag,
                          _u(RANK_T, closed))
         val, phi = np.asarray(val), np.asarray(phi)
         # `refine` per topology (the same shapes every round); the inf ones are dropped after
@@ -262,8 +310,8 @@ def search(target: Target, topos: list[Topology], *, time_limit: float, seed: in
                 poses0[slot] = ep + rng.normal(0.0, jitter * scale, ep.shape) * (k > 0)
                 arcs0[slot] = ea + (rng.normal(0.0, jitter, 2) * (k > 0) if not closed else 0.0)
                 rank_ok[slot] = True
-        p, a, v = _refine(arr.parents[tix[sel]], arr.active[tix[sel]], arr.traced[tix[sel]], poses0,
-                          arcs0, ttarget, np.float32(lr), flag, _u(REFINE_T, closed), steps=steps)
+        p, a, v = prog.refine(arr.parents[tix[sel]], arr.active[tix[sel]], arr.traced[tix[sel]], poses0,
+                              arcs0, ttarget, np.float32(lr), flag, _u(REFINE_T, closed))
         p, a, v = np.asarray(p, float), np.asarray(a, float), np.asarray(v)
         for ti in range(len(topos)):
             idx = np.flatnonzero((tix[sel] == ti) & np.isfinite(v) & rank_ok)
