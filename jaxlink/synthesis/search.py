@@ -386,12 +386,12 @@ def search(target: Target, topos: list[Topology], *, time_limit: float, seed: in
         if polish:
             polish_dur = dur
         else:
-            full_dur, polish_dur = (0.5 if rnd == 1 else 1.0) * dur, now - t_ref
+            full_dur, polish_dur = dur, now - t_ref  # the compiling is done before the first round
         can_polish = bool(elites) and now - t0 + polish_dur <= time_limit
         if can_polish and not polish:
             polish = True  # after each full round one polishing round: the best found refined again
         elif now - t0 + full_dur <= time_limit:
-            polish = False  # another full round, as long as the last (the first: half, its compiling aside)
+            polish = False  # another full round, if one as long as the last fits
         elif not can_polish:
             break
     found.sort(key=lambda c: c.match.distance)
