@@ -89,9 +89,11 @@ def sse_nearest(points: np.ndarray, curve: np.ndarray) -> float:
 
 
 def run_once(target: Path, out: Path, cache: Path, time_limit: float, seed: int) -> dict:
-    exe = shutil.which("jaxlink")
-    cmd = ([exe] if exe else [sys.executable, "-c", "import sys; from jaxlink.cli import main; sys.exit(main())"])
-    cmd += ["synthesize", str(target), "--topologies", "four-bar", "--time-limit", str(time_limit),
+    beside = Path(sys.executable).with_name("jaxlink")  # the command installed with this Python
+    exe = str(beside) if beside.exists() else shutil.which("jaxlink")
+    if exe is None:
+        raise SystemExit("the jaxlink command is not installed (pip install -e .)")
+    cmd = [exe, "synthesize", str(target), "--topologies", "four-bar", "--time-limit", str(time_limit),
             "--seed", str(seed), "--out", str(out), "--no-plot"]
     env = dict(os.environ, JAXLINK_CACHE_DIR=str(cache))
     before = resource.getrusage(resource.RUSAGE_CHILDREN)
