@@ -195,3 +195,21 @@ def test_six_bar_sketch_replays_the_tracer(tmp_path):
     got = np.array([[float(x["P_x_mm"]), float(x["P_y_mm"])] for x in rows])
     want = D.place(trace_exact(topo, pose, np.radians(5.0 * np.arange(72)))[0][:, topo.traced], m)
     assert np.max(np.abs(got - want)) < 1e-9 * 25
+
+
+def test_polishing_slots_go_to_the_best_three_topologies():
+    """A polishing round's slots: as many as asked, only on the three topologies with the lowest
+    refined value, evenly, each one's best two as they are before any jittered copy."""
+    from jaxlink.synthesis.search import _polish_slots
+
+    rng = np.random.default_rng(0)
+    pose = {ti: [(rng.normal(size=(6, 2)).astype(np.float32), np.array([0.5, 2.0], np.float32)) for _ in range(2)]
+            for ti in range(5)}
+    vals = {ti: [(v,), (v + 1,)] for ti, v in zip(range(5), [0.3, 0.1, 0.5, 0.2, 0.05])}
+    stix, p, a = _polish_slots(pose, vals, 24, 0.02, False, rng)
+    assert p.shape == (24, 6, 2) and a.shape == (24, 2)
+    assert sorted(set(stix.tolist())) == [1, 3, 4] and all(np.sum(stix == t) == 8 for t in (1, 3, 4))
+    for t in (1, 3, 4):
+        slots = np.flatnonzero(stix == t)
+        assert np.array_equal(p[slots[0]], pose[t][0][0]) and np.array_equal(p[slots[1]], pose[t][1][0])
+        assert not np.allclose(p[slots[2]], pose[t][0][0]) and np.allclose(p[slots[2]], pose[t][0][0], atol=0.2)

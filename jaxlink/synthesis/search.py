@@ -17,13 +17,18 @@ One **round** (repeated with fresh candidates until the time limit):
    margin above `MARGIN_FLOOR` at the samples; all candidates of all topologies in one batch;
 4. **score**: each refined candidate traced exactly (`tracer.trace_exact`, float64) at `n_trace`
    inputs, checked over its whole interval (`assembly.certify`) and matched (`distance.match`).
+
+After each full round, and while a full round would not fit in the time left, a **polishing
+round**: refine and score only, every slot on the best three topologies' best refined so far
+(`_polish_slots`). The three programs are compiled before the first round, at once (`programs`).
 """
 
 from __future__ import annotations
 
 import functools
 import time
-from typing import NamedTuple
+from concurrent.futures import ThreadPoolExecutor
+from typing import Any, Callable, NamedTuple
 
 import jax
 import jax.numpy as jnp
@@ -46,6 +51,49 @@ _STARTS = 16
 _SPANS = (0.25, 0.5, 0.75, 1.0)
 _ROT = 32
 _DT = jnp.float32
+#: XLA options of the screen and the rank (run once a round: compiling them fast matters more than running them fast)
+_QUICK: dict[str, Any] = {"xla_backend_optimization_level": 0}
+
+
+class Programs(NamedTuple):
+    """The three compiled programs of a search (`programs`): callables on the dynamic arguments."""
+
+    screen: Callable
+    rank: Callable
+    refine: Callable
+
+
+def programs(n_topos: int, n_dyads: int, closed: bool, *, samples: int, screen_keep: int, refine: int,
+             steps: int, quick: bool = False) -> Programs:
+    """Compile the screen, the rank and the refinement for these shapes, all three at once (XLA
+    compiles in parallel threads; on a cold start compiling is most of a short search's time).
+    The rank compiles at XLA's lowest optimisation level (about half the compile time, its run
+    time about the same); the refinement too when `quick` (it then runs about twice as long: for
+    short searches), and the screen when `quick` and `closed` (an open target's screen, 64
+    sub-arcs a candidate, would run longer than its compiling saves)."""
+    keep = min(screen_keep, samples * len(_subarcs(closed)))
+    jobs = [("screen", samples, n_dyads, closed, 0, quick and closed),
+            ("rank", keep * n_topos, n_dyads, False, 0, True),
+            ("refine", min(refine, keep) * n_topos, n_dyads, False, steps, quick)]
+    with ThreadPoolExecutor(len(jobs)) as ex:
+        return Programs(*ex.map(lambda job: _compiled(*job), jobs))
+
+
+@functools.lru_cache(maxsize=16)
+def _compiled(which: str, b: int, n_dyads: int, closed: bool, steps: int, quick: bool):
+    """One program of `programs` for a batch of `b` (kept for the process: a second search of the
+    same shapes compiles nothing; the rank's and the refinement's serve open and closed targets)."""
+    nj = CRANK + 1 + n_dyads
+    i32, f32 = np.int32, np.float32
+    topo = np.zeros((b, n_dyads, 2), i32), np.zeros((b, n_dyads), bool), np.zeros(b, i32)
+    options = _QUICK if quick else None
+    if which == "screen":
+        return _screen.lower(jax.random.PRNGKey(0), *topo, np.zeros(DESC_N, f32), closed=closed).compile(options)
+    poses, arcs = np.zeros((b, nj, 2), f32), np.zeros((b, 2), f32)
+    if which == "rank":
+        return _rank.lower(*topo, poses, arcs, np.zeros((RANK_T, 2), f32), f32(0), _u(RANK_T, False)).compile(options)
+    return _refine.lower(*topo, poses, arcs, np.zeros((TARGET_N, 2), f32), f32(0.01), f32(0), _u(REFINE_T, False),
+                         steps=steps).compile(options)
 
 
 class Candidate(NamedTuple):
@@ -158,7 +206,8 @@ def _loss(params, par, act, tr, target, closed, u):
 
 @functools.partial(jax.jit, static_argnames=("steps",))
 def _refine(parents, active, traced, poses, arcs, target, lr, closed, u, *, steps: int):
-    opt = optax.adam(lr)
+    # the step size falls from lr to lr / 10 along a half cosine: long strides first, a fine fit at the end
+    opt = optax.adam(lambda k: lr * (0.55 + 0.45 * jnp.cos(np.pi * jnp.minimum(k, steps) / steps)))
 
     def one(par, act, tr, pose, arc):
         params = (pose, arc)
@@ -203,15 +252,86 @@ def score(topo: Topology, pose: np.ndarray, start: float, span: float, target: T
     return _dist.match(pos[:, topo.traced], target.points, closed=target.closed, n=n_points), asm
 
 
+def _full_slots(prog, key, arr, samples, screen_keep, refine, tdesc, trank, flag, arcs_all, closed, elites,
+                jitter, rng):
+    """A full round's refinement slots: screen, rank, the best `refine` per topology rotated to their
+    best angle; the last half of each topology's slots restart from its best refined so far, jittered."""
+    n_topos = arr.parents.shape[0]
+    picks_pose, picks_arc, picks_topo = [], [], []
+    for ti in range(n_topos):
+        sub = jax.random.fold_in(key, ti)
+        par = np.repeat(arr.parents[ti:ti + 1], samples, 0)
+        act = np.repeat(arr.active[ti:ti + 1], samples, 0)
+        trc = np.repeat(arr.traced[ti:ti + 1], samples, 0)
+        poses, d = prog.screen(sub, par, act, trc, tdesc)
+        d = np.asarray(d)
+        flat = np.argsort(d, axis=None)[:screen_keep]  # a fixed count: the same shapes every round
+        ci, ai = np.unravel_index(flat, d.shape)
+        picks_pose.append(np.asarray(poses)[ci])
+        picks_arc.append(arcs_all[ai])
+        picks_topo.append(np.full(len(ci), ti))
+    pose = np.concatenate(picks_pose)
+    arc = np.concatenate(picks_arc)
+    tix = np.concatenate(picks_topo)
+    val, phi = prog.rank(arr.parents[tix], arr.active[tix], arr.traced[tix], pose, arc, trank, flag,
+                         _u(RANK_T, closed))
+    val, phi = np.asarray(val), np.asarray(phi)
+    # `refine` per topology (the same shapes every round); the inf ones are dropped after
+    sel = np.concatenate([np.flatnonzero(tix == ti)[np.argsort(val[tix == ti], kind="stable")][:refine]
+                          for ti in range(n_topos)])
+    # rotate each pose so that its curve is near the target's orientation; the offsets stay
+    poses0 = _rotate(pose[sel], phi[sel]).astype(np.float32)
+    arcs0 = arc[sel].copy()
+    rank_ok = np.isfinite(val[sel])
+    stix = tix[sel]
+    for ti, el in elites.items():
+        slots = np.flatnonzero(stix == ti)[refine - refine // 2:]
+        for k, slot in enumerate(slots):
+            poses0[slot], arcs0[slot] = _jittered(el[k % len(el)], jitter * (k > 0), closed, rng)
+            rank_ok[slot] = True
+    return stix, poses0, arcs0, rank_ok
+
+
+def _jittered(elite, jitter, closed, rng):
+    ep, ea = elite
+    scale = np.sqrt(np.mean(np.sum((ep - ep.mean(0)) ** 2, -1)))
+    return (ep + rng.normal(0.0, jitter * scale, ep.shape),
+            ea + (rng.normal(0.0, jitter, 2) if not closed else 0.0))
+
+
+def _polish_slots(elites, elite_vals, n_slots, jitter, closed, rng):
+    """A polishing round's slots (the same count as a full round's): every slot on one of the three
+    topologies whose best refined value is lowest, evenly; on each, its two best refined as they are,
+    the others jittered by 0.25–2 × `jitter`."""
+    best = sorted(elites, key=lambda ti: elite_vals[ti][0][0])[:3]
+    stix = np.array([best[i % len(best)] for i in range(n_slots)])
+    poses0, arcs0 = [], []
+    for i, ti in enumerate(stix):
+        k = i // len(best)
+        el = elites[ti]
+        amp = 0.0 if k < len(el) else jitter * (0.25, 0.5, 1.0, 2.0)[k % 4]
+        p, a = _jittered(el[k % len(el)], amp, closed, rng)
+        poses0.append(p)
+        arcs0.append(a)
+    return stix, np.asarray(poses0, np.float32), np.asarray(arcs0, np.float32)
+
+
 def search(target: Target, topos: list[Topology], *, time_limit: float, seed: int = 0,
            samples: int = 8192, screen_keep: int = 128, refine: int = 8, steps: int = 300,
            n_trace: int = 1000, n_points: int = _dist.N_POINTS, per_topology: int = 2,
-           lr: float = 0.01, jitter: float = 0.02, t0: float | None = None, log=None) -> list[Candidate]:
+           lr: float = 0.01, jitter: float = 0.02, quick: bool | None = None, t0: float | None = None,
+           log=None) -> list[Candidate]:
     """Rounds of screen → rank → refine → score until `time_limit` seconds (at least one round).
+    `quick` (`programs`; default: when `time_limit` ≤ 15 s) trades run time for compile time.
+    After each full round, and whenever the time left is too short for another full round but not
+    for a refinement, a polishing round refines the best found again (`_polish_slots`).
     Returns every scored candidate that assembles, best first."""
     t0 = time.perf_counter() if t0 is None else t0
     closed = target.closed
     arr = as_arrays(topos)
+    prog = programs(len(topos), arr.parents.shape[1], closed, samples=samples, screen_keep=screen_keep,
+                    refine=refine, steps=steps,
+                    quick=time_limit <= 15.0 if quick is None else quick)
     tpts = _dist.normalise(arclength_resample(target.points, TARGET_N, closed))[0]
     tdesc = _desc(target.points, closed)
     trank = jnp.asarray(_dist.normalise(arclength_resample(target.points, RANK_T, closed))[0], _DT)
@@ -225,55 +345,32 @@ def search(target: Target, topos: list[Topology], *, time_limit: float, seed: in
     rng = np.random.default_rng(seed)
     elites: dict[int, list] = {}       # per topology: the best two refined (pose, arc) so far
     elite_vals: dict[int, list] = {}
+    nsl = min(refine, min(screen_keep, samples * len(arcs_all)))  # refinement slots per topology
+    stix = np.repeat(np.arange(len(topos)), nsl)  # the topology of each slot (a full round)
+    polish = False
     while True:
         rnd += 1
-        picks_pose, picks_arc, picks_topo = [], [], []
-        for ti in range(len(topos)):
-            key, sub = jax.random.split(key)
-            par = np.repeat(arr.parents[ti:ti + 1], samples, 0)
-            act = np.repeat(arr.active[ti:ti + 1], samples, 0)
-            trc = np.repeat(arr.traced[ti:ti + 1], samples, 0)
-            poses, d = _screen(sub, par, act, trc, tdesc, closed=closed)
-            d = np.asarray(d)
-            flat = np.argsort(d, axis=None)[:screen_keep]  # a fixed count: the same shapes every round
-            ci, ai = np.unravel_index(flat, d.shape)
-            picks_pose.append(np.asarray(poses)[ci])
-            picks_arc.append(arcs_all[ai])
-            picks_topo.append(np.full(len(ci), ti))
-        pose = np.concatenate(picks_pose)
-        arc = np.concatenate(picks_arc)
-        tix = np.concatenate(picks_topo)
-        val, phi = _rank(arr.parents[tix], arr.active[tix], arr.traced[tix], pose, arc, trank, flag,
-                         _u(RANK_T, closed))
-        val, phi = np.asarray(val), np.asarray(phi)
-        # `refine` per topology (the same shapes every round); the inf ones are dropped after
-        sel = np.concatenate([np.flatnonzero(tix == ti)[np.argsort(val[tix == ti], kind="stable")][:refine]
-                              for ti in range(len(topos))])
-        # rotate each pose so that its curve is near the target's orientation; the offsets stay
-        poses0 = _rotate(pose[sel], phi[sel]).astype(np.float32)
-        arcs0 = arc[sel].copy()
-        rank_ok = np.isfinite(val[sel])
-        # restarts: the last half of each topology's slots refine again the best refined so far, jittered
-        for ti, el in elites.items():
-            slots = np.flatnonzero(tix[sel] == ti)[refine - refine // 2:]
-            for k, slot in enumerate(slots):
-                ep, ea = el[k % len(el)]
-                scale = np.sqrt(np.mean(np.sum((ep - ep.mean(0)) ** 2, -1)))
-                poses0[slot] = ep + rng.normal(0.0, jitter * scale, ep.shape) * (k > 0)
-                arcs0[slot] = ea + (rng.normal(0.0, jitter, 2) * (k > 0) if not closed else 0.0)
-                rank_ok[slot] = True
-        p, a, v = _refine(arr.parents[tix[sel]], arr.active[tix[sel]], arr.traced[tix[sel]], poses0,
-                          arcs0, ttarget, np.float32(lr), flag, _u(REFINE_T, closed), steps=steps)
+        if polish:
+            stix, poses0, arcs0 = _polish_slots(elites, elite_vals, len(stix), jitter, closed, rng)
+            rank_ok = np.ones(len(stix), bool)
+        else:
+            stix, poses0, arcs0, rank_ok = _full_slots(prog, key, arr, samples, screen_keep, refine, tdesc,
+                                                       trank, flag, arcs_all, closed, elites, jitter, rng)
+            key = jax.random.fold_in(key, rnd)
+        t_ref = time.perf_counter()
+        p, a, v = prog.refine(arr.parents[stix], arr.active[stix], arr.traced[stix], poses0,
+                              arcs0, ttarget, np.float32(lr), flag, _u(REFINE_T, closed))
         p, a, v = np.asarray(p, float), np.asarray(a, float), np.asarray(v)
         for ti in range(len(topos)):
-            idx = np.flatnonzero((tix[sel] == ti) & np.isfinite(v) & rank_ok)
+            idx = np.flatnonzero((stix == ti) & np.isfinite(v) & rank_ok)
             pool = [(v[i], p[i].astype(np.float32), a[i].astype(np.float32)) for i in idx]
             pool += elite_vals.get(ti, [])
             pool.sort(key=lambda e: e[0])
-            elite_vals[ti] = pool[:2]
-            elites[ti] = [(e[1], e[2]) for e in pool[:2]]
+            if pool:
+                elite_vals[ti] = pool[:2]
+                elites[ti] = [(e[1], e[2]) for e in pool[:2]]
         for ti in range(len(topos)):
-            idx = np.flatnonzero(tix[sel] == ti)
+            idx = np.flatnonzero(stix == ti)
             idx = idx[np.isfinite(v[idx]) & rank_ok[idx]]
             for i in idx[np.argsort(v[idx])][:per_topology]:
                 start, span = float(a[i, 0]), (2 * np.pi if closed else float(a[i, 1]))
@@ -282,10 +379,20 @@ def search(target: Target, topos: list[Topology], *, time_limit: float, seed: in
                     found.append(Candidate(topos[ti], p[i], start, span, m, asm, time.perf_counter() - t0))
         if log is not None:
             best = min((c.match.distance for c in found), default=float("inf"))
-            log(f"round {rnd}: {len(found)} candidates, best distance {best:.4f}, {time.perf_counter() - t0:.1f} s")
+            log(f"round {rnd}{' (polish)' if polish else ''}: {len(found)} candidates, best distance {best:.4f}, "
+                f"{time.perf_counter() - t0:.1f} s")
         now = time.perf_counter()
         dur, round_start = now - round_start, now
-        if now - t0 + (0.5 if rnd == 1 else 1.0) * dur > time_limit:
-            break  # another round, as long as this one (the first: half, its compiling aside), would overrun
+        if polish:
+            polish_dur = dur
+        else:
+            full_dur, polish_dur = dur, now - t_ref  # the compiling is done before the first round
+        can_polish = bool(elites) and now - t0 + polish_dur <= time_limit
+        if can_polish and not polish:
+            polish = True  # after each full round one polishing round: the best found refined again
+        elif now - t0 + full_dur <= time_limit:
+            polish = False  # another full round, if one as long as the last fits
+        elif not can_polish:
+            break
     found.sort(key=lambda c: c.match.distance)
     return found
