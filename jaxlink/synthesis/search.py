@@ -75,13 +75,15 @@ def programs(n_topos: int, n_dyads: int, closed: bool, *, samples: int, screen_k
     jobs = [("screen", samples, n_dyads, closed, 0, quick and closed),
             ("rank", keep * n_topos, n_dyads, False, 0, True),
             ("refine", min(refine, keep) * n_topos, n_dyads, False, steps, quick)]
+    x64 = bool(jax.config.read("jax_enable_x64"))  # the traced program's default dtypes depend on it
     with ThreadPoolExecutor(len(jobs)) as ex:
-        return Programs(*ex.map(lambda job: _compiled(*job), jobs))
+        return Programs(*ex.map(lambda job: _compiled(*job, x64), jobs))
 
 
 @functools.lru_cache(maxsize=16)
-def _compiled(which: str, b: int, n_dyads: int, closed: bool, steps: int, quick: bool):
-    """One program of `programs` for a batch of `b` (kept for the process: a second search of the
+def _compiled(which: str, b: int, n_dyads: int, closed: bool, steps: int, quick: bool, x64: bool):
+    """One program of `programs` for a batch of `b` (kept for the process, keyed by every static input
+    and the x64 mode; the dynamic data are arguments of the program: a second search of the
     same shapes compiles nothing; the rank's and the refinement's serve open and closed targets)."""
     nj = CRANK + 1 + n_dyads
     i32, f32 = np.int32, np.float32
