@@ -48,11 +48,11 @@ from .model.sketch import Sketch as Sketch
 from .results import RESULTS as RESULTS
 from .results import Solution as Solution
 from .results import SolveStats as SolveStats
-from .solvers.assemble import NewtonOptions as NewtonOptions
 from .solvers.assemble import solve as solve
 from .solvers.assemble import solve_path as solve_path
 from .solvers.branch_points import BranchPoints as BranchPoints
 from .solvers.branch_points import branch_points as branch_points
+from .solvers.options import NewtonOptions as NewtonOptions
 from .synthesis.api import synthesize as synthesize
 
 __version__ = "0.1.0"

@@ -14,8 +14,9 @@ import jaxlink as jl
 from jaxlink.analysis.motion import motion
 from jaxlink.files.reader import loads
 from jaxlink.solvers import dyads as _dyads
-from jaxlink.solvers.assemble import NewtonOptions, method_for
 from jaxlink.solvers.branch_points import TOGGLE, branch_points
+from jaxlink.solvers.closed_form import method_for
+from jaxlink.solvers.options import NewtonOptions
 
 D, R, L, C, H = 0.300, 0.100, 0.500, 0.200, 0.520  # the scene's dimensions (m)
 

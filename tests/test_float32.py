@@ -28,7 +28,7 @@ import jaxlink as jl
 from jaxlink.errors import MechanismError
 from jaxlink.report.kinematics import kinematics_table
 from jaxlink.scenes import scene_paths
-from jaxlink.solvers.assemble import default_rtol
+from jaxlink.solvers.options import default_rtol
 
 RTOL = default_rtol(np.float32)  # 1.19e-4, the documented float32 tolerance
 

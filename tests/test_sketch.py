@@ -16,7 +16,8 @@ import pytest
 
 import jaxlink as jl
 from jaxlink.solvers import dyads
-from jaxlink.solvers.assemble import NewtonOptions, method_for
+from jaxlink.solvers.closed_form import method_for
+from jaxlink.solvers.options import NewtonOptions
 
 jax.config.update("jax_enable_x64", True)
 pytestmark = pytest.mark.xdist_group("sketch")

@@ -11,7 +11,7 @@ import jax
 import numpy as np
 
 import jaxlink as jl
-from jaxlink.solvers import assemble
+from jaxlink.solvers import assemble, chunks, closed_form
 
 BENCH = pathlib.Path(__file__).resolve().parents[1] / "benchmarks" / "strider_vs_pylinkage.py"
 
@@ -26,7 +26,7 @@ def _bench():
 def test_strider_positions_and_stored_codes(monkeypatch):
     S = _bench()
     mech = S.strider_sketch().mechanism()
-    assert assemble.method_for(mech, jl.NewtonOptions()) == "closed_form"
+    assert closed_form.method_for(mech, jl.NewtonOptions()) == "closed_form"
     D = S.designs(4, seed=1)
     bad = D[1].copy()
     bad[6] = bad[7] + 1.8  # |tibia − f| > |DF| over part of the turn: the foot H cannot be assembled there
@@ -49,16 +49,16 @@ def test_strider_positions_and_stored_codes(monkeypatch):
     assert np.all(np.isnan(xy[3][~ok]))  # not assembled: NaN points
 
     # in chunks of 2 designs (3 chunks, the last padded): the same answers, bit for bit (on the CPU)
-    assert assemble._design_chunk(1000, 360, 4) == 20 or jax.default_backend() != "cpu"
-    assert assemble._design_chunk(1000, 360, 1) == 0  # one dyad: one piece
-    monkeypatch.setattr(assemble, "CHUNK_POSITIONS", 2 * len(thetas))
-    assert assemble._design_chunk(len(P), len(thetas), 4) == (2 if jax.default_backend() == "cpu" else 0)
+    assert chunks._design_chunk(1000, 360, 4) == 20 or jax.default_backend() != "cpu"
+    assert chunks._design_chunk(1000, 360, 1) == 0  # one dyad: one piece
+    monkeypatch.setattr(chunks, "CHUNK_POSITIONS", 2 * len(thetas))
+    assert chunks._design_chunk(len(P), len(thetas), 4) == (2 if jax.default_backend() == "cpu" else 0)
     batch = jax.jit(lambda ph, p, q0: assemble._batch(mech, ph, p, q0, jl.NewtonOptions(), True))
     chunked = batch(thetas, P, mech.guess)
     # the same solve in one piece, with the codes fused into every consumer (not stored): the
     # same answers
-    monkeypatch.setattr(assemble, "CHUNK_POSITIONS", 0)
-    monkeypatch.setattr(assemble, "MATERIALIZE_CODES", False)
+    monkeypatch.setattr(chunks, "CHUNK_POSITIONS", 0)
+    monkeypatch.setattr(closed_form, "MATERIALIZE_CODES", False)
     fused = jax.jit(lambda ph, p, q0: assemble._batch(mech, ph, p, q0, jl.NewtonOptions(), True))
     off = fused(thetas, P, mech.guess)
     for a, b, c in zip(*(jax.tree_util.tree_leaves(x) for x in (sol, off, chunked))):
@@ -75,10 +75,10 @@ def test_feed_batch_in_chunks_is_bit_identical(monkeypatch):
     P = mech.parameters[None] * (1 + 0.01 * rng.uniform(-1, 1, (6, len(mech.parameters))))
     phis = np.linspace(0, 2 * np.pi, 36, endpoint=False)
     run = jax.jit(lambda ph, p: assemble._batch(mech, ph, p, None, jl.NewtonOptions(), True))
-    monkeypatch.setattr(assemble, "CHUNK_POSITIONS", 2 * len(phis))
-    assert assemble._design_chunk(6, len(phis), 2) == (2 if jax.default_backend() == "cpu" else 0)
+    monkeypatch.setattr(chunks, "CHUNK_POSITIONS", 2 * len(phis))
+    assert chunks._design_chunk(6, len(phis), 2) == (2 if jax.default_backend() == "cpu" else 0)
     chunked = run(phis, P)
-    monkeypatch.setattr(assemble, "CHUNK_POSITIONS", 0)
+    monkeypatch.setattr(chunks, "CHUNK_POSITIONS", 0)
     whole = jax.jit(lambda ph, p: assemble._batch(mech, ph, p, None, jl.NewtonOptions(), True))(phis, P)
     assert np.all(np.asarray(whole.result) == jl.RESULTS.converged)
     # (the rounding depends on the kernels at the shipped optimization level: there, without the

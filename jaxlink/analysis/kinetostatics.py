@@ -47,8 +47,9 @@ from ..files.expr import ANGLE
 from ..model import bodies as _bodies
 from ..model.mechanism import Mechanism
 from ..results import RESULTS
-from ..solvers.assemble import NewtonOptions, solve
+from ..solvers.assemble import solve
 from ..solvers.linalg import UNROLL_MAX, solve_small
+from ..solvers.options import NewtonOptions
 from .transfer import along, rates
 
 

@@ -473,7 +473,8 @@ def cmd_check(args) -> int:
     dtype = enable_dtype(args.dtype)
     from ..model import structure as _structure
     from ..results import RESULTS
-    from ..solvers.assemble import NewtonOptions, method_for
+    from ..solvers.closed_form import method_for
+    from ..solvers.options import NewtonOptions
 
     mech = load_from_args(args)
     if mech.bodies is not None:  # what `reactions` checks before it solves

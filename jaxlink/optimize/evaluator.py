@@ -37,7 +37,8 @@ import numpy as np
 from ..analysis import feasibility as _feasibility
 from ..analysis.transfer import transfer_one
 from ..solvers import dyads as _dyads
-from ..solvers.assemble import NewtonOptions, default_rtol, solve_path
+from ..solvers.assemble import solve_path
+from ..solvers.options import NewtonOptions, default_rtol
 from .objectives import OBJECTIVES, PathData, to_python
 from .problem import Problem, start_method
 from .sharding import default_chunk, design_sharding, pad_rows, put

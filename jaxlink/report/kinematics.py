@@ -35,7 +35,8 @@ from ..cache import traced
 from ..model.mechanism import Mechanism
 from ..results import RESULTS, Solution
 from ..solvers import branch_points as _branch_points
-from ..solvers.assemble import NewtonOptions, default_rtol, solve
+from ..solvers.assemble import solve
+from ..solvers.options import NewtonOptions, default_rtol
 from . import grid as _grid
 from .units import FileUnits, convert, input_unit_text
 

@@ -76,7 +76,7 @@ def reactions_table(mech, phis, *, omega: float, p=None, dtype=np.float64, input
     from ..analysis.kinetostatics import rigidity_errors, solve_reactions
     from ..errors import MechanismError
     from ..model import bodies as _bodies
-    from ..solvers.assemble import NewtonOptions
+    from ..solvers.options import NewtonOptions
     from .kinematics import _branch_point_columns, located_branch_points
 
     mdl = _bodies.model(mech)

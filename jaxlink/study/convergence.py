@@ -108,7 +108,7 @@ def converged_tolerance(mech, inputs=None, *, precision: float | None = None, ma
                         chunk=None, options=None, progress=None, study=None, worst: bool = True):
     """`tolerance` with the stopping rule on its Monte Carlo (see the module doc):
     (`ToleranceReport` at the n reached, `Convergence`)."""
-    from ..solvers.assemble import NewtonOptions
+    from ..solvers.options import NewtonOptions
     from .tolerance import Study, tolerance
     from .worstcase import worst_case
 

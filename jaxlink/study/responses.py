@@ -44,7 +44,8 @@ from ..analysis import stroke as _stroke
 from ..analysis.transfer import transfer_one
 from ..errors import MechanismError
 from ..solvers import dyads as _dyads
-from ..solvers.assemble import NewtonOptions, default_rtol, solve, solve_path
+from ..solvers.assemble import solve, solve_path
+from ..solvers.options import NewtonOptions, default_rtol
 from .inputs import StudyInputs
 
 _UNIT_NAMES = {1.0: "m", 1e-3: "mm", 1e-2: "cm"}

@@ -163,7 +163,7 @@ class _Evaluator:
 
 
 def _study(mech, inputs, study, chunk, options):
-    from ..solvers.assemble import NewtonOptions
+    from ..solvers.options import NewtonOptions
     from .inputs import read_study
 
     if study is not None:

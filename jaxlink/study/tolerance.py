@@ -38,7 +38,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..analysis.feasibility import MARGIN_SLACK
-from ..solvers.assemble import NewtonOptions
+from ..solvers.options import NewtonOptions
 from .inputs import StudyInputs
 from .moments import Moments
 from .responses import Responses
