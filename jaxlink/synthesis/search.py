@@ -37,6 +37,7 @@ import optax
 
 from . import distance as _dist
 from .assembly import Assembly, certify
+from .sortnet import sort_last
 from .target import Target, arclength_resample
 from .topology import CRANK, Topology, as_arrays
 from .tracer import trace, trace_exact
@@ -120,7 +121,7 @@ def _sorted_radii(curve, closed: bool):
     c = jnp.stack([jnp.interp(q, s, curve[:, 0]), jnp.interp(q, s, curve[:, 1])], axis=-1)
     c = c - c.mean(0)
     r = jnp.sqrt(jnp.sum(c * c, axis=-1) + 1e-12)
-    return jnp.sort(r / jnp.sqrt(jnp.mean(r * r)))
+    return sort_last(r / jnp.sqrt(jnp.mean(r * r)))  # = jnp.sort, bit for bit (`sortnet`)
 
 
 def _desc(points: np.ndarray, closed: bool) -> np.ndarray:
