@@ -138,30 +138,57 @@ def _subarcs(closed: bool):
     return np.array([[2 * np.pi * i / _STARTS, 2 * np.pi * f] for i in range(_STARTS) for f in _SPANS], np.float32)
 
 
+def _subarc_slices(closed: bool) -> list[tuple[int, int, int]]:
+    """Each sub-arc of `_subarcs` as a strided slice (start, step, count) of the screen's curve at half
+    samples (`_half_samples`): its starts are whole samples and its points, 33 evenly spaced over the
+    span (a closed target: the whole turn's `SCREEN_T` + 1 samples), fall on whole and half samples."""
+    out = []
+    for start, span in _subarcs(closed).astype(np.float64):
+        k = SCREEN_T + 1 if closed else 33
+        x2 = 2 * SCREEN_T * (start + span * np.linspace(0.0, 1.0, k)) / (2 * np.pi)
+        idx = np.rint(x2).astype(int)
+        step = int(idx[1] - idx[0])
+        if not (np.allclose(x2, idx, atol=1e-6) and np.all(np.diff(idx) == step)):
+            raise AssertionError("a sub-arc's points are not on the half samples")  # a change of the constants
+        out.append((int(idx[0]), step, k))
+    return out
+
+
+def _half_samples(curve, ok, reach: int):
+    """The curve (T + 1 samples over a turn, the last = the first) and its dyads' closing (T + 1,) at
+    every half sample, the midpoints linear (closing where both ends close), extended periodically
+    to `reach` + 1 points."""
+    mid = 0.5 * (curve[:-1] + curve[1:])
+    c2 = jnp.stack([curve[:-1], mid], 1).reshape(2 * SCREEN_T, 2)
+    o2 = jnp.stack([ok[:-1], ok[:-1] & ok[1:]], 1).reshape(2 * SCREEN_T)
+    reps = reach // (2 * SCREEN_T) + 1
+    return jnp.concatenate([c2] * reps + [c2[:1]]), jnp.concatenate([o2] * reps + [o2[:1]])
+
+
 @functools.partial(jax.jit, static_argnames=("closed",))
 def _screen(key, parents, active, traced, target_desc, *, closed: bool):
-    """Descriptor distances (B, S) of random poses (B, J, 2) over the sub-arcs; inf where a dyad does not close."""
+    """Descriptor distances (B, S) of random poses (B, J, 2) over the sub-arcs; inf where a dyad does
+    not close at a sample of the sub-arc. Each sub-arc's points are a static strided slice of the
+    curve at half samples (`_subarc_slices`: no gathers)."""
     b = parents.shape[0]
     poses = jax.random.uniform(key, (b, CRANK + 1 + parents.shape[1], 2), _DT, -1.0, 1.0)
     th = jnp.asarray(2 * np.pi * np.arange(SCREEN_T + 1) / SCREEN_T, _DT)
     pos, marg = jax.vmap(trace, in_axes=(0, 0, 0, None))(parents, active, poses, th)
     curves = pos[jnp.arange(b), :, traced]                    # (B, T+1, 2), the last = the first
     ok = jnp.min(marg, axis=-1) > 0                            # (B, T+1)
-    arcs = jnp.asarray(_subarcs(closed))
-    u = jnp.linspace(0.0, 1.0, 33 if not closed else SCREEN_T + 1, dtype=_DT)
+    slices = _subarc_slices(closed)
+    reach = max(st + step * (k - 1) for st, step, k in slices)
 
-    def one(curve, okk, arc):
-        x = (arc[0] + arc[1] * u) / (2 * np.pi) * SCREEN_T
-        i0 = jnp.floor(x).astype(jnp.int32)
-        f = (x - i0)[:, None]
-        i0 = i0 % SCREEN_T
-        pts = (1 - f) * curve[i0] + f * curve[i0 + 1]
-        valid = jnp.all(okk[i0] & okk[i0 + 1])
-        d = jnp.mean(jnp.abs(_sorted_radii(pts, closed) - target_desc))
+    def per_candidate(curve, okk):
+        c2, o2 = _half_samples(curve, okk, reach)
+        pts = jnp.stack([jax.lax.slice(c2, (st, 0), (st + step * (k - 1) + 1, 2), (step, 1))
+                         for st, step, k in slices])
+        valid = jnp.stack([jnp.all(jax.lax.slice(o2, (st,), (st + step * (k - 1) + 1,), (step,)))
+                           for st, step, k in slices])
+        d = jax.vmap(lambda p: jnp.mean(jnp.abs(_sorted_radii(p, closed) - target_desc)))(pts)
         return jnp.where(valid, d, jnp.inf)
 
-    d = jax.vmap(lambda c, o: jax.vmap(lambda a: one(c, o, a))(arcs))(curves, ok)
-    return poses, d
+    return poses, jax.vmap(per_candidate)(curves, ok)
 
 
 def _normalised(c, w):
