@@ -673,3 +673,59 @@ def test_the_robust_design_map_against_the_closed_form_and_replot(setup, tmp_pat
     back = rp.read(tmp_path)[1]
     assert back.labels == rep.labels and back.robust.labels == rob.labels and back.inputs == rep.inputs
     assert np.array_equal(back.robust.values, rob.values) and np.array_equal(back.values, rep.values)
+
+
+# ---------------------------------------------------------------- triangular, truncated normal, boxes, second order
+def test_triangular_and_truncated_normal_tolerances():
+    """σ from the entry against scipy.stats' closed-form moments (triang: t/√6; truncnorm(−k, k)
+    scaled by t/k); the Monte Carlo draws and the unit-cube map (`design.to_values`) have that σ
+    within 4 standard errors (SE(s) from the closed-form fourth moment), lie in ±t and pass a
+    Kolmogorov–Smirnov test against the scipy distribution; `sigma` given is the distribution's σ."""
+    from scipy import stats
+
+    from jaxlink.study.design import to_values
+
+    mech = jl.loads(FILE)
+    t1, t2, k = 0.03, 0.02, 2.0
+    inputs = st.read_study(mech, tolerances={"crank": {"tol": t1, "distribution": "triangular"},
+                                             "rod": {"tol": t2, "distribution": "truncated-normal", "k": k}})
+    ref = (stats.triang(0.5, loc=-t1, scale=2 * t1), stats.truncnorm(-k, k, scale=t2 / k))
+    assert inputs.tolerances[0].sigma == pytest.approx(t1 / math.sqrt(6), rel=1e-14)
+    assert inputs.tolerances[0].sigma == pytest.approx(ref[0].std(), rel=1e-12)
+    assert inputs.tolerances[1].sigma == pytest.approx(ref[1].std(), rel=1e-12)
+    assert [t.half_width for t in inputs.tolerances] == [t1, t2]
+    n = 1 << 15
+    u = (np.arange(n)[:, None] + 0.5) / n * np.ones((1, 2))  # a stratified unit-cube sample
+    for dx in (st.draws(inputs, n), to_values(inputs, np.zeros(2), u)):
+        for j, (t, dist) in enumerate(zip((t1, t2), ref)):
+            s, m4 = dist.std(), dist.moment(4)
+            se = math.sqrt((m4 - s ** 4) / n) / (2 * s)
+            assert abs(dx[:, j].std(ddof=1) - s) <= 4 * se
+            assert np.all(np.abs(dx[:, j]) <= t) and np.abs(dx[:, j]).max() > 0.95 * t
+            assert stats.kstest(dx[:, j], dist.cdf).pvalue > 1e-3
+    back = st.read_study(mech, tolerances={"crank": {"sigma": ref[0].std(), "distribution": "triangular"},
+                                           "rod": {"sigma": ref[1].std(), "distribution": "truncated-normal",
+                                                   "k": k}})
+    assert [t.half_width for t in back.tolerances] == pytest.approx([t1, t2], rel=1e-12)
+    with pytest.raises(jl.MechanismError, match="circular zone is 'uniform'"):
+        st.read_study(mech, tolerances={"O1": {"radius": 0.1, "distribution": "triangular"}})
+
+
+def test_first_order_sigma_with_the_new_distributions(setup):
+    """The pin A = O1 + a (cos θ, sin θ) is linear: its first-order σ is √Σ(g_i σ_i)² with the
+    distributions' σ (triangular crank, the file's uniform rod, a rectangular zone of truncated
+    normals: σ = (w/3) √(1 − 6 φ(3) / (2Φ(3) − 1))); its linear worst case uses ±t."""
+    mech, inputs, study = setup
+    tol = st.read_study(mech, tolerances={"crank": {"tol": 0.03, "distribution": "triangular"},
+                                          "rod": 0.01,
+                                          "O1": {"box": [0.01, 0.02], "distribution": "truncated-normal"}})
+    rep = st.tolerance(mech, study=study.moved(inputs=tol), samples=0, worst=False)
+    th = np.deg2rad(rep.input_values)
+    sig = np.asarray([0.03 / math.sqrt(6), 0.01 / math.sqrt(3)] + [w / 3 * math.sqrt(
+        1 - 6 * math.exp(-4.5) / math.sqrt(2 * math.pi) / math.erf(3 / math.sqrt(2))) for w in (0.01, 0.02)])
+    np.testing.assert_allclose(rep.first_order.sigma, sig, rtol=1e-12)
+    f = rep.first_order
+    np.testing.assert_allclose(f.sigma_rss[_rows(rep, "A.x")], np.hypot(np.cos(th) * sig[0], sig[2]), rtol=1e-9)
+    np.testing.assert_allclose(f.sigma_rss[_rows(rep, "A.y")], np.hypot(np.sin(th) * sig[0], sig[3]), rtol=1e-9,
+                               atol=1e-15)
+    np.testing.assert_allclose(f.worst_case[_rows(rep, "A.y")], 0.03 * np.abs(np.sin(th)) + 0.02, rtol=1e-9)

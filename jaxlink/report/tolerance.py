@@ -134,7 +134,7 @@ def manifest(mech, rep: ToleranceReport, *, wall_time: float, files: list) -> di
         "responses": len(rep.labels),
         "tolerances": [{"name": t.name, "parameters": list(t.parameters), "kind": t.kind,
                         "distribution": t.distribution, "half_width": t.half_width, "sigma": t.sigma,
-                        "zone": "circle" if t.zone else None} for t in inp.tolerances],
+                        "zone": "circle" if t.zone else ("box " + t.box if t.box else None)} for t in inp.tolerances],
         "certificate": rep.certificate,
         "margin": rep.margin,
         "margin_drop_linear": (rep.margin_drop if rep.margin_drop is not None and math.isfinite(rep.margin_drop)

@@ -39,6 +39,7 @@ import numpy as np
 
 from ..analysis.feasibility import MARGIN_SLACK
 from ..solvers.assemble import NewtonOptions
+from .distributions import deviations
 from .inputs import StudyInputs
 from .moments import Moments
 from .responses import Responses
@@ -149,8 +150,10 @@ def draw(inputs: StudyInputs, block: int, size: int = BLOCK) -> np.ndarray:
                 cols += [t.sigma * rng.standard_normal(size), t.sigma * rng.standard_normal(size)]
         elif t.distribution == "uniform":
             cols.append(rng.uniform(-t.half_width, t.half_width, size))
-        else:
+        elif t.distribution == "normal":
             cols.append(t.sigma * rng.standard_normal(size))
+        else:  # triangular, truncated normal: the inverse CDF of uniform draws
+            cols.append(deviations(t.distribution, rng.uniform(0.0, 1.0, size), t.half_width, t.sigma, t.k))
     if inputs.correlation:  # Iman–Conover on its own stream: the independent draws are unchanged
         from .correlation import correlate
 
