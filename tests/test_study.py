@@ -729,3 +729,30 @@ def test_first_order_sigma_with_the_new_distributions(setup):
     np.testing.assert_allclose(f.sigma_rss[_rows(rep, "A.y")], np.hypot(np.sin(th) * sig[0], sig[3]), rtol=1e-9,
                                atol=1e-15)
     np.testing.assert_allclose(f.worst_case[_rows(rep, "A.y")], 0.03 * np.abs(np.sin(th)) + 0.02, rtol=1e-9)
+
+
+def test_a_rectangular_zone_worst_case_is_its_corners(setup):
+    """O1 in a rectangle ±0.2 × ±0.4 mm (truncated normals: bounded, the worst case takes ±w) with
+    ±0.3 mm on both links: the linear worst case of B.x is Σ t|g| with wx |g_x| + wy |g_y| for the
+    zone, and the true worst case is the enumeration of the 16 corners, equal to the closed form's
+    largest deviation over them."""
+    import itertools
+
+    mech, inputs, study = setup
+    half = np.asarray([0.3, 0.3, 0.2, 0.4])
+    tol = st.read_study(mech, tolerances={"crank": {"tol": 0.3, "distribution": "uniform"},
+                                          "rod": {"tol": 0.3, "distribution": "triangular"},
+                                          "O1": {"box": [0.2, 0.4], "distribution": "truncated-normal"}})
+    assert tol.parameters == ("crank", "rod", "O1_x", "O1_y") and [t.box for t in tol.tolerances] == ["", "", "O1",
+                                                                                                          "O1"]
+    rep = st.tolerance(mech, study=study.moved(inputs=tol), samples=0)
+    J = rep.first_order.jacobian[_rows(rep, "B.x")]
+    np.testing.assert_allclose(rep.first_order.worst_case[_rows(rep, "B.x")], np.abs(J) @ half, rtol=1e-12)
+    w = rep.worst
+    assert w.corners and w.candidates == 16 and set(w.status) == {"enumerated"}
+    theta = np.deg2rad(rep.input_values)
+    corners = study.x0 + np.asarray(list(itertools.product((-1, 1), repeat=4))) * half
+    (ax, ay, bx), (ax0, ay0, bx0) = _closed_form(corners, theta), _closed_form(study.x0[None], theta)
+    for n, v in {"deviation(B.x)": np.abs(bx - bx0).max(), "deviation(A)": np.hypot(ax - ax0, ay - ay0).max(),
+                 "deviation(A.y)": np.abs(ay - ay0).max()}.items():
+        assert w.value[w.names.index(n)] == pytest.approx(v, rel=1e-9), n
