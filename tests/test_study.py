@@ -756,3 +756,56 @@ def test_a_rectangular_zone_worst_case_is_its_corners(setup):
     for n, v in {"deviation(B.x)": np.abs(bx - bx0).max(), "deviation(A)": np.hypot(ax - ax0, ay - ay0).max(),
                  "deviation(A.y)": np.abs(ay - ay0).max()}.items():
         assert w.value[w.names.index(n)] == pytest.approx(v, rel=1e-9), n
+
+
+def _bx_closed_form(x, theta):
+    return _closed_form(np.atleast_2d(x), theta)[2]
+
+
+def test_second_order_against_the_closed_form_and_monte_carlo(setup):
+    """The Hessian of B.x(θ) = O1_x + a cos θ + √(b² − (O1_y + a sin θ − e)²) equals central
+    differences of the closed form (numpy); the second-order mean shift is ½ Σ H_ii σ_i² of those,
+    and std₂ the formula of docs/methods/tolerance.md with the inputs' closed-form moments (uniform:
+    μ₄ = 9σ⁴/5; the uniform disc: μ₄ = r⁴/8, E[δx² δy²] = r⁴/24, checked on the draws). At ±0.3 mm
+    the shift (~1e-3 mm) is far beyond the sampling error of Monte Carlo's mean once the linear part
+    J δ of the same draws is taken out (a control variate: E[J δ] = 0), and they agree within 4 SE."""
+    mech, inputs, study = setup
+    tol = st.read_study(mech, tolerances={"crank": 0.3, "rod": 0.3, "O1": {"radius": 0.3}})
+    rep = st.tolerance(mech, study=study.moved(inputs=tol), worst=False)
+    so, f, mc = rep.second_order, rep.first_order, rep.monte_carlo
+    rows = _rows(rep, "B.x")
+    th = np.deg2rad(rep.input_values)
+    h, x0, T = 1e-3, study.x0, 4
+    e = np.eye(T) * h
+    H = np.zeros((len(th), T, T))
+    for i in range(T):
+        for j in range(T):
+            f4 = (_bx_closed_form(x0 + e[i] + e[j], th) - _bx_closed_form(x0 + e[i] - e[j], th)
+                  - _bx_closed_form(x0 - e[i] + e[j], th) + _bx_closed_form(x0 - e[i] - e[j], th))
+            H[:, i, j] = f4[0] / (4 * h * h)
+    np.testing.assert_allclose(so.hessian[rows], H, atol=1e-6 * np.abs(H).max())
+    s2 = np.asarray([0.3 ** 2 / 3, 0.3 ** 2 / 3, 0.15 ** 2, 0.15 ** 2])
+    np.testing.assert_allclose(so.mean_shift[rows], 0.5 * np.einsum("kii,i->k", H, s2), rtol=1e-5, atol=1e-12)
+    r4 = 0.3 ** 4
+    cov = np.diag([0.8 * s2[0] ** 2, 0.8 * s2[1] ** 2, r4 / 8 - r4 / 16, r4 / 8 - r4 / 16])
+    cov[2, 3] = cov[3, 2] = r4 / 24 - r4 / 16
+    cross = np.outer(s2, s2)
+    cross[2, 3] = cross[3, 2] = r4 / 24
+    d = np.diagonal(H, axis1=1, axis2=2)
+    var = (f.jacobian[rows] ** 2) @ s2 + 0.25 * np.einsum("ki,ij,kj->k", d, cov, d) + 0.5 * (
+        H ** 2 * (cross * (1 - np.eye(T)))).sum((1, 2))
+    np.testing.assert_allclose(so.std[rows], np.sqrt(var), rtol=1e-6)
+    dx = st.draws(tol, mc.samples)
+    assert np.mean(dx[:, 2] ** 2 * dx[:, 3] ** 2) == pytest.approx(r4 / 24, rel=0.05)
+    assert np.mean(dx[:, 2] ** 4) == pytest.approx(r4 / 8, rel=0.05)
+    # against Monte Carlo: its mean less that of J δ over the same draws
+    assert mc.feasible == mc.samples
+    lin = dx @ f.jacobian[rows].T
+    resid = _bx_closed_form(x0 + dx, th) - _bx_closed_form(x0, th) - lin  # the closed form's nonlinear part
+    se = resid.std(0, ddof=1) / math.sqrt(mc.samples)
+    est = mc.mean_shift[rows] - lin.mean(0)
+    np.testing.assert_allclose(est, resid.mean(0), atol=1e-9)  # Monte Carlo's responses are the closed form's
+    big = np.abs(so.mean_shift[rows]) > 10 * se
+    assert big.sum() > len(rows) // 2  # the shift is visible at most positions
+    assert np.all(np.abs(est - so.mean_shift[rows]) <= 4 * se + 1e-3 * np.abs(so.mean_shift[rows]))
+    assert np.all(np.abs(mc.std[rows] - so.std[rows]) <= 4 * mc.std_error[rows])
