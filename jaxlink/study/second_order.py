@@ -43,9 +43,11 @@ class SecondOrder(NamedTuple):
 
 
 def input_moments(inputs) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(σ² (T,), Cov(δ_i², δ_j²) (T, T), E[δ_i² δ_j²] (T, T), its diagonal unused) of the
+    """(σ² (T,), Cov(δ_i², δ_j²) (T, T), E[δ_i² δ_j²] (T, T; its diagonal unused)) of the
     toleranced parameters (module doc)."""
-    var, mu4, pairs = [], [], []
+    var: list[float] = []
+    mu4: list[float] = []
+    pairs: list[tuple[int, int, float]] = []
     for t in inputs.tolerances:
         r4 = fourth_moment_ratio(t.distribution, t.k, t.zone)
         j = len(var)
