@@ -673,3 +673,139 @@ def test_the_robust_design_map_against_the_closed_form_and_replot(setup, tmp_pat
     back = rp.read(tmp_path)[1]
     assert back.labels == rep.labels and back.robust.labels == rob.labels and back.inputs == rep.inputs
     assert np.array_equal(back.robust.values, rob.values) and np.array_equal(back.values, rep.values)
+
+
+# ---------------------------------------------------------------- triangular, truncated normal, boxes, second order
+def test_triangular_and_truncated_normal_tolerances():
+    """σ from the entry against scipy.stats' closed-form moments (triang: t/√6; truncnorm(−k, k)
+    scaled by t/k); the Monte Carlo draws and the unit-cube map (`design.to_values`) have that σ
+    within 4 standard errors (SE(s) from the closed-form fourth moment), lie in ±t and pass a
+    Kolmogorov–Smirnov test against the scipy distribution; `sigma` given is the distribution's σ."""
+    from scipy import stats
+
+    from jaxlink.study.design import to_values
+
+    mech = jl.loads(FILE)
+    t1, t2, k = 0.03, 0.02, 2.0
+    inputs = st.read_study(mech, tolerances={"crank": {"tol": t1, "distribution": "triangular"},
+                                             "rod": {"tol": t2, "distribution": "truncated-normal", "k": k}})
+    ref = (stats.triang(0.5, loc=-t1, scale=2 * t1), stats.truncnorm(-k, k, scale=t2 / k))
+    assert inputs.tolerances[0].sigma == pytest.approx(t1 / math.sqrt(6), rel=1e-14)
+    assert inputs.tolerances[0].sigma == pytest.approx(ref[0].std(), rel=1e-12)
+    assert inputs.tolerances[1].sigma == pytest.approx(ref[1].std(), rel=1e-12)
+    assert [t.half_width for t in inputs.tolerances] == [t1, t2]
+    n = 1 << 15
+    u = (np.arange(n)[:, None] + 0.5) / n * np.ones((1, 2))  # a stratified unit-cube sample
+    for dx in (st.draws(inputs, n), to_values(inputs, np.zeros(2), u)):
+        for j, (t, dist) in enumerate(zip((t1, t2), ref)):
+            s, m4 = dist.std(), dist.moment(4)
+            se = math.sqrt((m4 - s ** 4) / n) / (2 * s)
+            assert abs(dx[:, j].std(ddof=1) - s) <= 4 * se
+            assert np.all(np.abs(dx[:, j]) <= t) and np.abs(dx[:, j]).max() > 0.95 * t
+            assert stats.kstest(dx[:, j], dist.cdf).pvalue > 1e-3
+    back = st.read_study(mech, tolerances={"crank": {"sigma": ref[0].std(), "distribution": "triangular"},
+                                           "rod": {"sigma": ref[1].std(), "distribution": "truncated-normal",
+                                                   "k": k}})
+    assert [t.half_width for t in back.tolerances] == pytest.approx([t1, t2], rel=1e-12)
+    with pytest.raises(jl.MechanismError, match="circular zone is 'uniform'"):
+        st.read_study(mech, tolerances={"O1": {"radius": 0.1, "distribution": "triangular"}})
+
+
+def test_first_order_sigma_with_the_new_distributions(setup):
+    """The pin A = O1 + a (cos θ, sin θ) is linear: its first-order σ is √Σ(g_i σ_i)² with the
+    distributions' σ (triangular crank, the file's uniform rod, a rectangular zone of truncated
+    normals: σ = (w/3) √(1 − 6 φ(3) / (2Φ(3) − 1))); its linear worst case uses ±t."""
+    mech, inputs, study = setup
+    tol = st.read_study(mech, tolerances={"crank": {"tol": 0.03, "distribution": "triangular"},
+                                          "rod": 0.01,
+                                          "O1": {"box": [0.01, 0.02], "distribution": "truncated-normal"}})
+    rep = st.tolerance(mech, study=study.moved(inputs=tol), samples=0, worst=False)
+    th = np.deg2rad(rep.input_values)
+    sig = np.asarray([0.03 / math.sqrt(6), 0.01 / math.sqrt(3)] + [w / 3 * math.sqrt(
+        1 - 6 * math.exp(-4.5) / math.sqrt(2 * math.pi) / math.erf(3 / math.sqrt(2))) for w in (0.01, 0.02)])
+    np.testing.assert_allclose(rep.first_order.sigma, sig, rtol=1e-12)
+    f = rep.first_order
+    np.testing.assert_allclose(f.sigma_rss[_rows(rep, "A.x")], np.hypot(np.cos(th) * sig[0], sig[2]), rtol=1e-9)
+    np.testing.assert_allclose(f.sigma_rss[_rows(rep, "A.y")], np.hypot(np.sin(th) * sig[0], sig[3]), rtol=1e-9,
+                               atol=1e-15)
+    np.testing.assert_allclose(f.worst_case[_rows(rep, "A.y")], 0.03 * np.abs(np.sin(th)) + 0.02, rtol=1e-9)
+
+
+def test_a_rectangular_zone_worst_case_is_its_corners(setup):
+    """O1 in a rectangle ±0.2 × ±0.4 mm (truncated normals: bounded, the worst case takes ±w) with
+    ±0.3 mm on both links: the linear worst case of B.x is Σ t|g| with wx |g_x| + wy |g_y| for the
+    zone, and the true worst case is the enumeration of the 16 corners, equal to the closed form's
+    largest deviation over them."""
+    import itertools
+
+    mech, inputs, study = setup
+    half = np.asarray([0.3, 0.3, 0.2, 0.4])
+    tol = st.read_study(mech, tolerances={"crank": {"tol": 0.3, "distribution": "uniform"},
+                                          "rod": {"tol": 0.3, "distribution": "triangular"},
+                                          "O1": {"box": [0.2, 0.4], "distribution": "truncated-normal"}})
+    assert tol.parameters == ("crank", "rod", "O1_x", "O1_y") and [t.box for t in tol.tolerances] == ["", "", "O1",
+                                                                                                          "O1"]
+    rep = st.tolerance(mech, study=study.moved(inputs=tol), samples=0)
+    J = rep.first_order.jacobian[_rows(rep, "B.x")]
+    np.testing.assert_allclose(rep.first_order.worst_case[_rows(rep, "B.x")], np.abs(J) @ half, rtol=1e-12)
+    w = rep.worst
+    assert w.corners and w.candidates == 16 and set(w.status) == {"enumerated"}
+    theta = np.deg2rad(rep.input_values)
+    corners = study.x0 + np.asarray(list(itertools.product((-1, 1), repeat=4))) * half
+    (ax, ay, bx), (ax0, ay0, bx0) = _closed_form(corners, theta), _closed_form(study.x0[None], theta)
+    for n, v in {"deviation(B.x)": np.abs(bx - bx0).max(), "deviation(A)": np.hypot(ax - ax0, ay - ay0).max(),
+                 "deviation(A.y)": np.abs(ay - ay0).max()}.items():
+        assert w.value[w.names.index(n)] == pytest.approx(v, rel=1e-9), n
+
+
+def _bx_closed_form(x, theta):
+    return _closed_form(np.atleast_2d(x), theta)[2]
+
+
+def test_second_order_against_the_closed_form_and_monte_carlo(setup):
+    """The Hessian of B.x(θ) = O1_x + a cos θ + √(b² − (O1_y + a sin θ − e)²) equals central
+    differences of the closed form (numpy); the second-order mean shift is ½ Σ H_ii σ_i² of those,
+    and std₂ the formula of docs/methods/tolerance.md with the inputs' closed-form moments (uniform:
+    μ₄ = 9σ⁴/5; the uniform disc: μ₄ = r⁴/8, E[δx² δy²] = r⁴/24, checked on the draws). At ±0.3 mm
+    the shift (~1e-3 mm) is far beyond the sampling error of Monte Carlo's mean once the linear part
+    J δ of the same draws is taken out (a control variate: E[J δ] = 0), and they agree within 4 SE."""
+    mech, inputs, study = setup
+    tol = st.read_study(mech, tolerances={"crank": 0.3, "rod": 0.3, "O1": {"radius": 0.3}})
+    rep = st.tolerance(mech, study=study.moved(inputs=tol), worst=False, second_order=True)
+    so, f, mc = rep.second_order, rep.first_order, rep.monte_carlo
+    rows = _rows(rep, "B.x")
+    th = np.deg2rad(rep.input_values)
+    h, x0, T = 1e-3, study.x0, 4
+    e = np.eye(T) * h
+    H = np.zeros((len(th), T, T))
+    for i in range(T):
+        for j in range(T):
+            f4 = (_bx_closed_form(x0 + e[i] + e[j], th) - _bx_closed_form(x0 + e[i] - e[j], th)
+                  - _bx_closed_form(x0 - e[i] + e[j], th) + _bx_closed_form(x0 - e[i] - e[j], th))
+            H[:, i, j] = f4[0] / (4 * h * h)
+    np.testing.assert_allclose(so.hessian[rows], H, atol=1e-6 * np.abs(H).max())
+    s2 = np.asarray([0.3 ** 2 / 3, 0.3 ** 2 / 3, 0.15 ** 2, 0.15 ** 2])
+    np.testing.assert_allclose(so.mean_shift[rows], 0.5 * np.einsum("kii,i->k", H, s2), rtol=1e-5, atol=1e-12)
+    r4 = 0.3 ** 4
+    cov = np.diag([0.8 * s2[0] ** 2, 0.8 * s2[1] ** 2, r4 / 8 - r4 / 16, r4 / 8 - r4 / 16])
+    cov[2, 3] = cov[3, 2] = r4 / 24 - r4 / 16
+    cross = np.outer(s2, s2)
+    cross[2, 3] = cross[3, 2] = r4 / 24
+    d = np.diagonal(H, axis1=1, axis2=2)
+    var = (f.jacobian[rows] ** 2) @ s2 + 0.25 * np.einsum("ki,ij,kj->k", d, cov, d) + 0.5 * (
+        H ** 2 * (cross * (1 - np.eye(T)))).sum((1, 2))
+    np.testing.assert_allclose(so.std[rows], np.sqrt(var), rtol=1e-6)
+    dx = st.draws(tol, mc.samples)
+    assert np.mean(dx[:, 2] ** 2 * dx[:, 3] ** 2) == pytest.approx(r4 / 24, rel=0.05)
+    assert np.mean(dx[:, 2] ** 4) == pytest.approx(r4 / 8, rel=0.05)
+    # against Monte Carlo: its mean less that of J δ over the same draws
+    assert mc.feasible == mc.samples
+    lin = dx @ f.jacobian[rows].T
+    resid = _bx_closed_form(x0 + dx, th) - _bx_closed_form(x0, th) - lin  # the closed form's nonlinear part
+    se = resid.std(0, ddof=1) / math.sqrt(mc.samples)
+    est = mc.mean_shift[rows] - lin.mean(0)
+    np.testing.assert_allclose(est, resid.mean(0), atol=1e-9)  # Monte Carlo's responses are the closed form's
+    big = np.abs(so.mean_shift[rows]) > 10 * se
+    assert big.sum() > len(rows) // 2  # the shift is visible at most positions
+    assert np.all(np.abs(est - so.mean_shift[rows]) <= 4 * se + 1e-3 * np.abs(so.mean_shift[rows]))
+    assert np.all(np.abs(mc.std[rows] - so.std[rows]) <= 4 * mc.std_error[rows])

@@ -84,7 +84,7 @@ def _base_manifest(mech, inputs, method: str) -> dict:
         else:
             factors.append({"name": f.name, "parameters": list(f.parameters), "kind": f.kind,
                             "distribution": f.distribution, "half_width": f.half_width, "sigma": f.sigma,
-                            "zone": "circle" if f.zone else None})
+                            "zone": "circle" if f.zone else ("box " + f.box if getattr(f, "box", "") else None)})
     return {
         "method": method, "file": str(mech.file),
         "file_sha256": hashlib.sha256(src.read_bytes()).hexdigest() if src.is_file() else None,

@@ -5,7 +5,9 @@ band's geometry (the 2 × 2 covariance of each point from the first-order Jacobi
 **tolerance.csv** (long form, one row per response and position): `output`, `unit` (the unit of
 every value column of the row, marked `(unit)`: the file's length unit for a point's x, y, the
 angle unit for a rocker's swing, …), `input (<input unit>)` (empty for a scalar metric),
-`nominal (unit)`, `sigma_rss (unit)`, `worst_case_linear (unit)` and with Monte Carlo
+`nominal (unit)`, `sigma_rss (unit)`, `worst_case_linear (unit)`, with second order
+`mean_shift2 (unit)` and `std2 (unit)` (the second-order mean shift and σ from the exact Hessian),
+and with Monte Carlo
 `mc_mean_shift (unit)`, `mc_std (unit)`, `mc_std_error (unit)`, `mc_p0.135 (unit)`,
 `mc_p99.865 (unit)` (deviations from the nominal), `mc_max_abs_deviation (unit)`, `agree` (1, or 0
 where first order and Monte Carlo disagree beyond the sampling error), with `[study] limits` and
@@ -47,6 +49,9 @@ def write_tolerance_csv(path, mech, rep: ToleranceReport) -> None:
     mc = rep.monte_carlo
     f = rep.first_order
     head = ["output", "unit", f"input ({iu})", "nominal (unit)", "sigma_rss (unit)", "worst_case_linear (unit)"]
+    so = rep.second_order
+    if so is not None:
+        head += ["mean_shift2 (unit)", "std2 (unit)"]
     if mc is not None:
         head += ["mc_mean_shift (unit)", "mc_std (unit)", "mc_std_error (unit)",
                  f"mc_p{100 * QUANTILES[0]:g} (unit)", f"mc_p{100 * QUANTILES[1]:g} (unit)",
@@ -80,6 +85,8 @@ def write_tolerance_csv(path, mech, rep: ToleranceReport) -> None:
         for i, (name, unit, k) in enumerate(rep.labels):
             row = [name, unit, "" if k is None else _g(rep.input_values[k]), _g(rep.nominal[i]),
                    _g(f.sigma_rss[i]), _g(f.worst_case[i])]
+            if so is not None:
+                row += [_g(so.mean_shift[i]), _g(so.std[i])]
             if mc is not None:
                 row += [_g(mc.mean_shift[i]), _g(mc.std[i]), _g(mc.std_error[i]), _g(mc.low[i]), _g(mc.high[i]),
                         _g(mc.max_abs[i]), str(int(mc.agree[i]))]
@@ -89,10 +96,12 @@ def write_tolerance_csv(path, mech, rep: ToleranceReport) -> None:
         for j, p in enumerate(rep.inputs.points):
             for c, a in (("x", 2 * N * j), ("y", 2 * N * j + N)):
                 row = [f"deviation({p}.{c})", lu, "", "0", "", _g(f.worst_case[a:a + N].max())]
+                row += ["", ""] if so is not None else []
                 if mc is not None:
                     row += ["", "", "", "", "", _g(mc.max_abs[a:a + N].max()), ""] + cap(-1)
                 w.writerow(row + tail(f"deviation({p}.{c})"))
             row = [f"deviation({p})", lu, "", "0", "", _g(rep.deviation_bound[j])]
+            row += ["", ""] if so is not None else []
             if mc is not None:
                 row += [_g(mc.deviation_mean[j]), "", "", "", "", _g(mc.deviation_max[j]), ""] + cap(-1)
             w.writerow(row + tail(f"deviation({p})"))
@@ -134,7 +143,7 @@ def manifest(mech, rep: ToleranceReport, *, wall_time: float, files: list) -> di
         "responses": len(rep.labels),
         "tolerances": [{"name": t.name, "parameters": list(t.parameters), "kind": t.kind,
                         "distribution": t.distribution, "half_width": t.half_width, "sigma": t.sigma,
-                        "zone": "circle" if t.zone else None} for t in inp.tolerances],
+                        "zone": "circle" if t.zone else ("box " + t.box if t.box else None)} for t in inp.tolerances],
         "certificate": rep.certificate,
         "margin": rep.margin,
         "margin_drop_linear": (rep.margin_drop if rep.margin_drop is not None and math.isfinite(rep.margin_drop)
@@ -144,6 +153,10 @@ def manifest(mech, rep: ToleranceReport, *, wall_time: float, files: list) -> di
                                                 "disagree": int(np.count_nonzero(~mc.agree)),
                                                 "capability": capability_json(mc)},
         "worst_case": worst_case_json(rep),
+        "second_order": None if rep.second_order is None else {
+            "method": "second-order Taylor moments from the exact Hessian (docs/methods/tolerance.md)",
+            "largest_mean_shift": float(np.abs(rep.second_order.mean_shift).max(initial=0.0)),
+            "largest_std_change": float(np.abs(rep.second_order.std - rep.first_order.sigma_rss).max(initial=0.0))},
         "warnings": list(rep.warnings),
         "timings_s": {k: round(v, 4) for k, v in rep.timings.items()},
         "wall_time_s": round(wall_time, 3),
@@ -189,7 +202,9 @@ def summary(mech, rep: ToleranceReport) -> str:
     groups: dict = {}
     for i, (name, unit, _k) in enumerate(rep.labels):
         groups.setdefault((name, unit), []).append(i)
+    so = rep.second_order
     head = f"{'output':<22} {'unit':<8} {'σ_RSS max':>11} {'worst lin.':>11}"
+    head += f" {'σ₂ max':>11} {'shift₂':>11}" if so is not None else ""
     head += f" {'MC σ max':>11} {'MC shift':>11}" if mc is not None else ""
     head += "  most important"
     lines = [head]
@@ -198,6 +213,8 @@ def summary(mech, rep: ToleranceReport) -> str:
         j = idx[np.argmax(f.sigma_rss[idx])]
         top = int(np.argmax(f.importance[j])) if f.sigma_rss[j] > 0 else None
         row = f"{name:<22} {unit:<8} {f.sigma_rss[j]:11.4g} {f.worst_case[idx].max():11.4g}"
+        if so is not None:
+            row += f" {so.std[idx].max():11.4g} {so.mean_shift[idx][np.argmax(np.abs(so.mean_shift[idx]))]:11.4g}"
         if mc is not None:
             row += f" {mc.std[idx].max():11.4g} {mc.mean_shift[idx][np.argmax(np.abs(mc.mean_shift[idx]))]:11.4g}"
         if top is not None:
@@ -206,6 +223,7 @@ def summary(mech, rep: ToleranceReport) -> str:
     lu = unit_names(mech)[0]
     for j, p in enumerate(rep.inputs.points):
         row = f"{'deviation(' + p + ')':<22} {lu:<8} {'':>11} {rep.deviation_bound[j]:11.4g}"
+        row += f" {'':>11} {'':>11}" if so is not None else ""
         if mc is not None:
             row += f" {'max ' + format(mc.deviation_max[j], '.4g'):>11} {'':>11}"
         lines.append(row)

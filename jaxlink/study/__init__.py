@@ -62,6 +62,7 @@ from .sampling import SensitivityReport as SensitivityReport
 from .sampling import evaluate as evaluate
 from .sampling import sample as sample
 from .sampling import sensitivity as sensitivity
+from .second_order import SecondOrder as SecondOrder
 from .sobol import SobolAccumulator as SobolAccumulator
 from .sobol import SobolIndices as SobolIndices
 from .sobol import sobol_indices as sobol_indices

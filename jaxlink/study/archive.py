@@ -21,12 +21,14 @@ def _types() -> dict:
     from .inputs import Range, StudyInputs, Tolerance
     from .robust import RobustMap
     from .sampling import SampleReport, SensitivityReport
+    from .second_order import SecondOrder
     from .sobol import SobolIndices
     from .tolerance import FirstOrder, MonteCarlo, ToleranceReport
     from .worstcase import WorstCase
 
     return {t.__name__: t for t in (Range, StudyInputs, Tolerance, SampleReport, SensitivityReport, SobolIndices,
-                                    FirstOrder, MonteCarlo, ToleranceReport, WorstCase, RobustMap)}
+                                    FirstOrder, MonteCarlo, ToleranceReport, WorstCase, RobustMap,
+                                    SecondOrder)}
 
 
 def pack(obj, prefix: str = "", arrays: dict | None = None) -> tuple[Any, dict]:

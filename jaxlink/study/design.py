@@ -16,6 +16,8 @@ generator), mapped to the studied parameters' values (file units), and the full-
 - a range [low, high]: x = low + u (high − low) (uniform);
 - a uniform tolerance ±t around the nominal x₀: x = x₀ + t (2u − 1);
 - a normal tolerance: x = x₀ + σ Φ⁻¹(u) (u clipped to [1e−12, 1 − 1e−12]);
+- a triangular or truncated-normal tolerance: x = x₀ + its inverse CDF at u
+  (`distributions.deviations`);
 - a circular zone of radius r (two columns u₁, u₂): uniform in the disc, (x, y) = (x₀, y₀) +
   r √u₁ (cos 2πu₂, sin 2πu₂); normal: each coordinate x₀ + σ Φ⁻¹(u).
 
@@ -84,6 +86,10 @@ def to_values(inputs: StudyInputs, x0, u) -> np.ndarray:
             out[:, j + 1] = x0[j + 1] + r * np.sin(a)
         elif f.distribution == "uniform":
             out[:, j] = x0[j] + f.half_width * (2.0 * c[:, 0] - 1.0)
+        elif f.distribution in ("triangular", "truncated-normal"):
+            from .distributions import deviations
+
+            out[:, j] = x0[j] + deviations(f.distribution, c[:, 0], f.half_width, f.sigma, f.k)
         else:
             out[:, j:j + k] = x0[j:j + k] + f.sigma * norm.ppf(np.clip(c, 1e-12, 1.0 - 1e-12))
         j += k

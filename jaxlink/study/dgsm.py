@@ -11,7 +11,10 @@ of Sobol's total index they give. docs/methods/sensitivity.md gives the formulas
 
 with C_f the factor's Poincaré constant: a range or a uniform tolerance of width w = high − low
 (= 2t): w² / π²; a normal tolerance: σ²; a uniform circular zone of radius r: r² / j'₁,₁²
-(j'₁,₁ = 1.8412, the first zero of J₁', the disc's first Neumann eigenvalue); a normal zone: σ².
+(j'₁,₁ = 1.8412, the first zero of J₁', the disc's first Neumann eigenvalue); a normal zone: σ²;
+a triangular tolerance ±t: (2t)² / π² (a log-concave density on an interval of length 2t:
+Payne–Weinberger's bound, an upper bound of C_f, so the index bound stays an upper bound); a
+truncated normal (σ_n cut at ±t): min(σ_n², (2t)² / π²) (Bakry–Émery and the same bound).
 V(y) is the variance of the n responses (population form). The bound is an upper bound of the
 total index (reported as `ST_bound`): a factor whose bound is small is unimportant (screening);
 a large bound says little — it is reached for a linear response of a uniform factor only within
@@ -76,6 +79,8 @@ def poincare_constants(inputs: StudyInputs) -> np.ndarray:
             out.append((f.high - f.low) ** 2 / math.pi ** 2)
         elif f.distribution == "normal":
             out.append(f.sigma ** 2)
+        elif f.distribution == "truncated-normal":
+            out.append(min((f.half_width / f.k) ** 2, (2.0 * f.half_width) ** 2 / math.pi ** 2))
         elif f.zone:
             out.append(f.half_width ** 2 / J11 ** 2)
         else:

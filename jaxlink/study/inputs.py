@@ -16,7 +16,10 @@ k = 3                       # default coverage: ±t = k σ for a normal toleranc
 l2 = 0.05                   # ±0.05, the table's distribution (normal, ±t = 3σ)
 l3 = { tol = 0.05, distribution = "uniform" }   # uniform on [−t, t]: σ = t / √3
 l4 = { sigma = 0.01 }       # normal, σ given (the worst case takes ±k σ)
+l5 = { tol = 0.05, distribution = "triangular" }        # symmetric on [−t, t]: σ = t / √6
+l6 = { tol = 0.05, distribution = "truncated-normal" }  # normal σ_n = t / k cut at ±t
 B0 = { radius = 0.1 }       # a circular zone of the frame pivot B0: the parameters B0_x, B0_y
+C0 = { box = [0.1, 0.05] }  # a rectangular zone of C0: half-widths in x and y (C0_x, C0_y)
 
 [study.ranges]              # sample, grid, sensitivity: the design space (file units)
 l2 = [40, 60]               # uniform over [40, 60] (sample, sensitivity); `levels` values (grid)
@@ -33,7 +36,10 @@ responses for its Cpk (docs/methods/tolerance.md).
 - `uniform`: the value lies uniformly in [x − t, x + t]; σ = t / √3;
 - `normal` with `tol`: ±t = k σ (k from the entry, else the table's, default 3), σ = t / k;
 - `normal` with `sigma`: σ given, t = k σ (t enters only the linear worst case);
-- `uniform` with `sigma`: t = √3 σ.
+- `uniform` with `sigma`: t = √3 σ;
+- `triangular` (symmetric on [x − t, x + t], mode x): σ = t / √6 (`sigma`: t = √6 σ);
+- `truncated-normal`: a normal of σ_n = t / k truncated to [x − t, x + t], its σ the truncated
+  one, σ = σ_n c(k) (`sigma` is that σ: t = k σ / c(k); `distributions.py`).
 
 **A circular zone** (`radius = r`): the pivot lies in the disc of radius r around its nominal
 position, its coordinates the parameters `NAME_x`, `NAME_y` (a frame joint of a sketch file,
@@ -41,6 +47,13 @@ file-format.md §16; in a loop file any pair so named). `uniform`: uniformly in 
 coordinate with σ = r / 2 (uncorrelated); `normal`: each coordinate normal with σ = r / k (r is
 k σ per coordinate, not a coverage of the disc). Its linear worst case is r times the length of
 the response's gradient in (x, y): the largest change over the disc, not over its bounding square.
+A circular zone is `uniform` or `normal`.
+
+**A rectangular zone** (`box = [wx, wy]`, half-widths in x and y, file units): each coordinate
+toleranced on its own half-width with the entry's distribution (any of them; `normal`: σ = w / k
+per coordinate) — exactly two independent scalar tolerances `NAME_x` ±wx and `NAME_y` ±wy, which
+is how it is read (`Tolerance.box` names the zone). Its linear worst case is wx |g_x| + wy |g_y|
+(a corner of the rectangle), its true worst case that over the rectangle.
 """
 
 from __future__ import annotations
@@ -49,6 +62,8 @@ import math
 from typing import Any, Mapping, NamedTuple
 
 from ..errors import MechanismError
+from .distributions import DISTRIBUTIONS as _DISTRIBUTIONS
+from .distributions import sigma_per_half_width
 
 METHODS = ("tolerance", "sample", "grid", "sensitivity", "morris", "regression", "dgsm", "vector", "list", "centered")
 #: the methods over the ranges (or the tolerances' distributions) that draw their own designs
@@ -56,12 +71,12 @@ DRAWN = ("sample", "sensitivity", "morris", "regression", "dgsm")
 #: Dakota's parameter studies: designs given by the file (`parameter_studies.read_designs`)
 GIVEN = ("vector", "list", "centered")
 SAMPLERS = ("sobol", "lhs", "halton", "random")
-DISTRIBUTIONS = ("normal", "uniform")
+DISTRIBUTIONS = _DISTRIBUTIONS
 METRICS = ("stroke", "speed", "acceleration", "deviation")
 KNOWN_KEYS = {"method", "positions", "points", "metrics", "samples", "seed", "distribution", "k", "chunk",
               "rpm", "tolerances", "ranges", "sampler", "levels", "bootstrap", "confidence", "robust", "limits",
               "correlation", "precision", "max_samples", "final", "steps", "list", "step"}
-TOLERANCE_KEYS = {"tol", "sigma", "radius", "distribution", "k"}
+TOLERANCE_KEYS = {"tol", "sigma", "radius", "box", "distribution", "k"}
 DEFAULTS: dict = {"method": "tolerance", "positions": 360, "metrics": ("stroke", "deviation"), "samples": 10000,
             "seed": 0, "distribution": "normal", "k": 3.0, "sampler": "sobol", "levels": 11, "bootstrap": 100,
             "confidence": 0.95}
@@ -75,8 +90,10 @@ class Tolerance(NamedTuple):
 
     **Fields:** `name` (the parameter, or the frame joint of a zone), `parameters` (`(name,)`, or
     `(NAME_x, NAME_y)` for a zone), `kind` ("length" | "angle" | "number"), `distribution`
-    ("normal" | "uniform"), `half_width` (t: the value lies in ±t for a uniform tolerance, ±t = kσ
-    for a normal one; a zone's radius), `sigma` (σ of each coordinate), `zone` (a circular zone).
+    (one of `DISTRIBUTIONS`), `half_width` (t: the value lies in ±t for a bounded distribution,
+    ±t = kσ for a normal one; a zone's radius), `sigma` (σ of each coordinate), `zone` (a circular
+    zone), `k` (the coverage: ±t = k σ_n of a normal or truncated normal), `box` (the frame joint
+    whose rectangular zone this coordinate is, else "").
     """
 
     name: str
@@ -86,6 +103,8 @@ class Tolerance(NamedTuple):
     half_width: float
     sigma: float
     zone: bool = False
+    k: float = 3.0
+    box: str = ""
 
 
 class Range(NamedTuple):
@@ -261,12 +280,12 @@ def _read_study(mech, table, overrides) -> StudyInputs:
     tolerances = []
     seen: set = set()
     for name, entry in tol_raw.items():
-        tol = _tolerance(mech, name, entry, default_dist, default_k)
-        for p in tol.parameters:
-            if p in seen:
-                raise _err(mech, f"'{p}' carries two tolerances", f"tolerances.{name}")
-            seen.add(p)
-        tolerances.append(tol)
+        for tol in _tolerance(mech, name, entry, default_dist, default_k):
+            for p in tol.parameters:
+                if p in seen:
+                    raise _err(mech, f"'{p}' carries two tolerances", f"tolerances.{name}")
+                seen.add(p)
+            tolerances.append(tol)
     out = StudyInputs(method, tuple(tolerances), positions, tuple(points), tuple(dict.fromkeys(metrics)),
                       samples, seed, chunk, rpm, ranges, sampler, bootstrap, confidence, robust, limits, **more)
     return _correlated(mech, out, t)
@@ -338,11 +357,12 @@ def _ranges(mech, raw, levels_raw) -> tuple:
     return tuple(out)
 
 
-def _tolerance(mech, name: str, entry, default_dist: str, default_k: float) -> Tolerance:
+def _tolerance(mech, name: str, entry, default_dist: str, default_k: float) -> tuple:
+    """The `Tolerance`s of one entry of `[study.tolerances]` (two for a rectangular zone)."""
     key = f"tolerances.{name}"
     if isinstance(entry, bool) or not isinstance(entry, (int, float, Mapping)):
         raise _err(mech, f"a tolerance is a number (±t) or a table {{ tol = t, sigma = s, radius = r, "
-                         f"distribution = ..., k = ... }}, got {entry!r}", key)
+                         f"box = [wx, wy], distribution = ..., k = ... }}, got {entry!r}", key)
     e = {"tol": entry} if not isinstance(entry, Mapping) else dict(entry)
     for k in e:
         if k not in TOLERANCE_KEYS:
@@ -353,32 +373,45 @@ def _tolerance(mech, name: str, entry, default_dist: str, default_k: float) -> T
     k = _number(mech, e, "k", key) if "k" in e else default_k
     if not k > 0:
         raise _err(mech, f"'k' must be > 0, got {k:g}", key)
-    given = [g for g in ("tol", "sigma", "radius") if g in e]
+    given = [g for g in ("tol", "sigma", "radius", "box") if g in e]
     if len(given) != 1:
-        raise _err(mech, "give exactly one of 'tol' (±t), 'sigma' (σ) or 'radius' (a pivot's circular zone)", key)
+        raise _err(mech, "give exactly one of 'tol' (±t), 'sigma' (σ), 'radius' (a pivot's circular zone) or "
+                         "'box' (a pivot's rectangular zone: [wx, wy])", key)
+    if given[0] in ("radius", "box"):
+        pair = (f"{name}_x", f"{name}_y")
+        what = "circular" if given[0] == "radius" else "rectangular"
+        if not all(p in mech.parameter_names for p in pair):
+            raise _err(mech, f"a {what} zone needs the pivot's coordinates {pair[0]}, {pair[1]} as parameters "
+                             f"(a frame joint of a sketch file); parameters: {', '.join(mech.parameter_names)}", key)
+        if any(mech.kinds[p] != "length" for p in pair):
+            raise _err(mech, f"{pair[0]}, {pair[1]} must be lengths", key)
+    if given[0] == "box":
+        box = e["box"]
+        if (not isinstance(box, (list, tuple)) or len(box) != 2
+                or any(isinstance(v, bool) or not isinstance(v, (int, float)) or not 0 < v < 1e15 for v in box)):
+            raise _err(mech, f"'box' is [wx, wy]: the zone's two half-widths (> 0, file units), got {box!r}", key)
+        s = sigma_per_half_width(dist, k)
+        return tuple(Tolerance(p, (p,), "length", dist, float(w), float(w) * s, False, k, name)
+                     for p, w in zip(pair, box))
     value = _number(mech, e, given[0], key)
     if not value > 0:
         raise _err(mech, f"'{given[0]}' must be > 0, got {value:g}", key)
     if given[0] == "radius":
-        pair = (f"{name}_x", f"{name}_y")
-        if not all(p in mech.parameter_names for p in pair):
-            raise _err(mech, f"a circular zone needs the pivot's coordinates {pair[0]}, {pair[1]} as parameters "
-                             f"(a frame joint of a sketch file); parameters: {', '.join(mech.parameter_names)}", key)
-        if any(mech.kinds[p] != "length" for p in pair):
-            raise _err(mech, f"{pair[0]}, {pair[1]} must be lengths", key)
+        if dist not in ("uniform", "normal"):
+            raise _err(mech, f"a circular zone is 'uniform' (in the disc) or 'normal' (per coordinate), got {dist!r}; "
+                             "a rectangular zone ('box') takes any distribution", key)
         sigma = value / 2.0 if dist == "uniform" else value / k
-        return Tolerance(name, pair, "length", dist, value, sigma, True)
+        return (Tolerance(name, pair, "length", dist, value, sigma, True, k),)
     if name not in mech.parameter_names:
         derived = [d[0] for d in mech.derived]
         why = " (derived: tolerance the parameters it is computed from)" if name in derived else ""
         raise _err(mech, f"'{name}' is not a parameter{why}; parameters: {', '.join(mech.parameter_names)}", key)
+    ratio = sigma_per_half_width(dist, k)  # σ / t
     if given[0] == "tol":
-        t = value
-        sigma = t / math.sqrt(3.0) if dist == "uniform" else t / k
+        t, sigma = value, value * ratio
     else:
-        sigma = value
-        t = math.sqrt(3.0) * sigma if dist == "uniform" else k * sigma
-    return Tolerance(name, (name,), mech.kinds[name], dist, t, sigma, False)
+        sigma, t = value, value / ratio
+    return (Tolerance(name, (name,), mech.kinds[name], dist, t, sigma, False, k),)
 
 
 def _located(e: MechanismError) -> MechanismError:

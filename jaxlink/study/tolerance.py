@@ -39,9 +39,11 @@ import numpy as np
 
 from ..analysis.feasibility import MARGIN_SLACK
 from ..solvers.options import NewtonOptions
+from .distributions import deviations
 from .inputs import StudyInputs
 from .moments import Moments
 from .responses import Responses
+from .second_order import SecondOrder, second_order_stats
 from .worstcase import WorstCase, worst_case
 
 #: samples per random stream (the chunk is a multiple of it)
@@ -115,7 +117,9 @@ class ToleranceReport(NamedTuple):
       worst-case drop under the tolerances; first order is not to be trusted where it reaches the
       margin: a toggle or change point within the tolerances);
     - `warnings` (list of str); `timings` (dict of seconds);
-    - `worst` (`worstcase.WorstCase`, or None when not asked): the true worst case over the box.
+    - `worst` (`worstcase.WorstCase`, or None when not asked): the true worst case over the box;
+    - `second_order` (`second_order.SecondOrder`, or None when not asked): the second-order mean
+      shift and σ of every response from its exact Hessian.
     """
 
     inputs: StudyInputs
@@ -132,6 +136,7 @@ class ToleranceReport(NamedTuple):
     warnings: list
     timings: dict
     worst: WorstCase | None = None
+    second_order: SecondOrder | None = None
 
 
 def draw(inputs: StudyInputs, block: int, size: int = BLOCK) -> np.ndarray:
@@ -149,8 +154,10 @@ def draw(inputs: StudyInputs, block: int, size: int = BLOCK) -> np.ndarray:
                 cols += [t.sigma * rng.standard_normal(size), t.sigma * rng.standard_normal(size)]
         elif t.distribution == "uniform":
             cols.append(rng.uniform(-t.half_width, t.half_width, size))
-        else:
+        elif t.distribution == "normal":
             cols.append(t.sigma * rng.standard_normal(size))
+        else:  # triangular, truncated normal: the inverse CDF of uniform draws
+            cols.append(deviations(t.distribution, rng.uniform(0.0, 1.0, size), t.half_width, t.sigma, t.k))
     if inputs.correlation:  # Iman–Conover on its own stream: the independent draws are unchanged
         from .correlation import correlate
 
@@ -212,6 +219,7 @@ class Study:
         chunk = chunk or inputs.chunk or default_chunk(inputs)
         self.chunk = -(-int(chunk) // BLOCK) * BLOCK
         self._jac = jax.jit(jax.jacfwd(_with_aux(r.single), has_aux=True))
+        self._hess = jax.jit(jax.jacfwd(jax.jacfwd(lambda x: r.single(x, "screen")[0])))  # compiled when first asked
         self._batch = jax.jit(jax.vmap(lambda x: r.single(x, "screen")))
         self._certify = None if r.dyads is None else jax.jit(jax.vmap(r.certified))
         self._margin = None
@@ -265,6 +273,11 @@ class Study:
         J, (v, ok, m) = self._jac(jnp.asarray(self.x0))
         self._nominal = (np.asarray(v), bool(ok), float(m))
         return first_order_stats(np.asarray(J), self.inputs)
+
+    def second_order(self, first: FirstOrder) -> SecondOrder:
+        """The second-order mean shift and σ (`second_order.py`) from the exact Hessian of every
+        response at the nominal and the first-order Jacobian `first.jacobian`."""
+        return second_order_stats(first.jacobian, np.asarray(self._hess(jnp.asarray(self.x0))), self.inputs)
 
     def margin_drop(self):
         """(margin, its linear worst-case drop) of the nominal (dyad mechanisms), else (None, None)."""
@@ -472,7 +485,7 @@ def _bonferroni(m: int) -> float:
 
 def tolerance(mech, inputs: StudyInputs | None = None, *, samples: int | None = None, chunk=None,
               options: NewtonOptions = NewtonOptions(), progress=None, study: Study | None = None,
-              worst: bool = True, checkpoint=None) -> ToleranceReport:
+              worst: bool = True, checkpoint=None, second_order: bool = False) -> ToleranceReport:
     """The tolerance analysis of `mech` around its design (see the module doc).
 
     **Arguments:**
@@ -482,7 +495,9 @@ def tolerance(mech, inputs: StudyInputs | None = None, *, samples: int | None = 
     - `chunk`: designs per compiled batch; `options`: `NewtonOptions`; `progress`: called with
       the samples done after each Monte Carlo batch; `study`: a `Study` already compiled (warm);
     - `worst`: search the true worst case over the tolerance box (`worstcase.worst_case`);
-    - `checkpoint`: a `checkpoint.Checkpoint` of the Monte Carlo (saved batch by batch, resumed).
+    - `checkpoint`: a `checkpoint.Checkpoint` of the Monte Carlo (saved batch by batch, resumed);
+    - `second_order`: the second-order mean shift and σ from the exact Hessian (`second_order.py`; off by
+      default: its Hessian costs one more compile, about 5 s).
 
     **Returns:** a `ToleranceReport`. Raises `MechanismError` when the nominal design does not
     assemble over its whole cycle.
@@ -500,6 +515,11 @@ def tolerance(mech, inputs: StudyInputs | None = None, *, samples: int | None = 
     t1 = time.perf_counter()
     first = study.first_order()
     timings["first_order"] = time.perf_counter() - t1
+    second = None
+    if second_order:
+        t1 = time.perf_counter()
+        second = study.second_order(first)
+        timings["second_order"] = time.perf_counter() - t1
     nominal, ok, margin = study.nominal()
     if not ok:
         raise MechanismError(
@@ -548,4 +568,4 @@ def tolerance(mech, inputs: StudyInputs | None = None, *, samples: int | None = 
                 "feasible designs found)")
     timings["total"] = time.perf_counter() - t0
     return ToleranceReport(inputs, r.labels, r.input_values, inputs.parameters, nominal, first, mc, bound,
-                           r.certificate, m, drop, warnings, timings, wc)
+                           r.certificate, m, drop, warnings, timings, wc, second)
