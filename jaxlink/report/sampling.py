@@ -9,7 +9,8 @@ robust-design map its columns (`sigma_rss(OUTPUT) (unit)`, `worst_case_linear(OU
 `cpk(OUTPUT) (1)`, `jaxlink.study.robust`).
 
 **indices.csv** (`sensitivity`; long form): `output`, `input (<input unit>)` (the position's
-input for a point's x or y, empty for a scalar), `parameter` (the factor), `method` (`S1`, `ST`),
+input for a point's x or y, empty for a scalar), `parameter` (the factor; for `S2` the pair
+`a,b`, in the factors' order), `method` (`S1`, `ST`, and `S2` with `[study] second_order`),
 `value (1)`, `low (1)`, `high (1)` (the bootstrap interval), `conditional` (1: over the wholly
 feasible base samples only; 0 for the `feasible` output itself, over all).
 """
@@ -26,6 +27,7 @@ import numpy as np
 from ..study.inputs import GIVEN, Range
 from ..study.responses import unit_names
 from ..study.sampling import SampleReport, SensitivityReport
+from ..study.sobol import pairs
 
 
 def _g(v) -> str:
@@ -69,6 +71,10 @@ def write_indices_csv(path, mech, rep: SensitivityReport) -> None:
                         v, lo, hi = (getattr(ind, m)[i, j], getattr(ind, m + "_low")[i, j],
                                      getattr(ind, m + "_high")[i, j])
                         w.writerow([name, x, f, m, _g(v), _g(lo), _g(hi), cond])
+                if ind.S2 is not None:
+                    for c, (j, k) in enumerate(pairs(len(rep.factors))):
+                        w.writerow([name, x, f"{rep.factors[j]},{rep.factors[k]}", "S2", _g(ind.S2[i, c]),
+                                    _g(ind.S2_low[i, c]), _g(ind.S2_high[i, c]), cond])
 
 
 def _base_manifest(mech, inputs, method: str) -> dict:
@@ -184,7 +190,8 @@ def write_sensitivity_all(out_dir, mech, rep: SensitivityReport, *, wall_time: f
     files += [d / "study.npz", d / "study.json"]
     data = _base_manifest(mech, rep.inputs, "sensitivity")
     data.update({"samples": rep.samples, "evaluations": rep.evaluations, "bootstrap": rep.inputs.bootstrap,
-                 "confidence": rep.inputs.confidence, "feasible_fraction": rep.feasible_fraction,
+                 "confidence": rep.inputs.confidence, "second_order": rep.inputs.second_order,
+                 "feasible_fraction": rep.feasible_fraction,
                  "complete_samples": rep.complete, "conditional": rep.complete < rep.samples,
                  "certificate": rep.certificate, "responses": len(rep.labels),
                  "warnings": list(rep.warnings), "timings_s": {k: round(v, 4) for k, v in rep.timings.items()},

@@ -135,8 +135,10 @@ class SobolAccumulator:
         np.multiply(ya, ya, out=t3[:, 1])
         t3[:, 1] += yb * yb
         diff = t3[:, 2 + D:2 + 2 * D]
-        np.subtract(np.asarray(yab, float).transpose(1, 0, 2), s, out=diff)
-        diff -= ya[:, None]
+        yab = np.asarray(yab, float)
+        for j in range(D):  # factor by factor: contiguous reads (the same numbers as one strided pass)
+            np.subtract(yab[j], s, out=diff[:, j])
+            diff[:, j] -= ya
         np.multiply(yb[:, None], diff, out=t3[:, 2:2 + D])
         np.multiply(diff, diff, out=t3[:, 2 + 2 * D:2 + 3 * D])
         if self.second_order:
@@ -144,7 +146,9 @@ class SobolAccumulator:
             if yba is None:
                 raise ValueError("a second-order accumulator needs the evaluations on BA_j (yba)")
             ba = t3[:, 2 + 3 * D:2 + 4 * D]
-            np.subtract(np.asarray(yba, float).transpose(1, 0, 2), s, out=ba)
+            yba = np.asarray(yba, float)
+            for j in range(D):
+                np.subtract(yba[j], s, out=ba[:, j])
             ab = diff + ya[:, None]  # y_AB_j − s
             prod = ya * yb
             for i, (j, k) in enumerate(self.pairs):
