@@ -16,8 +16,8 @@ used (0 in the arrays, empty cells in study.csv), never dropped and never a NaN.
   which parameters drive infeasibility; `feasible_fraction` is the fraction of the 2N independent
   draws (A and B) that are feasible — an estimate of the probability that a design drawn from the
   ranges assembles;
-- the responses' indices are computed over the base samples whose D + 2 evaluations are all
-  feasible (the others weigh 0): indices *conditional on feasibility*, with a warning — an
+- the responses' indices are computed over the base samples whose D + 2 (2D + 2 with the second
+  order) evaluations are all feasible (the others weigh 0): indices *conditional on feasibility*, with a warning — an
   approximation, the feasible region not being a product of the ranges; with fewer than two such
   base samples the responses' indices are not computed (a warning, no NaN).
 """
@@ -79,8 +79,9 @@ class SensitivityReport(NamedTuple):
     - `indices` (`SobolIndices` of the M responses, conditional on feasibility; None when fewer
       than two base samples are wholly feasible); `feasibility` (`SobolIndices` of the indicator,
       one output);
-    - `samples` (base samples N), `evaluations` (N (D + 2)), `feasible_fraction` (of the 2N draws A
-      and B), `complete` (base samples whose D + 2 evaluations are all feasible);
+    - `samples` (base samples N), `evaluations` (N (D + 2), N (2D + 2) with `second_order`),
+      `feasible_fraction` (of the 2N draws A and B), `complete` (base samples whose evaluations are
+      all feasible);
     - `certificate`, `warnings`, `timings`.
     """
 
@@ -279,8 +280,11 @@ def sensitivity(mech, inputs: StudyInputs | None = None, *, samples: int | None 
     from N = `samples` base samples of the study's `sampler` (2d columns: A and B) over its ranges
     (or its tolerances' distributions; a circular zone is one factor of two parameters).
 
+    With `inputs.second_order`, the designs BA_j too and the second-order indices S2.
+
     **Arguments:** as `sample` (`checkpoint`: the estimators' sums saved after every batch, a
-    saved study resumed). **Returns:** a `SensitivityReport` (see the module doc; the
+    saved study resumed); `overlap` (default True): batch k + 1 dispatched to JAX before batch k's
+    estimator sums are taken, the same numbers as without. **Returns:** a `SensitivityReport` (see the module doc; the
     estimators in `jaxlink.study.sobol`).
     """
     t0 = time.perf_counter()

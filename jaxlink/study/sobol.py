@@ -13,6 +13,13 @@ of y_A and y_B, population form as SALib):
     S1_j = (1/N) Σ_i (y_B,i − m) (y_ABj,i − y_A,i) / V          (Saltelli et al. 2010)
     ST_j = (1/2N) Σ_i (y_A,i − y_ABj,i)² / V                    (Jansen 1999)
 
+**Second order** (`second_order`, Saltelli 2002 as SALib's `calc_second_order=True`): the
+matrices BA_j (B with factor j's columns from A) too, N (2D + 2) evaluations, m their mean, and
+
+    S2_jk = (1/N) Σ_i [(y_BAj,i − m)(y_ABk,i − m) − (y_A,i − m)(y_B,i − m)] / V − S1_j − S1_k   (j < k)
+
+from the sums of y_BAj − y_B and of y_BAj y_ABk − y_A y_B (the m² terms cancel).
+
 S1 is not invariant to a shift of y in a finite sample: centring with m is SALib's (it normalizes
 y by its mean and standard deviation before estimating).
 
