@@ -260,7 +260,7 @@ def _plt():
 
 def plot_bars(path, mech, rep: SensitivityReport) -> None:
     """S1 and ST of each factor with their bootstrap intervals, one panel per scalar output (the
-    feasibility first)."""
+    feasibility first); with the second order, each pair's S2 after them."""
     plt = _plt()
     panels = [("feasible (indicator)" + (": every design feasible" if rep.feasibility.constant[0] else ""),
                rep.feasibility, 0)]
@@ -269,14 +269,21 @@ def plot_bars(path, mech, rep: SensitivityReport) -> None:
     D = len(rep.factors)
     cols = min(3, len(panels))
     rows = -(-len(panels) // cols)
-    fig, axes = plt.subplots(rows, cols, figsize=(4.2 * cols, 3.0 * rows), squeeze=False)
+    wide = 1.0 + (0.0 if rep.feasibility.S2 is None else 0.5 * len(pairs(D)) / max(D, 1))
+    fig, axes = plt.subplots(rows, cols, figsize=(4.2 * cols * wide, 3.0 * rows), squeeze=False)
     x = np.arange(D)
     for ax, (title, ind, i) in zip(axes.ravel(), panels):
         for off, m, c in ((-0.2, "S1", "C0"), (0.2, "ST", "C1")):
             v = getattr(ind, m)[i]
             err = np.stack([v - getattr(ind, m + "_low")[i], getattr(ind, m + "_high")[i] - v])
             ax.bar(x + off, v, 0.4, yerr=np.maximum(err, 0.0), color=c, capsize=3, label=m)
-        ax.set_xticks(x, rep.factors, rotation=30, ha="right", fontsize=8)
+        ticks = list(rep.factors)
+        if ind.S2 is not None and ind.S2.shape[1]:  # the pairs' S2 after the factors
+            v = ind.S2[i]
+            err = np.stack([v - ind.S2_low[i], ind.S2_high[i] - v])
+            ax.bar(D + np.arange(len(v)), v, 0.4, yerr=np.maximum(err, 0.0), color="C2", capsize=3, label="S2")
+            ticks += [f"{rep.factors[j]},{rep.factors[k]}" for j, k in pairs(D)]
+        ax.set_xticks(np.arange(len(ticks)), ticks, rotation=30, ha="right", fontsize=8)
         ax.set_title(title, fontsize=9)
         ax.set_ylim(min(0.0, ax.get_ylim()[0]), max(1.05, ax.get_ylim()[1]))
         ax.axhline(0, color="k", lw=0.5)
