@@ -278,9 +278,10 @@ def plot_bars(path, mech, rep: SensitivityReport) -> None:
             err = np.stack([v - getattr(ind, m + "_low")[i], getattr(ind, m + "_high")[i] - v])
             ax.bar(x + off, v, 0.4, yerr=np.maximum(err, 0.0), color=c, capsize=3, label=m)
         ticks = list(rep.factors)
-        if ind.S2 is not None and ind.S2.shape[1]:  # the pairs' S2 after the factors
-            v = ind.S2[i]
-            err = np.stack([v - ind.S2_low[i], ind.S2_high[i] - v])
+        s2, s2_low, s2_high = ind.S2, ind.S2_low, ind.S2_high
+        if s2 is not None and s2_low is not None and s2_high is not None and s2.shape[1]:  # the pairs' S2 last
+            v = s2[i]
+            err = np.stack([v - s2_low[i], s2_high[i] - v])
             ax.bar(D + np.arange(len(v)), v, 0.4, yerr=np.maximum(err, 0.0), color="C2", capsize=3, label="S2")
             ticks += [f"{rep.factors[j]},{rep.factors[k]}" for j, k in pairs(D)]
         ax.set_xticks(np.arange(len(ticks)), ticks, rotation=30, ha="right", fontsize=8)
