@@ -17,7 +17,8 @@ lengths varied over ±5 % (crank, coupler, rocker, B0_x), N = 4096 base samples 
 Sobol' (N (D + 2) = 24 576 designs), S1 and ST of every output with 100 bootstrap resamples:
 
 - jaxlink: `jaxlink.study.sensitivity` end to end — cold (the `Study` built and compiled in the
-  run) and warm (the same study again); every design's whole-cycle feasibility included;
+  run) and warm (the same study again); every design's whole-cycle feasibility included; each
+  warm run followed by one with `overlap=False` (the batches not overlapped: the same indices);
 - baseline: the same designs evaluated by a numpy model of the same four-bar (the closed-form
   circle intersection, vectorized over designs and positions), then SALib's `sobol.analyze` once
   per output column (its API), with the same bootstrap draws — its indices must equal jaxlink's.
@@ -148,11 +149,17 @@ def run(case: str, N: int, columns: int) -> dict:
     cold = time.perf_counter() - t
     warm, load = [], []
 
+    plain: list = []
+
     def jaxlink_warm():
         t = time.perf_counter()
         r = st.sensitivity(mech, study=study)
         warm.append(time.perf_counter() - t)
         load.append(os.getloadavg()[0])
+        t = time.perf_counter()
+        p = st.sensitivity(mech, study=study, overlap=False)  # the plain loop: the same numbers, slower
+        plain.append(time.perf_counter() - t)
+        assert p.indices is not None and r.indices is not None and np.array_equal(p.indices.ST, r.indices.ST)
         return r
 
     rep = jaxlink_warm()
@@ -194,7 +201,9 @@ def run(case: str, N: int, columns: int) -> dict:
                    max_index_difference=err, numpy_model_vs_jaxlink_mm=model_error)
     rep = jaxlink_warm()
     med = statistics.median(warm)
-    row.update(jaxlink_warm_s=warm, jaxlink_warm_median_s=med, jaxlink_timings_warm=rep.timings, load_1min=load)
+    row.update(jaxlink_warm_s=warm, jaxlink_warm_median_s=med, jaxlink_warm_not_overlapped_s=plain,
+               jaxlink_warm_not_overlapped_median_s=statistics.median(plain), jaxlink_timings_warm=rep.timings,
+               load_1min=load)
     if "baseline_s" in row:
         row.update(ratio_warm=row["baseline_s"] / med, ratio_cold=row["baseline_s"] / cold)
     return row
@@ -217,7 +226,9 @@ def main() -> None:
         if "max_index_difference" in row:
             print(f"  largest |jaxlink − SALib| over S1, ST, ST interval: {row['max_index_difference']:.2g}; numpy "
                   f"model vs jaxlink at the nominal: {row['numpy_model_vs_jaxlink_mm']:.2g} mm; warm runs "
-                  f"{', '.join(f'{w:.2f}' for w in row['jaxlink_warm_s'])} s; load {row['load_1min']}")
+                  f"{', '.join(f'{w:.2f}' for w in row['jaxlink_warm_s'])} s (not overlapped "
+                  f"{', '.join(f'{w:.2f}' for w in row['jaxlink_warm_not_overlapped_s'])} s); load "
+                  f"{row['load_1min']}")
     out = pathlib.Path(__file__).parent / "results" / "latest" / "sensitivity.json"
     out.parent.mkdir(parents=True, exist_ok=True)
     meta = {"machine": platform.machine(), "cpus": os.cpu_count(), "jax": jax.__version__,

@@ -337,6 +337,54 @@ def test_sobol_sums_written_in_place_equal_the_concatenated_terms():
     np.testing.assert_array_equal(acc.sums, sums)
 
 
+def _second_order_design(f, n, d, lo, hi, seed):
+    """(ya, yb, yab, yba) of `f` on A, B (n, d uniform over [lo, hi]), AB_j and BA_j."""
+    from scipy.stats import qmc
+
+    u = lo + (hi - lo) * qmc.Sobol(2 * d, scramble=True, seed=seed).random(n)
+    a, b = u[:, :d], u[:, d:]
+    ab = np.stack([np.where(np.arange(d) == j, b, a) for j in range(d)])
+    ba = np.stack([np.where(np.arange(d) == j, a, b) for j in range(d)])
+    return f(a), f(b), f(ab), f(ba)
+
+
+def test_second_order_indices_against_closed_forms_and_salib():
+    """S2 (Saltelli 2002) of y = x1 + x2 + x1 x2 (+ an inert x3), x uniform on [−1, 1]: V_1 = V_2 =
+    1/3, V_12 = 1/9, so S1 = 3/7, S12 = 1/7, S13 = S23 = 0; and of the Ishigami function, S13 =
+    b² π⁸ (8/225) / V, S12 = S23 = 0 — each within its bootstrap interval (×1.5). Streamed over
+    three batches the sums give the single batch's indices. With SALib, its S1, ST, S2 and their
+    intervals on the same samples (calc_second_order=True)."""
+    pairs = st.sobol.pairs(3)
+    assert pairs == [(0, 1), (0, 2), (1, 2)]
+    cases = [(lambda x: x[..., 0] + x[..., 1] + x[..., 0] * x[..., 1], -1.0, 1.0, [1 / 7, 0.0, 0.0]),
+             (lambda x: np.sin(x[..., 0]) + 7 * np.sin(x[..., 1]) ** 2 + 0.1 * x[..., 2] ** 4 * np.sin(x[..., 0]),
+              -np.pi, np.pi, [0.0, 0.01 * np.pi ** 8 * 8 / 225 / (49 / 8 + 0.1 * np.pi ** 4 / 5
+                                                                   + 0.01 * np.pi ** 8 / 18 + 0.5), 0.0])]
+    for f, lo, hi, exact in cases:
+        ya, yb, yab, yba = _second_order_design(f, 8192, 3, lo, hi, 3)
+        r = st.sobol_indices(ya, yb, yab, yba=yba, resamples=100, seed=5)
+        half = 0.5 * (r.S2_high - r.S2_low)[0]
+        assert np.all(np.abs(r.S2[0] - exact) <= 1.5 * half + 1e-3), (r.S2[0], exact, half)
+        assert np.all(half < 0.05)
+        acc = st.SobolAccumulator(1, 3, st.sobol.bootstrap_counts(8192, 100, 5), second_order=True)
+        for a, b in ((0, 3000), (3000, 5000), (5000, 8192)):
+            acc.update(a, ya[a:b, None], yb[a:b, None], yab[:, a:b, None], yba=yba[:, a:b, None])
+        streamed = acc.result()
+        for m in ("S1", "ST", "S2", "S2_low", "S2_high"):
+            np.testing.assert_allclose(getattr(streamed, m), getattr(r, m), rtol=1e-9, atol=1e-12)
+    salib = pytest.importorskip("SALib.analyze.sobol")
+    problem = {"num_vars": 3, "names": ["x1", "x2", "x3"], "bounds": [[-np.pi, np.pi]] * 3}
+    Y = np.concatenate([ya[:, None], yab.T, yba.T, yb[:, None]], 1).ravel()  # SALib's order
+    s = salib.analyze(problem, Y, calc_second_order=True, seed=5, num_resamples=100)
+    for m in ("S1", "ST"):
+        np.testing.assert_allclose(getattr(r, m)[0], s[m], rtol=1e-9, atol=1e-12)
+        np.testing.assert_allclose(getattr(r, m + "_high")[0] - getattr(r, m)[0], s[m + "_conf"], rtol=1e-9,
+                                   atol=1e-12)
+    np.testing.assert_allclose(r.S2[0], [s["S2"][j, k] for j, k in pairs], rtol=1e-9, atol=1e-12)
+    np.testing.assert_allclose(r.S2_high[0] - r.S2[0], [s["S2_conf"][j, k] for j, k in pairs], rtol=1e-9,
+                               atol=1e-12)
+
+
 def _closed_form(x, theta):
     """A.x, A.y, B.x (n, N each) of the slider-crank at designs x (n, 4: crank, rod, O1_x, O1_y)."""
     a, b, ox, oy = (x[:, k:k + 1] for k in range(4))
@@ -400,6 +448,64 @@ def test_sensitivity_of_the_path_against_closed_forms_and_first_order(sensitivit
         np.testing.assert_allclose(ind.ST_high[rows[k]] - ind.ST[rows[k]], s["ST_conf"], rtol=1e-5, atol=1e-9)
 
 
+def _designs(inputs, study, n, second=False):
+    """A, B, AB_j (and BA_j) of the study's first `n` base samples, rebuilt from `unit_blocks`."""
+    u = np.concatenate(list(st.unit_blocks("sobol", 8, n, inputs.seed, 300)))
+    a, b = st.to_values(inputs, study.x0, u[:, :4]), st.to_values(inputs, study.x0, u[:, 4:])
+    ab = np.stack([np.where(np.arange(4) == j, b, a) for j in range(4)])
+    ba = np.stack([np.where(np.arange(4) == j, a, b) for j in range(4)])
+    return a, b, ab, (ba if second else None)
+
+
+def test_sensitivity_overlap_batches_and_second_order(sensitivity_run, tmp_path):
+    """The study's batches overlapped (batch k + 1 dispatched before batch k's sums) give the
+    indices of the plain loop bit for bit; both equal the estimators fed every design's evaluation
+    at once (one batch, not two: the bootstrap counts follow the base samples). With
+    `second_order`: S2 of every output equals the estimators' on the same evaluations (SALib's
+    scheme, BA_j), and indices.csv holds its rows (`S2`, parameter `a,b`)."""
+    from jaxlink.report import sampling as rs
+
+    mech, inputs, study, rep = sensitivity_run
+    moved = study.moved(inputs=inputs)
+    plain = st.sensitivity(mech, study=moved, overlap=False)
+    for m in st.SobolIndices._fields[:6]:
+        assert np.array_equal(getattr(plain.indices, m), getattr(rep.indices, m)), m
+    a, b, ab, _ = _designs(inputs, study, 1024)
+    y, ok, _labels = st.evaluate(moved, np.concatenate([a, b, ab.reshape(-1, 4)]))
+    assert ok.all()
+    y = y.reshape(6, 1024, -1)
+    acc = st.SobolAccumulator(y.shape[2], 4, st.sobol.bootstrap_counts(1024, 100, [4, 1]), shift=rep.nominal)
+    acc.update(0, y[0], y[1], y[2:])  # the study's shift: tiny ranges, the sums of y − nominal
+    ref = acc.result()
+    for m in st.SobolIndices._fields[:6]:
+        np.testing.assert_allclose(getattr(rep.indices, m), getattr(ref, m), rtol=1e-9, atol=1e-12, err_msg=m)
+
+    sec = st.read_study(mech, method="sensitivity", samples=400, seed=4, ranges=RANGES, bootstrap=20,
+                        second_order=True)
+    r2 = st.sensitivity(mech, study=study.moved(inputs=sec))
+    assert r2.evaluations == 400 * 10 and r2.indices.S2.shape == (len(r2.labels), 6)
+    a, b, ab, ba = _designs(sec, study, 400, second=True)
+    y, ok, _labels = st.evaluate(moved, np.concatenate([a, b, ab.reshape(-1, 4), ba.reshape(-1, 4)]))
+    y = y.reshape(10, 400, -1)
+    acc = st.SobolAccumulator(y.shape[2], 4, st.sobol.bootstrap_counts(400, 20, [4, 1]), shift=r2.nominal,
+                              second_order=True)
+    acc.update(0, y[0], y[1], y[2:6], yba=y[6:])
+    ref = acc.result()
+    for m in ("S1", "ST", "S2", "S2_low", "S2_high"):
+        np.testing.assert_allclose(getattr(r2.indices, m), getattr(ref, m), rtol=1e-9, atol=1e-12, err_msg=m)
+    rs.write_indices_csv(tmp_path / "indices.csv", mech, r2)
+    rows = [line.split(",") for line in (tmp_path / "indices.csv").read_text().splitlines()]
+    s2 = [r for r in rows if "S2" in r]
+    assert len(s2) == 6 * (len(r2.labels) + 1) and rows[0][2] == "parameter"  # the feasibility too
+    assert ['"crank', 'rod"'] in [r[2:4] for r in s2]
+    rs.plot_bars(tmp_path / "sobol.png", mech, r2)  # the S2 bars beside S1 and ST
+    assert (tmp_path / "sobol.png").stat().st_size > 1000
+    with pytest.raises(jl.MechanismError, match="second_order"):
+        st.read_study(mech, method="sample", ranges=RANGES, second_order=True)
+    # with `tolerance` the key asks for the second-order moments (`tolerance(second_order=...)` from the CLI)
+    assert st.read_study(mech, method="tolerance", tolerances={"crank": 0.05}, second_order=True).second_order
+
+
 def test_sensitivity_of_the_feasibility_and_conditional_indices(setup, tmp_path):
     """Near the toggle b = a + e: feasibility iff b ≥ a + |e − O1_y| (independent check). The
     feasible fraction of the A, B draws equals that count; O1_x does not enter it, so its indices
@@ -417,8 +523,8 @@ def test_sensitivity_of_the_feasibility_and_conditional_indices(setup, tmp_path)
     f = rep.feasibility
     assert f.S1[0, 2] == 0 and f.ST[0, 2] == 0 and f.ST[0, 1] > 0.3 and f.ST[0, 0] > 0.05
     assert 0 < rep.complete < 512 and any("conditional on feasibility" in w for w in rep.warnings)
-    for v in rep.indices:
-        assert np.all(np.isfinite(np.asarray(v, float)))
+    for v in rep.indices:  # S2 None without the second order
+        assert v is None or np.all(np.isfinite(np.asarray(v, float)))
     from jaxlink.report import sampling as rs
 
     files = rs.write_sensitivity_all(tmp_path, mech, rep, wall_time=1.0)

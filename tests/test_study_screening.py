@@ -197,7 +197,7 @@ def test_morris_regression_dgsm_of_the_slider_crank(setup, tmp_path):
     from jaxlink.report import screening
 
     files = screening.write_all(tmp_path / "m", mech, m, wall_time=1.0)
-    assert {p.split("/")[-1] for p in files} == {"indices.csv", "morris.png", "study.json"}
+    assert {p.split("/")[-1] for p in files} == {"indices.csv", "morris.png", "study.npz", "study.json"}
     head = (tmp_path / "m" / "indices.csv").read_text().splitlines()[0]
     assert head == "output,input (deg),parameter,method,unit,value (unit),low (unit),high (unit),conditional"
 
@@ -214,6 +214,24 @@ def test_morris_regression_dgsm_of_the_slider_crank(setup, tmp_path):
     R = np.sqrt(b * b - h * h)
     exact = [np.mean(v ** 2, axis=0) for v in (np.cos(th) - h * np.sin(th) / R, b / R, 1 + 0 * R, -h / R)]
     np.testing.assert_allclose(d.indices.nu[_rows(d, "B.x")], np.stack(exact, 1), rtol=1e-7)
+    # --replot: each report read back from study.npz and study.json equals the one written, and the
+    # plot is redrawn from them alone
+    from jaxlink.report.replot import read, replot
+
+    for name, rep in (("m", m), ("g", g), ("d", d)):
+        if name != "m":
+            screening.write_all(tmp_path / name, mech, rep, wall_time=1.0, plot=False)
+        back = read(tmp_path / name)[1]
+        assert type(back) is type(rep) and back.labels == rep.labels
+        for f in rep.indices._fields:
+            a, b = getattr(rep.indices, f), getattr(back.indices, f)
+            if isinstance(a, dict):
+                assert all(np.array_equal(a[k], b[k]) for k in a), f
+            else:
+                assert np.array_equal(a, b), f
+    (tmp_path / "m" / "morris.png").unlink()
+    assert [p.split("/")[-1] for p in replot(tmp_path / "m")] == ["morris.png"]
+    assert (tmp_path / "m" / "morris.png").is_file()
 
     wide_s = st.sensitivity(mech, study=_moved(mech, study, method="sensitivity", samples=256, ranges=WIDE))
     wide_d = st.dgsm(mech, study=_moved(mech, study, method="dgsm", samples=256, ranges=WIDE))

@@ -40,6 +40,10 @@ def register(sub) -> None:
                    help="the sequence of sample and sensitivity (default: [study] sampler, else sobol)")
     p.add_argument("--bootstrap", type=int, default=None, metavar="R",
                    help="bootstrap resamples of the Sobol' intervals (default: [study] bootstrap, else 100)")
+    p.add_argument("--second-order", action="store_true", default=None,
+                   help="sensitivity: the second-order Sobol' indices S2 too, N (2D + 2) designs; tolerance: the "
+                        "second-order mean shift and sigma from the exact Hessian (one more compile, ~5 s) "
+                        "(default: [study] second_order)")
     p.add_argument("--positions", type=int, default=None, metavar="N",
                    help="input positions over the cycle (default: [study] positions, else 360)")
     p.add_argument("--seed", type=int, default=None, help="random seed (default: [study] seed, else 0)")
@@ -87,7 +91,7 @@ def cmd_study(args) -> int:
             raise MechanismError(f"{opt} must be at least {lo}, got {v}")
     inputs = read_study(mech, method=args.method, samples=args.samples, positions=args.positions, seed=args.seed,
                         chunk=args.chunk, sampler=args.sampler, bootstrap=args.bootstrap, robust=args.robust,
-                        precision=args.precision, max_samples=args.max_samples)
+                        precision=args.precision, max_samples=args.max_samples, second_order=args.second_order)
     study = Study(mech, inputs)
     extra = {"chunk": study.chunk, "command_line": {"set": list(args.set), "dtype": args.dtype,
                                                     "resume": bool(args.resume)}}
@@ -109,6 +113,7 @@ def cmd_study(args) -> int:
         bar = tqdm(total=inputs.samples, desc="Monte Carlo", unit="sample", leave=False, file=sys.stderr)
     try:
         rep = tolerance(mech, study=study, progress=None if bar is None else bar.update,
+                        second_order=inputs.second_order,
                         checkpoint=_checkpoint(args, mech, study, "monte_carlo"))
     finally:
         if bar is not None:
@@ -167,7 +172,7 @@ def _design_space(args, mech, study, show: bool, t0: float, extra: dict) -> int:
     inputs = study.inputs
     D = len(inputs.factors)
     total = {"sample": inputs.samples, "grid": int(np.prod(grid_shape(inputs))) if inputs.ranges else 0,
-             "sensitivity": inputs.samples * (D + 2)}[inputs.method]
+             "sensitivity": inputs.samples * ((2 * D if inputs.second_order else D) + 2)}[inputs.method]
     bar = None
     if show and total > 0:
         from tqdm import tqdm

@@ -9,7 +9,8 @@ robust-design map its columns (`sigma_rss(OUTPUT) (unit)`, `worst_case_linear(OU
 `cpk(OUTPUT) (1)`, `jaxlink.study.robust`).
 
 **indices.csv** (`sensitivity`; long form): `output`, `input (<input unit>)` (the position's
-input for a point's x or y, empty for a scalar), `parameter` (the factor), `method` (`S1`, `ST`),
+input for a point's x or y, empty for a scalar), `parameter` (the factor; for `S2` the pair
+`a,b`, in the factors' order), `method` (`S1`, `ST`, and `S2` with `[study] second_order`),
 `value (1)`, `low (1)`, `high (1)` (the bootstrap interval), `conditional` (1: over the wholly
 feasible base samples only; 0 for the `feasible` output itself, over all).
 """
@@ -26,6 +27,7 @@ import numpy as np
 from ..study.inputs import GIVEN, Range
 from ..study.responses import unit_names
 from ..study.sampling import SampleReport, SensitivityReport
+from ..study.sobol import pairs
 
 
 def _g(v) -> str:
@@ -69,6 +71,10 @@ def write_indices_csv(path, mech, rep: SensitivityReport) -> None:
                         v, lo, hi = (getattr(ind, m)[i, j], getattr(ind, m + "_low")[i, j],
                                      getattr(ind, m + "_high")[i, j])
                         w.writerow([name, x, f, m, _g(v), _g(lo), _g(hi), cond])
+                if ind.S2 is not None:
+                    for c, (j, k) in enumerate(pairs(len(rep.factors))):
+                        w.writerow([name, x, f"{rep.factors[j]},{rep.factors[k]}", "S2", _g(ind.S2[i, c]),
+                                    _g(ind.S2_low[i, c]), _g(ind.S2_high[i, c]), cond])
 
 
 def _base_manifest(mech, inputs, method: str) -> dict:
@@ -184,7 +190,8 @@ def write_sensitivity_all(out_dir, mech, rep: SensitivityReport, *, wall_time: f
     files += [d / "study.npz", d / "study.json"]
     data = _base_manifest(mech, rep.inputs, "sensitivity")
     data.update({"samples": rep.samples, "evaluations": rep.evaluations, "bootstrap": rep.inputs.bootstrap,
-                 "confidence": rep.inputs.confidence, "feasible_fraction": rep.feasible_fraction,
+                 "confidence": rep.inputs.confidence, "second_order": rep.inputs.second_order,
+                 "feasible_fraction": rep.feasible_fraction,
                  "complete_samples": rep.complete, "conditional": rep.complete < rep.samples,
                  "certificate": rep.certificate, "responses": len(rep.labels),
                  "warnings": list(rep.warnings), "timings_s": {k: round(v, 4) for k, v in rep.timings.items()},
@@ -253,7 +260,7 @@ def _plt():
 
 def plot_bars(path, mech, rep: SensitivityReport) -> None:
     """S1 and ST of each factor with their bootstrap intervals, one panel per scalar output (the
-    feasibility first)."""
+    feasibility first); with the second order, each pair's S2 after them."""
     plt = _plt()
     panels = [("feasible (indicator)" + (": every design feasible" if rep.feasibility.constant[0] else ""),
                rep.feasibility, 0)]
@@ -262,14 +269,22 @@ def plot_bars(path, mech, rep: SensitivityReport) -> None:
     D = len(rep.factors)
     cols = min(3, len(panels))
     rows = -(-len(panels) // cols)
-    fig, axes = plt.subplots(rows, cols, figsize=(4.2 * cols, 3.0 * rows), squeeze=False)
+    wide = 1.0 + (0.0 if rep.feasibility.S2 is None else 0.5 * len(pairs(D)) / max(D, 1))
+    fig, axes = plt.subplots(rows, cols, figsize=(4.2 * cols * wide, 3.0 * rows), squeeze=False)
     x = np.arange(D)
     for ax, (title, ind, i) in zip(axes.ravel(), panels):
         for off, m, c in ((-0.2, "S1", "C0"), (0.2, "ST", "C1")):
             v = getattr(ind, m)[i]
             err = np.stack([v - getattr(ind, m + "_low")[i], getattr(ind, m + "_high")[i] - v])
             ax.bar(x + off, v, 0.4, yerr=np.maximum(err, 0.0), color=c, capsize=3, label=m)
-        ax.set_xticks(x, rep.factors, rotation=30, ha="right", fontsize=8)
+        ticks = list(rep.factors)
+        s2, s2_low, s2_high = ind.S2, ind.S2_low, ind.S2_high
+        if s2 is not None and s2_low is not None and s2_high is not None and s2.shape[1]:  # the pairs' S2 last
+            v = s2[i]
+            err = np.stack([v - s2_low[i], s2_high[i] - v])
+            ax.bar(D + np.arange(len(v)), v, 0.4, yerr=np.maximum(err, 0.0), color="C2", capsize=3, label="S2")
+            ticks += [f"{rep.factors[j]},{rep.factors[k]}" for j, k in pairs(D)]
+        ax.set_xticks(np.arange(len(ticks)), ticks, rotation=30, ha="right", fontsize=8)
         ax.set_title(title, fontsize=9)
         ax.set_ylim(min(0.0, ax.get_ylim()[0]), max(1.05, ax.get_ylim()[1]))
         ax.axhline(0, color="k", lw=0.5)

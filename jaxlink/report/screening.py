@@ -99,7 +99,8 @@ def _method(rep) -> str:
 
 def write_all(out_dir, mech, rep, *, wall_time: float, plot: bool = True) -> list:
     """indices.csv, the plot (morris.png, regression.png or dgsm.png; with a scalar response or
-    the feasibility to show) and study.json into `out_dir`."""
+    the feasibility to show), study.npz and study.json into `out_dir` (`--replot` redraws the
+    plot from the last two)."""
     d = pathlib.Path(out_dir)
     d.mkdir(parents=True, exist_ok=True)
     method = _method(rep)
@@ -109,7 +110,7 @@ def write_all(out_dir, mech, rep, *, wall_time: float, plot: bool = True) -> lis
         files.append(d / f"{method}.png")
         if not plot_indices(files[-1], mech, rep):
             files.pop()
-    files.append(d / "study.json")
+    files += [d / "study.npz", d / "study.json"]
     data = _base_manifest(mech, rep.inputs, method)
     extra: dict = {"feasible_fraction": rep.feasible_fraction, "certificate": rep.certificate,
                    "responses": len(rep.labels), "bootstrap": rep.inputs.bootstrap,
@@ -123,6 +124,9 @@ def write_all(out_dir, mech, rep, *, wall_time: float, plot: bool = True) -> lis
     data.update(extra)
     data.update({"warnings": list(rep.warnings), "timings_s": {k: round(v, 4) for k, v in rep.timings.items()},
                  "wall_time_s": round(wall_time, 3), "files": [f.name for f in files]})
+    from .study_files import write_archive
+
+    write_archive(d, mech, rep, data)  # study.npz and the report's tree: --replot redraws from them
     files[-1].write_text(json.dumps(data, indent=2, allow_nan=False) + "\n", encoding="utf-8")
     return [str(f) for f in files]
 

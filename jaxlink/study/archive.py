@@ -18,7 +18,10 @@ import numpy as np
 
 
 def _types() -> dict:
+    from .dgsm import DGSMIndices, DGSMReport
     from .inputs import Range, StudyInputs, Tolerance
+    from .morris import MorrisIndices, MorrisReport
+    from .regression import RegressionIndices, RegressionReport
     from .robust import RobustMap
     from .sampling import SampleReport, SensitivityReport
     from .second_order import SecondOrder
@@ -27,7 +30,8 @@ def _types() -> dict:
     from .worstcase import WorstCase
 
     return {t.__name__: t for t in (Range, StudyInputs, Tolerance, SampleReport, SensitivityReport, SobolIndices,
-                                    FirstOrder, MonteCarlo, ToleranceReport, WorstCase, RobustMap,
+                                    FirstOrder, MonteCarlo, ToleranceReport, WorstCase, RobustMap, MorrisIndices,
+                                    MorrisReport, RegressionIndices, RegressionReport, DGSMIndices, DGSMReport,
                                     SecondOrder)}
 
 

@@ -75,7 +75,7 @@ DISTRIBUTIONS = _DISTRIBUTIONS
 METRICS = ("stroke", "speed", "acceleration", "deviation")
 KNOWN_KEYS = {"method", "positions", "points", "metrics", "samples", "seed", "distribution", "k", "chunk",
               "rpm", "tolerances", "ranges", "sampler", "levels", "bootstrap", "confidence", "robust", "limits",
-              "correlation", "precision", "max_samples", "final", "steps", "list", "step"}
+              "correlation", "precision", "max_samples", "final", "steps", "list", "step", "second_order"}
 TOLERANCE_KEYS = {"tol", "sigma", "radius", "box", "distribution", "k"}
 DEFAULTS: dict = {"method": "tolerance", "positions": 360, "metrics": ("stroke", "deviation"), "samples": 10000,
             "seed": 0, "distribution": "normal", "k": 3.0, "sampler": "sobol", "levels": 11, "bootstrap": 100,
@@ -134,7 +134,9 @@ class StudyInputs(NamedTuple):
     `correlation` (the rank correlations between inputs:
     `(name, name, rho)` triples, `correlation.py`), `precision` and `max_samples` (the stopping rule,
     `convergence.py`; None: no rule), `designs` (the rows of a `vector`, `list` or `centered` study,
-    file units, `parameter_studies.py`), `morris_levels` (the Morris grid's levels p)."""
+    file units, `parameter_studies.py`), `morris_levels` (the Morris grid's levels p), `second_order`
+    (`sensitivity`: the Sobol' S2 too, N (2D + 2) designs; `tolerance`: the second-order mean shift
+    and σ from the exact Hessian, `second_order.py`)."""
 
     method: str
     tolerances: tuple
@@ -156,6 +158,7 @@ class StudyInputs(NamedTuple):
     max_samples: int = 65536
     designs: tuple = ()
     morris_levels: int = 4
+    second_order: bool = False
 
     @property
     def factors(self) -> tuple:
@@ -267,8 +270,13 @@ def _read_study(mech, table, overrides) -> StudyInputs:
     if method in DRAWN and not ranges and not tol_raw:
         raise _err(mech, f"the {method} method needs [study.ranges] (NAME = [low, high], file units) or "
                          "[study.tolerances]", "ranges")
+    second_order = t.get("second_order", False)
+    if not isinstance(second_order, bool) or (second_order and method not in ("sensitivity", "tolerance")):
+        raise _err(mech, f"'second_order' (tolerance: the second-order mean shift and σ; sensitivity: the Sobol' "
+                         f"S2) must be true or false, with method = \"tolerance\" or \"sensitivity\"; got "
+                         f"{second_order!r} with {method!r}", "second_order")
     more: dict[str, Any] = dict(precision=precision, max_samples=max_samples, designs=designs,
-                                morris_levels=morris_levels)
+                                morris_levels=morris_levels, second_order=second_order)
     if method != "tolerance" and not tol_raw:
         out = StudyInputs(method, (), positions, tuple(points), tuple(dict.fromkeys(metrics)), samples, seed,
                           chunk, rpm, ranges, sampler, bootstrap, confidence, robust, limits, **more)

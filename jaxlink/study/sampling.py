@@ -16,8 +16,8 @@ used (0 in the arrays, empty cells in study.csv), never dropped and never a NaN.
   which parameters drive infeasibility; `feasible_fraction` is the fraction of the 2N independent
   draws (A and B) that are feasible — an estimate of the probability that a design drawn from the
   ranges assembles;
-- the responses' indices are computed over the base samples whose D + 2 evaluations are all
-  feasible (the others weigh 0): indices *conditional on feasibility*, with a warning — an
+- the responses' indices are computed over the base samples whose D + 2 (2D + 2 with the second
+  order) evaluations are all feasible (the others weigh 0): indices *conditional on feasibility*, with a warning — an
   approximation, the feasible region not being a product of the ranges; with fewer than two such
   base samples the responses' indices are not computed (a warning, no NaN).
 """
@@ -79,8 +79,9 @@ class SensitivityReport(NamedTuple):
     - `indices` (`SobolIndices` of the M responses, conditional on feasibility; None when fewer
       than two base samples are wholly feasible); `feasibility` (`SobolIndices` of the indicator,
       one output);
-    - `samples` (base samples N), `evaluations` (N (D + 2)), `feasible_fraction` (of the 2N draws A
-      and B), `complete` (base samples whose D + 2 evaluations are all feasible);
+    - `samples` (base samples N), `evaluations` (N (D + 2), N (2D + 2) with `second_order`),
+      `feasible_fraction` (of the 2N draws A and B), `complete` (base samples whose evaluations are
+      all feasible);
     - `certificate`, `warnings`, `timings`.
     """
 
@@ -126,21 +127,38 @@ class _Evaluator:
                                           if self.deviation else ())
         self.nominal: np.ndarray | None = None
         self.seconds = 0.0
+        self._submitted = False
 
     def __call__(self, x):
+        return self.finish(self.submit(x))
+
+    def submit(self, x):
+        """Dispatch the batches of designs `x` (n, T) and return at once (JAX runs them
+        asynchronously); `finish` waits for them and returns what `__call__` does. Calls are
+        finished in the order they were submitted (the first one carries the nominal)."""
         t0 = time.perf_counter()
         s = self.study
-        first = self.nominal is None
+        first = self.nominal is None and not self._submitted
+        self._submitted = True
         if first:
             x = np.concatenate([s.x0[None], x])
         n = x.shape[0]
-        vals, oks = [], []
+        batches = []
         for a in range(0, n, s.chunk):
             k = min(s.chunk, n - a)
             xp = np.empty((s.chunk, x.shape[1]))
             xp[:] = s.x0
             xp[:k] = x[a:a + k]
-            v, ok, est = s._batch(jnp.asarray(xp))
+            batches.append((xp, k, s._batch(jnp.asarray(xp))))
+        self.seconds += time.perf_counter() - t0
+        return first, batches
+
+    def finish(self, pending):
+        t0 = time.perf_counter()
+        s = self.study
+        first, batches = pending
+        vals, oks = [], []
+        for xp, k, (v, ok, est) in batches:
             ok = s._certified(xp[:k], np.asarray(ok)[:k], np.asarray(est)[:k])
             vals.append(np.asarray(v)[:k])
             oks.append(ok)
@@ -257,13 +275,16 @@ def sample(mech, inputs: StudyInputs | None = None, *, samples: int | None = Non
 
 
 def sensitivity(mech, inputs: StudyInputs | None = None, *, samples: int | None = None, chunk=None, options=None,
-                progress=None, study: Study | None = None, checkpoint=None) -> SensitivityReport:
+                progress=None, study: Study | None = None, checkpoint=None, overlap: bool = True) -> SensitivityReport:
     """Sobol' S1 and ST of every response (and of the feasibility) with bootstrap intervals,
     from N = `samples` base samples of the study's `sampler` (2d columns: A and B) over its ranges
     (or its tolerances' distributions; a circular zone is one factor of two parameters).
 
+    With `inputs.second_order`, the designs BA_j too and the second-order indices S2.
+
     **Arguments:** as `sample` (`checkpoint`: the estimators' sums saved after every batch, a
-    saved study resumed). **Returns:** a `SensitivityReport` (see the module doc; the
+    saved study resumed); `overlap` (default True): batch k + 1 dispatched to JAX before batch k's
+    estimator sums are taken, the same numbers as without. **Returns:** a `SensitivityReport` (see the module doc; the
     estimators in `jaxlink.study.sobol`).
     """
     t0 = time.perf_counter()
@@ -283,9 +304,11 @@ def sensitivity(mech, inputs: StudyInputs | None = None, *, samples: int | None 
         raise MechanismError(f"a sensitivity study needs at least 2 base samples, got {N}", file=mech.file,
                              key="study.samples")
     counts = bootstrap_counts(N, inputs.bootstrap, [inputs.seed, 1])
-    per = max(1, study.chunk // (D + 2))
+    second = bool(inputs.second_order)
+    E = 2 * D + 2 if second else D + 2  # designs per base sample: A, B, AB_j (and BA_j)
+    per = max(1, study.chunk // E)
     resp: SobolAccumulator | None = None
-    feas = SobolAccumulator(1, D, counts)
+    feas = SobolAccumulator(1, D, counts, second_order=second)
     drawn = ok_draws = complete = 0
     t_est = 0.0
     start = 0
@@ -294,31 +317,39 @@ def sensitivity(mech, inputs: StudyInputs | None = None, *, samples: int | None 
     if saved is not None:
         done, state = saved
         ev.nominal = state["nominal"]
-        resp = SobolAccumulator(len(ev.labels), D, counts)
+        resp = SobolAccumulator(len(ev.labels), D, counts, second_order=second)
         resp.restore(state["responses"])
         feas.restore(state["feasibility"])
         drawn, ok_draws, complete, start = state["drawn"], state["ok_draws"], state["complete"], state["start"]
         if progress is not None:
-            progress(start * (D + 2))
-    for ci, u in enumerate(unit_blocks(inputs.sampler, 2 * T, N, inputs.seed, per)):
-        if ci < done:
-            continue
-        n = len(u)
+            progress(start * E)
+    def designs(u):
         a = to_values(inputs, study.x0, u[:, :T])
         b = to_values(inputs, study.x0, u[:, T:])
         ab = np.repeat(a[None], D, axis=0)
         for k, c in enumerate(cols):
             ab[k][:, c] = b[:, c]
-        y, ok = ev(np.concatenate([a, b, ab.reshape(-1, T)]))
+        x = [a, b, ab.reshape(-1, T)]
+        if second:
+            ba = np.repeat(b[None], D, axis=0)
+            for k, c in enumerate(cols):
+                ba[k][:, c] = a[:, c]
+            x.append(ba.reshape(-1, T))
+        return np.concatenate(x)
+
+    def estimate(ci, n, y, ok):
+        nonlocal resp, drawn, ok_draws, complete, start, t_est
         t1 = time.perf_counter()
         if resp is None:
             assert ev.nominal is not None
-            resp = SobolAccumulator(len(ev.labels), D, counts, shift=ev.nominal)
-        okb = ok.reshape(D + 2, n)
+            resp = SobolAccumulator(len(ev.labels), D, counts, shift=ev.nominal, second_order=second)
+        okb = ok.reshape(E, n)
         w = okb.all(axis=0)
-        resp.update(start, y[:n], y[n:2 * n], y[2 * n:].reshape(D, n, -1), w)
+        ba = y[(D + 2) * n:].reshape(D, n, -1) if second else None
+        resp.update(start, y[:n], y[n:2 * n], y[2 * n:(D + 2) * n].reshape(D, n, -1), w, yba=ba)
         f = ok.astype(float)[:, None]
-        feas.update(start, f[:n], f[n:2 * n], f[2 * n:].reshape(D, n, 1))
+        feas.update(start, f[:n], f[n:2 * n], f[2 * n:(D + 2) * n].reshape(D, n, 1),
+                    yba=f[(D + 2) * n:].reshape(D, n, 1) if second else None)
         drawn += 2 * n
         ok_draws += int(okb[:2].sum())
         complete += int(w.sum())
@@ -328,7 +359,24 @@ def sensitivity(mech, inputs: StudyInputs | None = None, *, samples: int | None 
             checkpoint.save(ci + 1, {"nominal": ev.nominal, "responses": resp.state(), "feasibility": feas.state(),
                                     "drawn": drawn, "ok_draws": ok_draws, "complete": complete, "start": start})
         if progress is not None:
-            progress(n * (D + 2))
+            progress(n * E)
+
+    # batch k + 1 is dispatched (JAX runs it asynchronously) before batch k's estimator terms are
+    # summed (numpy, outside the GIL in its BLAS): the same operations in the same order as without
+    # the overlap, so the same numbers bit for bit
+    pending = None
+    for ci, u in enumerate(unit_blocks(inputs.sampler, 2 * T, N, inputs.seed, per)):
+        if ci < done:
+            continue
+        job = (ci, len(u), ev.submit(designs(u)))
+        if not overlap:
+            estimate(job[0], job[1], *ev.finish(job[2]))
+            continue
+        if pending is not None:
+            estimate(pending[0], pending[1], *ev.finish(pending[2]))
+        pending = job
+    if pending is not None:
+        estimate(pending[0], pending[1], *ev.finish(pending[2]))
     assert resp is not None and ev.nominal is not None
     t1 = time.perf_counter()
     warnings = []
@@ -336,11 +384,11 @@ def sensitivity(mech, inputs: StudyInputs | None = None, *, samples: int | None 
     if complete >= 2:
         indices = resp.result(inputs.confidence)
     else:
-        warnings.append(f"only {complete} of {N} base samples have all their {D + 2} designs feasible: the responses' "
+        warnings.append(f"only {complete} of {N} base samples have all their {E} designs feasible: the responses' "
                         "Sobol' indices are not computed (only the feasibility's)")
     if 2 <= complete < N:
         warnings.append(
-            f"{N - complete} of {N} base samples have an infeasible design among their {D + 2}: the responses' indices "
+            f"{N - complete} of {N} base samples have an infeasible design among their {E}: the responses' indices "
             f"are computed over the {complete} others — conditional on feasibility, an approximation (the feasible "
             "region is not a product of the ranges); the feasibility's own indices say which parameters drive it")
     fi = feas.result(inputs.confidence)
@@ -348,4 +396,4 @@ def sensitivity(mech, inputs: StudyInputs | None = None, *, samples: int | None 
     timings = {"evaluate": ev.seconds, "estimate": t_est, "total": time.perf_counter() - t0}
     r = study.responses
     return SensitivityReport(inputs, tuple(f.name for f in factors), ev.labels, r.input_values, ev.nominal, indices,
-                             fi, N, N * (D + 2), ok_draws / max(drawn, 1), complete, r.certificate, warnings, timings)
+                             fi, N, N * E, ok_draws / max(drawn, 1), complete, r.certificate, warnings, timings)
