@@ -3,13 +3,14 @@
 Per case: a random linkage of a class — `4` the four-bar, `6w` a Watt six-bar, `6s` a Stephenson
 six-bar (the built-in topologies of `jaxlink.synthesis.topology`, traced at their point E on the
 last dyad's link, a random point of that link), `8` an eight-bar (a six-bar of at most 5 dyads
-grown by one more dyad between two moving joints of different bodies that no dyad joins yet, traced at the new joint; at most 10
-joints) — drawn with every joint uniform in [−1, 1]², kept when every dyad closes over the whole
-turn (`assembly.certify`, smallest margin ≥ `--min-margin`). Its traced joint's path (the
-project's exact tracer, `tracer.trace_exact`, `--inputs` inputs) is the target: a closed one over
-the whole turn (even cases), or an open one over a random sub-interval of a quarter to three
-quarters of the turn (odd cases). `jaxlink.synthesize` then searches the default topologies
-(`--max-links`, 8: the four-bar and the six six-bars) within `--time-limit` seconds.
+grown by one more dyad between two moving joints of different bodies that no dyad joins yet,
+traced at the new joint; at most 10 joints) — drawn with every joint uniform in [−1, 1]², kept
+when every dyad closes over the whole turn (`assembly.certify`, smallest margin ≥
+`--min-margin`). Its traced joint's path (the project's exact tracer, `tracer.trace_exact`,
+`--inputs` inputs) is the target: a closed one over the whole turn (even cases), or an open one
+over a random sub-interval of a quarter to three quarters of the turn (odd cases).
+`jaxlink.synthesize` then searches the default topologies (`--max-links`, 8: the four-bar and the
+six six-bars) within `--time-limit` seconds.
 
 **The discretisation floor** of a target (docs/methods/synthesis.md): the distance D between two
 samplings of the planted curve itself that are half a sample apart — the exact curve (traced at 20
@@ -167,7 +168,8 @@ def main() -> int:
             jl.synthesize(warm if closed else warm[:60], closed=closed, time_limit=0.1, samples=args.samples,
                           topologies=[eight_bar(np.random.default_rng(0))], quick=quick)
     compile_s = time.perf_counter() - t0
-    print(f"compiled (closed and open{', eight-bar given' if args.eight_given else ''}) in {compile_s:.1f} s", flush=True)
+    given = ", eight-bar given" if args.eight_given else ""
+    print(f"compiled (closed and open{given}) in {compile_s:.1f} s", flush=True)
     rows = []
     print(f"{'class':<6}{'case':<5}{'curve':<7}{'planted':<34}{'pj':>3}{'found':<27}{'fj':>3}"
           f"{'distance':>10}{'floor':>9}{'ratio':>7}{'rec':>5}{'time_s':>8}")
@@ -191,8 +193,9 @@ def main() -> int:
                         "median_ratio": float(np.median([r["ratio"] for r in rs]))}
         if any("given_recovered" in r for r in rs):
             summary[cls]["given_recovered"] = sum(r.get("given_recovered", False) for r in rs)
-        print(f"class {cls}: recovered {summary[cls]['recovered']}/{len(rs)} (closed {summary[cls]['closed_recovered']}, "
-              f"open {summary[cls]['open_recovered']}), median D/floor {summary[cls]['median_ratio']:.2f}"
+        sm = summary[cls]
+        print(f"class {cls}: recovered {sm['recovered']}/{len(rs)} (closed {sm['closed_recovered']}, "
+              f"open {sm['open_recovered']}), median D/floor {sm['median_ratio']:.2f}"
               + (f", with its topology given {summary[cls]['given_recovered']}/{len(rs)}"
                  if "given_recovered" in summary[cls] else ""))
     total = sum(r["recovered"] for r in rows)
