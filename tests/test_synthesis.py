@@ -233,3 +233,5 @@ def test_topology_objects_are_searched():
     seven = T.Topology("seven", tuple([(T.CRANK, 1)] * 7), 10)
     with pytest.raises(MechanismError, match="more than 6 dyads"):
         synthesize(target, topologies=[seven], time_limit=1)
+    with pytest.raises(MechanismError, match="two topologies named"):
+        synthesize(target, topologies=[mine, T.grow(mine, 4, 5)], time_limit=1)

@@ -95,7 +95,8 @@ def synthesize(target: Any, *, closed: bool | None = None, time_limit: float = 6
     `closed`: match a closed loop over a whole crank turn, or an open path over a sub-interval
     (default: from the target, `jaxlink.synthesis.target`). `topologies`: the topologies to search, each
     the name of a built-in one (`jaxlink.synthesis.topology.topologies`) or a `Topology` (e.g. one
-    grown by `topology.grow`, at most `topology.MAX_DYADS` dyads); default the built-ins up to `max_links`.
+    grown by `topology.grow`, at most `topology.MAX_DYADS` dyads, every name distinct); default the
+    built-ins up to `max_links`.
     Returns the best design of each topology, best first (`Synthesis.best`); `seed` makes it
     repeatable for a given number of rounds. Computes in float64 for the answers (NumPy) whatever JAX's x64 setting."""
     t0 = time.perf_counter()
@@ -115,6 +116,10 @@ def synthesize(target: Any, *, closed: bool | None = None, time_limit: float = 6
         big = [t.name for t in topos if len(t.dyads) > MAX_DYADS]
         if big:
             raise MechanismError(f"topology {big[0]!r} has more than {MAX_DYADS} dyads")
+        names = [t.name for t in topos]
+        if len(set(names)) < len(names):
+            raise MechanismError(f"two topologies named {next(n for n in names if names.count(n) > 1)!r}: "
+                                 "name each (`grow(..., name=...)`); the answers are keyed by name")
     found = search(tgt, topos, time_limit=time_limit, seed=seed, samples=samples, n_trace=count,
                    n_points=n_points, t0=t0, log=log, **search_options)
     best: dict[str, Candidate] = {}
