@@ -213,3 +213,25 @@ def test_polishing_slots_go_to_the_best_three_topologies():
         slots = np.flatnonzero(stix == t)
         assert np.array_equal(p[slots[0]], pose[t][0][0]) and np.array_equal(p[slots[1]], pose[t][1][0])
         assert not np.allclose(p[slots[2]], pose[t][0][0]) and np.allclose(p[slots[2]], pose[t][0][0], atol=0.2)
+
+
+def test_topology_objects_are_searched():
+    """`synthesize(topologies=[...])` takes a `Topology` (one grown by `grow`) beside the built-ins'
+    names: the answer carries its name and recovers its planted curve (the four-bar with its rocker
+    dyad's parents written the other way round: the same program as the closed run above)."""
+    from jaxlink.errors import MechanismError
+
+    mine = T.Topology("my-four-bar", ((1, T.CRANK), (T.CRANK, 4)), FOUR_BAR.traced)
+    pose = POSE.copy()
+    pose[4] = [1.1, -0.8]     # the rocker dyad's branch sign flips with its parents' order: the other assembly
+    target = trace_exact(mine, pose, np.linspace(0, 2 * np.pi, 400, endpoint=False))[0][:, mine.traced]
+    r = synthesize(target, topologies=[mine], time_limit=1, count=400)
+    assert [d.topology for d in r.designs] == ["my-four-bar"] and r.best.joints == 5
+    assert r.best.distance <= 1.5 * _floor(target, True)
+    with pytest.raises(MechanismError, match="unknown topology"):
+        synthesize(target, topologies=["no-such-bar"], time_limit=1)
+    seven = T.Topology("seven", tuple([(T.CRANK, 1)] * 7), 10)
+    with pytest.raises(MechanismError, match="more than 6 dyads"):
+        synthesize(target, topologies=[seven], time_limit=1)
+    with pytest.raises(MechanismError, match="two topologies named"):
+        synthesize(target, topologies=[mine, T.grow(mine, 4, 5)], time_limit=1)

@@ -15,6 +15,7 @@ from . import distance as _dist
 from .mechanism import crank_angle, placed_pose, to_sketch
 from .search import Candidate, interval_offsets, search
 from .target import Target, load_target, make_target
+from .topology import MAX_DYADS, Topology
 from .topology import topologies as builtin_topologies
 from .tracer import lengths
 
@@ -86,14 +87,16 @@ def _design(c: Candidate, target: Target, n_trace: int, name: str) -> Design:
 
 
 def synthesize(target: Any, *, closed: bool | None = None, time_limit: float = 60.0, seed: int = 0,
-               max_links: int = 8, topologies: list[str] | None = None, n_points: int = _dist.N_POINTS,
+               max_links: int = 8, topologies: list[str | Topology] | None = None, n_points: int = _dist.N_POINTS,
                count: int = 1000, samples: int = 8192, name: str = "synthesized",
                log: Callable[[str], None] | None = None, **search_options) -> Synthesis:
     """Find linkages whose traced point follows `target` (a path to a .csv/.npy/.svg file, an
     (N, 2) array or a `Target`), up to `max_links` links, within about `time_limit` seconds.
     `closed`: match a closed loop over a whole crank turn, or an open path over a sub-interval
-    (default: from the target, `jaxlink.synthesis.target`). `topologies`: names of the built-in
-    topologies to search (`jaxlink.synthesis.topology.topologies`; default all up to `max_links`).
+    (default: from the target, `jaxlink.synthesis.target`). `topologies`: the topologies to search, each
+    the name of a built-in one (`jaxlink.synthesis.topology.topologies`) or a `Topology` (e.g. one
+    grown by `topology.grow`, at most `topology.MAX_DYADS` dyads, every name distinct); default the
+    built-ins up to `max_links`.
     Returns the best design of each topology, best first (`Synthesis.best`); `seed` makes it
     repeatable for a given number of rounds. Computes in float64 for the answers (NumPy) whatever JAX's x64 setting."""
     t0 = time.perf_counter()
@@ -106,10 +109,17 @@ def synthesize(target: Any, *, closed: bool | None = None, time_limit: float = 6
     topos = builtin_topologies(max_links)
     if topologies is not None:
         known = {t.name: t for t in builtin_topologies(99)}
-        bad = [n for n in topologies if n not in known]
+        bad = [n for n in topologies if not isinstance(n, Topology) and n not in known]
         if bad:
             raise MechanismError(f"unknown topology {bad[0]!r}; the topologies are {', '.join(known)}")
-        topos = [known[n] for n in topologies]
+        topos = [n if isinstance(n, Topology) else known[n] for n in topologies]
+        big = [t.name for t in topos if len(t.dyads) > MAX_DYADS]
+        if big:
+            raise MechanismError(f"topology {big[0]!r} has more than {MAX_DYADS} dyads")
+        names = [t.name for t in topos]
+        if len(set(names)) < len(names):
+            raise MechanismError(f"two topologies named {next(n for n in names if names.count(n) > 1)!r}: "
+                                 "name each (`grow(..., name=...)`); the answers are keyed by name")
     found = search(tgt, topos, time_limit=time_limit, seed=seed, samples=samples, n_trace=count,
                    n_points=n_points, t0=t0, log=log, **search_options)
     best: dict[str, Candidate] = {}
