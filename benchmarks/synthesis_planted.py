@@ -49,11 +49,11 @@ import numpy as np  # noqa: E402
 jax.config.update("jax_enable_x64", True)
 
 import jaxlink as jl  # noqa: E402
+from jaxlink.synthesis import assembly, target, tracer  # noqa: E402
 from jaxlink.synthesis import distance as D  # noqa: E402
 from jaxlink.synthesis import topology as T  # noqa: E402
-from jaxlink.synthesis.assembly import certify  # noqa: E402
-from jaxlink.synthesis.target import arclength_resample  # noqa: E402
-from jaxlink.synthesis.tracer import trace_exact  # noqa: E402
+
+certify, arclength_resample, trace_exact = assembly.certify, target.arclength_resample, tracer.trace_exact
 
 WATT = [t for t in T.topologies() if t.name.startswith("watt")]
 STEPHENSON = [t for t in T.topologies() if t.name.startswith("stephenson")]
