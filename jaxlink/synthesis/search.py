@@ -37,7 +37,7 @@ import optax
 
 from . import distance as _dist
 from .assembly import Assembly, certify
-from .sortnet import sort_last
+from .sortnet import sort_first
 from .target import Target, arclength_resample
 from .topology import CRANK, Topology, as_arrays
 from .tracer import trace, trace_exact
@@ -113,19 +113,20 @@ class Candidate(NamedTuple):
     found_s: float
 
 
-def _sorted_radii(curve, closed: bool):
-    """The descriptor: sorted distances from the centroid of the arclength-resampled, normalised curve."""
+def _radii(curve, closed: bool):
+    """The descriptor before sorting: distances from the centroid of the arclength-resampled,
+    normalised curve (`_screen` sorts them, `sortnet.sort_first`)."""
     seg = jnp.sqrt(jnp.sum(jnp.diff(curve, axis=0) ** 2, axis=-1) + 1e-12)
     s = jnp.concatenate([jnp.zeros(1, curve.dtype), jnp.cumsum(seg)])
     q = s[-1] * (jnp.arange(DESC_N) / (DESC_N if closed else DESC_N - 1))
     c = jnp.stack([jnp.interp(q, s, curve[:, 0]), jnp.interp(q, s, curve[:, 1])], axis=-1)
     c = c - c.mean(0)
     r = jnp.sqrt(jnp.sum(c * c, axis=-1) + 1e-12)
-    return sort_last(r / jnp.sqrt(jnp.mean(r * r)))  # = jnp.sort, bit for bit (`sortnet`)
+    return r / jnp.sqrt(jnp.mean(r * r))
 
 
 def _desc(points: np.ndarray, closed: bool) -> np.ndarray:
-    """`_sorted_radii` in NumPy (the target's descriptor)."""
+    """The sorted `_radii` in NumPy (the target's descriptor)."""
     c = arclength_resample(points, DESC_N, closed)
     c = c - c.mean(0)
     r = np.sqrt(np.sum(c * c, axis=-1) + 1e-12)
@@ -185,10 +186,12 @@ def _screen(key, parents, active, traced, target_desc, *, closed: bool):
                          for st, step, k in slices])
         valid = jnp.stack([jnp.all(jax.lax.slice(o2, (st,), (st + step * (k - 1) + 1,), (step,)))
                            for st, step, k in slices])
-        d = jax.vmap(lambda p: jnp.mean(jnp.abs(_sorted_radii(p, closed) - target_desc)))(pts)
-        return jnp.where(valid, d, jnp.inf)
+        return jax.vmap(lambda p: _radii(p, closed))(pts), valid
 
-    return poses, jax.vmap(per_candidate)(curves, ok)
+    r, valid = jax.vmap(per_candidate)(curves, ok)            # (B, S, DESC_N), (B, S)
+    desc = sort_first(jnp.moveaxis(r, -1, 0))                # sorted along the leading axis: no gathers
+    d = jnp.mean(jnp.abs(desc - target_desc[:, None, None]), axis=0)
+    return poses, jnp.where(valid, d, jnp.inf)
 
 
 def _normalised(c, w):
