@@ -69,26 +69,9 @@ def margins_at(mech, dyads, sigma, q_ref, phis, p):
         phis, trig_in)
 
 
-def _parabola_min(ma, mb, mc, lo, hi):
-    """Minimum over t ∈ [lo, hi] of the parabola through (−1, ma), (0, mb), (1, mc), and its t."""
-    a = 0.5 * (ma + mc) - mb
-    b = 0.5 * (mc - ma)
-    convex = a > 0
-    t_star = jnp.clip(-b / jnp.where(convex, 2.0 * a, 1.0), lo, hi)
-
-    def val(t):
-        return a * t * t + b * t + mb
-
-    cands = jnp.stack([jnp.broadcast_to(lo, a.shape), jnp.broadcast_to(hi, a.shape),
-                       jnp.where(convex, t_star, lo)])
-    vals = val(cands)
-    i = jnp.argmin(vals, axis=0)
-    return jnp.take_along_axis(vals, i[None], 0)[0], jnp.take_along_axis(cands, i[None], 0)[0]
-
-
-def _parabola_low(ma, mb, mc, lo, hi):
-    """`_parabola_min`'s value alone, as the least of its three candidates' values (`jnp.minimum`,
-    no argmin and gather: the same number, several times cheaper in a batch)."""
+def _parabola(ma, mb, mc, lo, hi):
+    """The parabola through (−1, ma), (0, mb), (1, mc) as a function `val(t)`, and the three
+    candidates of its minimum over t ∈ [lo, hi]: lo, hi and its vertex (lo where it is not convex)."""
     a = 0.5 * (ma + mc) - mb
     b = 0.5 * (mc - ma)
     convex = a > 0
@@ -98,7 +81,23 @@ def _parabola_low(ma, mb, mc, lo, hi):
         return a * t * t + b * t + mb
 
     lo_, hi_ = jnp.broadcast_to(lo, a.shape), jnp.broadcast_to(hi, a.shape)
-    return jnp.minimum(jnp.minimum(val(lo_), val(hi_)), val(jnp.where(convex, t_star, lo_)))
+    return val, (lo_, hi_, jnp.where(convex, t_star, lo_))
+
+
+def _parabola_min(ma, mb, mc, lo, hi):
+    """Minimum over t ∈ [lo, hi] of the parabola through (−1, ma), (0, mb), (1, mc), and its t."""
+    val, cands = _parabola(ma, mb, mc, lo, hi)
+    cands = jnp.stack(cands)
+    vals = val(cands)
+    i = jnp.argmin(vals, axis=0)
+    return jnp.take_along_axis(vals, i[None], 0)[0], jnp.take_along_axis(cands, i[None], 0)[0]
+
+
+def _parabola_low(ma, mb, mc, lo, hi):
+    """`_parabola_min`'s value alone, as the least of its three candidates' values (`jnp.minimum`,
+    no argmin and gather: the same number, several times cheaper in a batch)."""
+    val, (lo_, hi_, vertex) = _parabola(ma, mb, mc, lo, hi)
+    return jnp.minimum(jnp.minimum(val(lo_), val(hi_)), val(vertex))
 
 
 def interval_lower(m):
