@@ -190,13 +190,17 @@ def main(argv=None) -> dict:
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--quick", action="store_true", help="sizes up to 1e6 positions, small Monte Carlo")
     ap.add_argument("--max-positions", type=float, default=None, help="largest batch (default 1e8; quick 1e6)")
+    ap.add_argument("--min-positions", type=float, default=0, help="smallest batch (default 1e3)")
+    ap.add_argument("--only", choices=("scaling", "gradient", "montecarlo"), action="append",
+                    help="run only these parts (repeatable; default all three)")
     ap.add_argument("--continuation-max", type=float, default=None,
                     help="largest batch for Newton continuation (default 1e8; quick 1e5)")
     ap.add_argument("--json", metavar="OUT", help="write the results as JSON (default: benchmarks/results/latest/)")
     args = ap.parse_args(argv)
     top = args.max_positions or (1e6 if args.quick else 1e8)
     cont_top = args.continuation_max or (1e5 if args.quick else 1e8)
-    sizes = [s for s in (1e3, 1e4, 1e5, 1e6, 1e7, 1e8, 3e8) if s <= top]
+    sizes = [s for s in (1e3, 1e4, 1e5, 1e6, 1e7, 1e8, 3e8) if args.min_positions <= s <= top]
+    parts = set(args.only or ("scaling", "gradient", "montecarlo"))
 
     import jax
 
@@ -205,7 +209,7 @@ def main(argv=None) -> dict:
     rows = []
     print(f"{'positions':>10} {'dtype':>8} {'method':>13} {'pos/s':>10} {'vs hand':>8} {'compile s':>9} "
           f"{'peak MB':>9} {'max err rad':>11}")
-    for s in sizes:
+    for s in (sizes if "scaling" in parts else ()):
         for dtype in ("float64", "float32"):
             per = {}
             for kind in ("handwritten", "closed_form", "continuation"):
@@ -227,7 +231,7 @@ def main(argv=None) -> dict:
                       f"{fmt(r.get('max_abs_error_rad'), '.1e'):>11} {r.get('error', '')}", flush=True)
 
     grads = []
-    for B in ((1e3, 1e4) if args.quick else (1e3, 1e5)):
+    for B in ((1e3, 1e4) if args.quick else (1e3, 1e5)) if "gradient" in parts else ():
         g = child(GRAD, [str(int(B))])
         grads.append(g)
         print(f"gradient at {int(B)} designs: {fmt(g.get('gradient_over_forward'), '.2f')}× the forward solve "
@@ -236,7 +240,7 @@ def main(argv=None) -> dict:
 
     mcs = []
     budget = 20000 if args.quick else 2_000_000
-    for chunk in ("default", "16384" if args.quick else "100000"):
+    for chunk in ("default", "16384" if args.quick else "100000") if "montecarlo" in parts else ():
         m = child(MONTECARLO, [str(budget), chunk])
         mcs.append(m)
         print(f"Monte Carlo (sewing-feed-opt, chunk {chunk}): {fmt(m.get('designs_per_s'))} designs/s "

@@ -111,9 +111,12 @@ def test_the_same_structure_loaded_twice_compiles_once():
 
 
 @pytest.mark.parametrize("method", ["auto", "continuation"])
-def test_a_batch_over_the_memory_budget_is_chunked_and_identical(method):
-    """`max_bytes` smaller than the batch: chunks of designs (the last one padded), copied to the
-    host, bit-identical to the one-call solve — per-design inputs and guesses included."""
+@pytest.mark.parametrize("where", ["device", "host"])
+def test_a_batch_over_the_memory_budget_is_chunked_and_identical(method, where):
+    """`max_bytes` smaller than the batch: chunks of designs (the last one padded), bit-identical
+    to the one-call solve — per-design inputs and guesses included. The result stays on the
+    device where twice its size leaves room for a chunk (4 designs' estimate: the result is
+    11 × 24 × 7 values of 8 bytes, 1.375 designs' estimate), else each chunk goes to the host."""
     m = jl.load("four-bar")
     opts = jl.NewtonOptions(method=method)
     phis = np.deg2rad(np.arange(0.0, 360.0, 15.0))
@@ -122,18 +125,27 @@ def test_a_batch_over_the_memory_budget_is_chunked_and_identical(method):
     P[:, m.parameter_index("b")] = np.linspace(0.030, 0.080, B)  # some cannot turn a revolution
     one = jl.solve(m, phis, P, options=opts)
     per = (2 + 3 + 2) * len(phis) * 128  # bytes of one design by solve's estimate
-    chunked = jl.solve(m, phis, P, options=opts, max_bytes=3 * per)  # chunks of 2 designs
-    assert isinstance(chunked.q, np.ndarray) and not isinstance(one.q, np.ndarray)
+    budget = 4 * per if where == "device" else 2 * per  # chunks of 2 designs either way
+    from jaxlink.solvers.assemble import _chunk_designs
+
+    assert _chunk_designs(m, phis, P, True, budget) == (2, where == "device")
+    chunked = jl.solve(m, phis, P, options=opts, max_bytes=budget)
+    assert isinstance(chunked.q, np.ndarray) == (where == "host") and not isinstance(one.q, np.ndarray)
     assert chunked.q.shape == (B, len(phis), 2)
     for x, y in zip(jax.tree_util.tree_leaves(one), jax.tree_util.tree_leaves(chunked)):
-        np.testing.assert_array_equal(np.asarray(x), y)
+        np.testing.assert_array_equal(np.asarray(x), np.asarray(y))
     assert 0 < np.asarray(one.converged).all(axis=1).sum() < B
     # each design its own inputs and guesses
     PH = phis[None, :] + np.linspace(0.0, 0.3, B)[:, None]
     Q0 = np.asarray(one.q[:, 0])
     a = jl.solve(m, PH, P, Q0, options=opts)
-    b = jl.solve(m, PH, P, Q0, options=opts, max_bytes=5 * per)
+    b = jl.solve(m, PH, P, Q0, options=opts, max_bytes=budget + per)
     for x, y in zip(jax.tree_util.tree_leaves(a), jax.tree_util.tree_leaves(b)):
-        np.testing.assert_array_equal(np.asarray(x), y)
+        np.testing.assert_array_equal(np.asarray(x), np.asarray(y))
+    # a wrong chunk (its padding not cut, or the designs shifted) is caught by the same check
+    from jaxlink.solvers.assemble import _solve_chunked
+
+    bad = _solve_chunked(m, phis, np.roll(P, 1, axis=0), None, opts, True, 2, where == "device")
+    assert not np.array_equal(np.asarray(one.q), np.asarray(bad.q))
     with pytest.raises(ValueError, match="max_bytes"):
         jl.solve(m, phis, P, max_bytes=0)

@@ -289,8 +289,9 @@ def solve(mech: Mechanism, phis, p=None, q0=None, *, options: NewtonOptions = Ne
     - `points`: also compute the points of interest (`Solution.points`).
     - `max_bytes`: the device memory a batch may use (default: a quarter of the device's memory,
       of the available host memory on a CPU). A larger batch is solved in chunks of designs that
-      fit, each copied to the host as it is done: the result is then numpy arrays, identical to
-      the unchunked solve.
+      fit, identical to the unchunked solve: kept on the device where the whole result fits
+      beside a chunk's working memory, else each chunk copied to the host as it is done (the
+      result then numpy arrays).
 
     **Returns:** a `Solution` (q, points, result, stats) with leading axes (N,) or (B, N).
 
@@ -301,10 +302,10 @@ def solve(mech: Mechanism, phis, p=None, q0=None, *, options: NewtonOptions = Ne
     (`jax.device_put(p, NamedSharding(...))`) is solved where it lies.
     """
     _warn_if_float32(p)
-    chunk = _chunk_designs(mech, phis, p, points, max_bytes)
-    if chunk is None:
+    plan = _chunk_designs(mech, phis, p, points, max_bytes)
+    if plan is None:
         return _solve_jit(mech, phis, p, q0, options, points)
-    return _solve_chunked(mech, phis, p, q0, options, points, chunk)
+    return _solve_chunked(mech, phis, p, q0, options, points, *plan)
 
 
 # device memory of one solved position, per value it returns (q, points, residual, code, steps):
@@ -328,8 +329,11 @@ def memory_budget() -> int:
     return max(64 << 20, int(avail) // 4)
 
 
-def _chunk_designs(mech, phis, p, points: bool, max_bytes) -> int | None:
-    """Designs per chunk when the batch needs more than `max_bytes`, else None (one call)."""
+def _chunk_designs(mech, phis, p, points: bool, max_bytes) -> tuple[int, bool] | None:
+    """(designs per chunk, whether the result stays on the device) when the batch needs more than
+    `max_bytes`, else None (one call). The result stays on the device where twice its size (the
+    chunks' results and their concatenation) leaves room for the chunks' working memory; the
+    chunks are then sized to that room. Otherwise each chunk is copied to the host."""
     if p is None or isinstance(p, jax.core.Tracer) or isinstance(phis, jax.core.Tracer) or np.ndim(p) != 2:
         return None
     if max_bytes is not None and not (int(max_bytes) > 0):
@@ -340,27 +344,40 @@ def _chunk_designs(mech, phis, p, points: bool, max_bytes) -> int | None:
     budget = memory_budget() if max_bytes is None else int(max_bytes)
     if B * per_design <= budget:
         return None
-    chunk = 1
-    while 2 * chunk * per_design <= budget and 2 * chunk < B:
-        chunk *= 2
-    return chunk
+
+    def largest(room):  # the largest power of two designs whose working memory fits in `room`
+        chunk = 1
+        while 2 * chunk * per_design <= room and 2 * chunk < B:
+            chunk *= 2
+        return chunk
+
+    room = budget - 2 * B * N * values * 8  # the result (8 bytes a value at most), twice
+    if room >= per_design:
+        return largest(room), True
+    return largest(budget), False
 
 
-def _solve_chunked(mech, phis, p, q0, options, points, chunk: int) -> Solution:
+def _solve_chunked(mech, phis, p, q0, options, points, chunk: int, on_device: bool = False) -> Solution:
     """`_solve_jit` over chunks of `chunk` designs (the last one padded by repeating its first
-    design, so one compiled shape serves them all), each copied to the host when done."""
-    P = np.asarray(p)
+    design, so one compiled shape serves them all). `on_device`: the chunks are sliced, solved and
+    concatenated on the device (the result jax arrays); else each is copied to the host when done
+    (the result numpy arrays). The values are the same either way."""
+    xp = jnp if on_device else np
+    P = xp.asarray(p)
     B = P.shape[0]
-    per_design_phis = np.ndim(phis) == 2
-    per_design_q0 = q0 is not None and np.ndim(q0) == 2
+    PH = xp.asarray(phis) if np.ndim(phis) == 2 else None
+    Q0 = xp.asarray(q0) if q0 is not None and np.ndim(q0) == 2 else None
     parts = []
     for lo in range(0, B, chunk):
-        idx = np.arange(lo, min(lo + chunk, B))
-        take = np.concatenate([idx, np.full(chunk - len(idx), idx[0])])
-        sol = _solve_jit(mech, np.asarray(phis)[take] if per_design_phis else phis, P[take],
-                         np.asarray(q0)[take] if per_design_q0 else q0, options, points)
-        parts.append(jax.tree_util.tree_map(lambda x, n=len(idx): np.asarray(x)[:n], jax.device_get(sol)))
-    return jax.tree_util.tree_map(lambda *xs: np.concatenate(xs, axis=0), *parts)
+        n = min(chunk, B - lo)
+        take = slice(lo, lo + n) if n == chunk else np.concatenate([np.arange(lo, lo + n), np.full(chunk - n, lo)])
+        sol = _solve_jit(mech, phis if PH is None else PH[take], P[take], q0 if Q0 is None else Q0[take],
+                         options, points)
+        if on_device:
+            parts.append(sol if n == chunk else jax.tree_util.tree_map(lambda x, n=n: x[:n], sol))
+        else:
+            parts.append(jax.tree_util.tree_map(lambda x, n=n: np.asarray(x)[:n], jax.device_get(sol)))
+    return jax.tree_util.tree_map(lambda *xs: xp.concatenate(xs, axis=0), *parts)
 
 
 def solve_path(mech: Mechanism, phis, p=None, q0=None, *, options: NewtonOptions = NewtonOptions(),
