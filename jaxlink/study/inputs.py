@@ -329,7 +329,14 @@ def _correlated(mech, inputs: StudyInputs, t) -> StudyInputs:
         return inputs
     from .correlation import read_correlation
 
-    return inputs._replace(correlation=read_correlation(mech, inputs, t["correlation"], _err))
+    out = inputs._replace(correlation=read_correlation(mech, inputs, t["correlation"], _err))
+    if out.method == "tolerance" and out.second_order:
+        from .second_order import unsupported
+
+        why = unsupported(out)
+        if why:
+            raise _err(mech, why, "correlation")
+    return out
 
 
 def _ranges(mech, raw, levels_raw) -> tuple:

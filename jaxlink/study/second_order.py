@@ -67,11 +67,127 @@ def input_moments(inputs) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 
 def second_order_stats(J, H, inputs) -> SecondOrder:
     """The mean shift and std₂ (module doc) from the Jacobian `J` (M, T) and Hessians `H`
-    (M, T, T) of the responses."""
+    (M, T, T) of the responses; with a `[study.correlation]` the correlated form (module doc).
+    Raises `ValueError` (`unsupported`'s reason) where its fourth moments are not computable."""
     J = np.asarray(J, float)
     H = np.asarray(H, float)
+    if inputs.correlation:
+        return _correlated_stats(J, H, inputs)
     s2, cov, cross = input_moments(inputs)
     d = np.diagonal(H, axis1=1, axis2=2)  # (M, T)
     off = cross * (1.0 - np.eye(len(s2)))
     var = (J ** 2) @ s2 + 0.25 * np.einsum("mi,ij,mj->m", d, cov, d) + 0.5 * np.einsum("mij,ij->m", H ** 2, off)
     return SecondOrder(0.5 * d @ s2, np.sqrt(np.maximum(var, 0.0)), H)
+
+
+def _correlated_stats(J, H, inputs) -> SecondOrder:
+    """The correlated form: shift ½ tr(H Σ), Var₂ = gᵀ Σ g + ¼ (Σ H_ij H_kl E[δ_i δ_j δ_k δ_l] − (tr H Σ)²)."""
+    from .copula import covariance
+
+    sigma = covariance(inputs)
+    m4 = fourth_moments(inputs)
+    T = sigma.shape[0]
+    M = H.shape[0]
+    Hf = H.reshape(M, T * T)
+    tr = Hf @ sigma.reshape(T * T)
+    quad = np.einsum("mi,mi->m", Hf @ m4.reshape(T * T, T * T), Hf)
+    var = np.einsum("mi,ij,mj->m", J, sigma, J) + 0.25 * (quad - tr ** 2)
+    return SecondOrder(0.5 * tr, np.sqrt(np.maximum(var, 0.0)), H)
+
+
+def _structure(inputs):
+    """(tolerance per parameter (T,), the normal-scores correlation C (T, T), the zone partner of
+    each parameter or −1)."""
+    tols = [t for t in inputs.tolerances for _ in t.parameters]
+    params = list(inputs.parameters)
+    c = np.eye(len(tols))
+    for a, b, r in inputs.correlation:
+        i, j = params.index(a), params.index(b)
+        c[i, j] = c[j, i] = r
+    partner = -np.ones(len(tols), int)
+    j = 0
+    for t in inputs.tolerances:
+        if t.zone:
+            partner[j], partner[j + 1] = j + 1, j
+        j += len(t.parameters)
+    return tols, c, partner
+
+
+def _components(idx, link) -> list[list[int]]:
+    """The connected components of the distinct parameters `idx` under `link` (T, T) (truthy: linked)."""
+    left = list(idx)
+    out = []
+    while left:
+        comp = [left.pop(0)]
+        k = 0
+        while k < len(comp):
+            near = [j for j in left if link[comp[k], j]]
+            comp += near
+            left = [j for j in left if j not in near]
+            k += 1
+        out.append(comp)
+    return out
+
+
+def unsupported(inputs) -> str | None:
+    """Why the second-order σ cannot be computed exactly with the inputs' correlation, or None:
+    three or more inputs linked by correlations, one of them not normal (their joint fourth moments
+    under the Gaussian copula are 3- and 4-dimensional integrals, not computed)."""
+    if not inputs.correlation:
+        return None
+    tols, c, _ = _structure(inputs)
+    for comp in _components(list(range(len(tols))), c != 0.0):
+        if len(comp) >= 3 and any(tols[i].distribution != "normal" for i in comp):
+            names = [inputs.parameters[i] for i in comp]
+            return (f"second order with correlated inputs is computed for correlated pairs (any distribution) and "
+                    f"for groups of normal inputs; {', '.join(names)} are linked by correlations and not all normal: "
+                    "leave second_order out, or correlate them in pairs, or make them normal")
+    return None
+
+
+def fourth_moments(inputs) -> np.ndarray:
+    """E[δ_i δ_j δ_k δ_l] (T, T, T, T) of the toleranced parameters: a product over the independent
+    groups of the indices (module doc): one input μ₂ or μ₄; a zone's coordinates (the disc's mixed
+    moments); a correlated pair by quadrature (`copula.moment`); a correlated group of normal
+    inputs by Isserlis' theorem, E[δ_i δ_j δ_k δ_l] = Σ_ij Σ_kl + Σ_ik Σ_jl + Σ_il Σ_jk. Raises
+    `ValueError` as `unsupported`."""
+    import itertools
+
+    from .copula import covariance, moment
+
+    why = unsupported(inputs)
+    if why:
+        raise ValueError(why)
+    tols, c, partner = _structure(inputs)
+    sigma = covariance(inputs)
+    T = len(tols)
+
+    def part(idx) -> float:
+        counts = {i: idx.count(i) for i in dict.fromkeys(idx)}
+        if sum(counts.values()) % 2:
+            return 0.0  # the joint distribution is symmetric about the nominal
+        keys = list(counts)
+        if len(keys) == 1:
+            (i, n), = counts.items()
+            t = tols[i]
+            return t.sigma ** 2 if n == 2 else fourth_moment_ratio(t.distribution, t.k, t.zone) * t.sigma ** 4
+        i, j = keys[0], keys[1]
+        if len(keys) == 2 and partner[i] == j:  # a zone's two coordinates
+            if any(n % 2 for n in counts.values()):
+                return 0.0  # the disc is symmetric in each coordinate
+            s4 = tols[i].sigma ** 4
+            return 2.0 / 3.0 * s4 if tols[i].distribution == "uniform" else s4
+        if len(keys) == 2:
+            return moment(tols[i], tols[j], c[i, j], counts[i], counts[j])
+        a, b, cc, d = idx  # three or four distinct: normal (`unsupported`)
+        return sigma[a, b] * sigma[cc, d] + sigma[a, cc] * sigma[b, d] + sigma[a, d] * sigma[b, cc]
+
+    link = (c != 0.0) | (partner[:, None] == np.arange(T)[None, :])
+    out = np.zeros((T, T, T, T))
+    for q in itertools.combinations_with_replacement(range(T), 4):
+        v = 1.0
+        for g in _components(list(dict.fromkeys(q)), link):
+            v *= part(tuple(i for i in q if i in g))
+        for perm in set(itertools.permutations(q)):
+            out[perm] = v
+    return out

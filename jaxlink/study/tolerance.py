@@ -304,10 +304,12 @@ class Study:
             ok[rows] = np.asarray(self._certify(jnp.asarray(xs)))[:len(rows)]
         return ok
 
-    def monte_carlo(self, n: int, first: FirstOrder, *, progress=None, checkpoint=None) -> MonteCarlo:
+    def monte_carlo(self, n: int, first: FirstOrder, *, progress=None, checkpoint=None,
+                    second: SecondOrder | None = None) -> MonteCarlo:
         """`n` Monte Carlo samples (see the module doc); `progress(k)` is called after each batch
         with the samples done in it. `checkpoint` (a `checkpoint.Checkpoint`): the streamed state
-        is saved after every batch, and a saved state resumed (the batches done skipped)."""
+        is saved after every batch, and a saved state resumed (the batches done skipped). `second`
+        (`SecondOrder`): the mean is compared with the nominal plus its mean shift (`agreement`)."""
         r = self.responses
         nominal = self.nominal()[0]
         n_curve = r.n_curve
@@ -373,15 +375,27 @@ class Study:
             z = np.zeros(M)
             return MonteCarlo(n, 0, infeasible, z, z, z, z, z, z, z, dev_max, dev_sum, np.ones(M, bool), *cap)
         std, se, me = mom.std, mom.std_error, mom.mean_error
-        zcrit = _bonferroni(M)
-        floor = 1e-9 * (np.abs(nominal) + first.sigma_rss) + 1e-300  # rounding of the solve
-        agree = np.ones(M, bool)
-        if mom.n >= MIN_COMPARE:
-            agree = ((np.abs(std - first.sigma_rss) <= zcrit * se + floor)
-                     & (np.abs(mom.mean) <= zcrit * me + floor))
+        agree = agreement(mom.mean, std, me, se, mom.n, nominal, first, second)
         return MonteCarlo(n, feasible, infeasible, mom.mean, std, se, me, mom.quantile(QUANTILES[0]),
                           mom.quantile(QUANTILES[1]), np.maximum(np.abs(mom.low), np.abs(mom.high)),
                           dev_max, dev_sum / max(feasible, 1), agree, *cap)
+
+
+def agreement(mean_shift, std, mean_error, std_error, n: int, nominal, first: FirstOrder,
+              second: SecondOrder | None = None) -> np.ndarray:
+    """(M,) False where Monte Carlo disagrees with the moment method beyond its sampling error (the
+    module doc): |s − σ_RSS| > z SE(s), or |mean − y(x̄) − shift| > z SE(mean), shift the second-order
+    mean shift of `second` (0 without: first order predicts none); z of `_bonferroni` over the M
+    responses, plus a floor of 1e-9 relative for the solve's rounding. All True below `MIN_COMPARE`
+    samples."""
+    M = len(nominal)
+    if n < MIN_COMPARE:
+        return np.ones(M, bool)
+    zcrit = _bonferroni(M)
+    floor = 1e-9 * (np.abs(nominal) + first.sigma_rss) + 1e-300  # rounding of the solve
+    shift = np.zeros(M) if second is None else np.asarray(second.mean_shift)
+    return ((np.abs(np.asarray(std) - first.sigma_rss) <= zcrit * np.asarray(std_error) + floor)
+            & (np.abs(np.asarray(mean_shift) - shift) <= zcrit * np.asarray(mean_error) + floor))
 
 
 def limited_responses(mech, inputs: StudyInputs, labels) -> tuple:
@@ -432,12 +446,19 @@ def _with_aux(single):
 
 
 def first_order_stats(J, inputs: StudyInputs) -> FirstOrder:
-    """σ_RSS, the linear worst case and the importance factors from the Jacobian `J` (M, T)."""
+    """σ_RSS, the linear worst case and the importance factors from the Jacobian `J` (M, T); with a
+    `[study.correlation]` the covariance Σ of the inputs (`copula.covariance`): σ_RSS² = J Σ Jᵀ and
+    I_j = J_j (Σ J)_j / σ_RSS² (module doc)."""
     J = np.asarray(J, float)
     sigma = np.asarray([t.sigma for t in inputs.tolerances for _ in t.parameters])
     half = np.asarray([t.half_width for t in inputs.tolerances for _ in t.parameters])
-    contrib = (J * sigma) ** 2
-    var = contrib.sum(axis=1)
+    if inputs.correlation:
+        from .copula import covariance
+
+        contrib = J * (J @ covariance(inputs))  # J_j (Σ J)_j: Σ_j of it is Jᵀ Σ J
+    else:
+        contrib = (J * sigma) ** 2
+    var = np.maximum(contrib.sum(axis=1), 0.0)
     worst = _group_norms(J, inputs) @ _group_half_widths(inputs)
     importance = np.where(var[:, None] > 0, contrib / np.where(var > 0, var, 1.0)[:, None], 0.0)
     return FirstOrder(J, np.sqrt(var), worst, importance, sigma, half)
@@ -517,6 +538,11 @@ def tolerance(mech, inputs: StudyInputs | None = None, *, samples: int | None = 
     timings["first_order"] = time.perf_counter() - t1
     second = None
     if second_order:
+        from .second_order import unsupported
+
+        why = unsupported(inputs)
+        if why:
+            raise MechanismError(why, file=mech.file, key="study.correlation")
         t1 = time.perf_counter()
         second = study.second_order(first)
         timings["second_order"] = time.perf_counter() - t1
@@ -537,7 +563,7 @@ def tolerance(mech, inputs: StudyInputs | None = None, *, samples: int | None = 
     mc = None
     if n_mc > 0:
         t2 = time.perf_counter()
-        mc = study.monte_carlo(n_mc, first, progress=progress, checkpoint=checkpoint)
+        mc = study.monte_carlo(n_mc, first, progress=progress, checkpoint=checkpoint, second=second)
         timings["monte_carlo"] = time.perf_counter() - t2
         if mc.infeasible:
             warnings.append(
@@ -553,7 +579,8 @@ def tolerance(mech, inputs: StudyInputs | None = None, *, samples: int | None = 
             warnings.append(
                 f"first order and Monte Carlo disagree beyond Monte Carlo's sampling error at {bad.size} of "
                 f"{len(nominal)} responses ({', '.join(names[:6])}{', …' if len(names) > 6 else ''}; σ differs by up "
-                f"to {100 * float(rel.max()):.3g} %): the response is not linear over the tolerances there")
+                f"to {100 * float(rel.max()):.3g} %): the response is not "
+                + ("quadratic" if second is not None else "linear") + " over the tolerances there")
     K = len(inputs.points)
     bound = deviation_bound(first.jacobian, inputs, K, inputs.positions)
     wc = None
