@@ -21,7 +21,8 @@ path from the nominal over the cycle) give `worst_case_linear` (the linear bound
 mean (of `deviation(P)`) and largest value, and the worst case; a metric's row its worst case; a cell
 that has no value is empty.
 
-**importance.csv**: `output`, `input (<input unit>)`, `parameter`, `factor (1)`: (J σ)² / σ_RSS².
+**importance.csv**: `output`, `input (<input unit>)`, `parameter`, `factor (1)`: (J σ)² / σ_RSS²
+(with `[study.correlation]` J_j (Σ J)_j / σ_RSS², `FirstOrder.importance`).
 """
 
 from __future__ import annotations

@@ -23,7 +23,8 @@ Spearman matrix is C up to sampling error (O(1/√n); the scores' Pearson correl
 their rank correlation close to it). A block of n ≤ k + 1 rows is left as it is.
 
 Where it applies: the Monte Carlo draws of `tolerance` (each block of 1024 draws reordered on its
-own stream) and the designs of `sample` and `regression` with the `lhs` or `random` sampler (each
+own stream; its first and second order use the Pearson correlation those draws have, `copula.py`)
+and the designs of `sample` and `regression` with the `lhs` or `random` sampler (each
 batch of designs reordered; reordering is within a column, so a Latin hypercube stays one). A
 correlated input is a scalar factor (a range or a tolerance; not a circular zone). The Sobol',
 Morris and derivative-based indices assume independent inputs: those methods refuse a correlation.

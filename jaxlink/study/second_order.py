@@ -19,6 +19,17 @@ Var₂ = Σ g_i² σ_i² + ¼ Σ H_ii² (μ₄,i − σ_i⁴) + ½ Σ_{i≠j} H_
 uniform circular zone (radius r, σ = r/2) are uncorrelated but not independent:
 E[δ_x² δ_y²] = r⁴/24 = (2/3) σ⁴ and Cov(δ_x², δ_y²) = −σ⁴/3 (μ₄ = 2σ⁴).
 
+**Correlated inputs** (`[study.correlation]`; Σ the covariance of `copula.covariance`): the joint
+distribution is still symmetric about the nominal (a Gaussian copula of symmetric marginals), so
+
+    mean shift = ½ tr(H Σ),   Var₂ = gᵀ Σ g + ¼ (Σ_ijkl H_ij H_kl E[δ_i δ_j δ_k δ_l] − (tr H Σ)²)
+
+with the fourth moments (`fourth_moments`) a product over the independent groups: one input, a
+zone's two coordinates (as above), a correlated pair (`copula.moment`, any distributions), a group
+of three or more inputs linked by correlations, all normal (Isserlis: E[δ_i δ_j δ_k δ_l] =
+Σ_ij Σ_kl + Σ_ik Σ_jl + Σ_il Σ_jk). Three or more linked inputs, one of them not normal, need 3- and
+4-dimensional integrals of the copula: refused (`unsupported`).
+
 The standard deviation is std₂ = √Var₂. The Hessian is `jax.jacfwd` of the study's Jacobian
 (`jax.jacfwd` of the response function, the path solve differentiated implicitly): both orders
 exact, no finite differences.

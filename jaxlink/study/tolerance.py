@@ -11,7 +11,13 @@ of parameter j (independent inputs) and t_j its half-width:
     I_j = (J_j σ_j)² / σ_y,RSS²                   (importance factors, Σ_j I_j = 1)
 
 A circular zone (x, y) of radius r counts r √(J_x² + J_y²) to the worst case (the largest change
-over the disc), and σ_x = σ_y per coordinate to the RSS (uncorrelated).
+over the disc), and σ_x = σ_y per coordinate to the RSS (uncorrelated). With a
+`[study.correlation]`, Σ the covariance of the inputs that the Monte Carlo draws have
+(`copula.covariance`: Σ_ab = σ_a σ_b ρ_ab, ρ the Pearson correlation of the Gaussian copula):
+
+    σ_y,RSS² = J Σ Jᵀ,   I_j = J_j (Σ J)_j / σ_y,RSS²   (Σ_j I_j = 1; an I_j can be negative)
+
+and the linear worst case is unchanged (the box is the box).
 
 **Monte Carlo.** `samples` designs drawn from the distributions (`draw`: numpy's Generator,
 one stream per block of `BLOCK` samples seeded with (seed, block), so the samples do not depend
@@ -20,9 +26,10 @@ the statistics streamed (`moments.Moments`). A design that does not assemble ove
 on the nominal's branch is *counted* (`infeasible`) and left out of the statistics, which are
 those of the feasible designs; never dropped silently, never a NaN.
 
-**Agreement.** Where Monte Carlo ran, every response whose Monte Carlo σ differs from σ_RSS by
-more than z standard errors of the sample σ, or whose mean differs from the nominal by more than
-z standard errors of the mean, is flagged (z for a family-wise 1 % false-alarm rate over the
+**Agreement** (`agreement`). Where Monte Carlo ran, every response whose Monte Carlo σ differs
+from σ_RSS by more than z standard errors of the sample σ, or whose mean differs from the nominal
+(plus the second-order mean shift where second order ran) by more than z standard errors of the
+mean, is flagged (z for a family-wise 1 % false-alarm rate over the
 responses: Bonferroni), with the nonlinearity it reveals.
 """
 
@@ -579,8 +586,9 @@ def tolerance(mech, inputs: StudyInputs | None = None, *, samples: int | None = 
             warnings.append(
                 f"first order and Monte Carlo disagree beyond Monte Carlo's sampling error at {bad.size} of "
                 f"{len(nominal)} responses ({', '.join(names[:6])}{', …' if len(names) > 6 else ''}; σ differs by up "
-                f"to {100 * float(rel.max()):.3g} %): the response is not "
-                + ("quadratic" if second is not None else "linear") + " over the tolerances there")
+                f"to {100 * float(rel.max()):.3g} %): the response is not linear over the tolerances there"
+                + (" (the mean compared with the nominal plus the second-order mean shift)" if second is not None
+                   else ""))
     K = len(inputs.points)
     bound = deviation_bound(first.jacobian, inputs, K, inputs.positions)
     wc = None
