@@ -99,11 +99,13 @@ def cmd_study(args) -> int:
     from . import study_methods
 
     if study_methods.handles(inputs):  # morris, regression, dgsm, Dakota's studies, the stopping rule
-        if args.resume:
-            raise MechanismError(f"--resume covers tolerance, sample, grid and sensitivity without a stopping rule; "
-                                 f"not {inputs.method!r}" + (" with --precision" if inputs.precision else "")
-                                 + ": run it again without --resume")
-        return study_methods.run(args, mech, study, show, t0)
+        screening = inputs.method in study_methods.SCREENING
+        if args.resume and not screening:
+            raise MechanismError(f"--resume covers tolerance, sample, grid, sensitivity without a stopping rule, "
+                                 f"morris, regression and dgsm; not {inputs.method!r}"
+                                 + (" with --precision" if inputs.precision else "") + ": run it again without --resume")
+        ck = _checkpoint(args, mech, study, inputs.method) if screening else None
+        return study_methods.run(args, mech, study, show, t0, checkpoint=ck)
     if inputs.method != "tolerance":
         return _design_space(args, mech, study, show, t0, extra)
     bar = None
