@@ -387,13 +387,15 @@ def _written(tmp_path, name, mech, rep):
     return (d / "indices.csv").read_bytes(), screening.summary(rep), data, archive.load_npz(d / "study.npz")
 
 
-def test_morris_regression_dgsm_killed_and_resumed_give_the_same_bytes(setup, tmp_path):
+def test_morris_regression_dgsm_killed_and_resumed_give_the_same_bytes(setup, tmp_path, monkeypatch, capsys):
     """Morris, regression and DGSM over two batches each near the toggle (infeasible designs in
     both), interrupted after the first batch (the checkpoint written batch by batch), resumed:
     indices.csv, the summary, study.json (but the timings) and every array of study.npz equal the
     uninterrupted run's bit for bit. The resume reads the checkpoint (a perturbed saved state, a
     missing chunk change the result or are refused), and a checkpoint whose key differs (seed,
-    samples, chunk, method) is refused naming the difference."""
+    samples, chunk, method) is refused naming the difference. From the command line: a Morris
+    study interrupted (Ctrl-C) after its first checkpoint, then `--resume`d, writes the bytes of an
+    uninterrupted one; a resume with another --seed is refused."""
     import shutil
 
     from jaxlink.study import archive
@@ -438,3 +440,33 @@ def test_morris_regression_dgsm_killed_and_resumed_give_the_same_bytes(setup, tm
         st.dgsm(mech, study=mv, checkpoint=ck("dgsm", inp, resume=True, chunk=512))
     with pytest.raises(jl.MechanismError, match="another study .*the study's method"):
         st.dgsm(mech, study=mv, checkpoint=ck("morris", inp, resume=True))
+
+    from jaxlink.cli import main
+
+    src = tmp_path / "slider.toml"
+    src.write_text(FILE + 'seed = 2\nmethod = "morris"\nsamples = 400\n[study.ranges]\ncrank = [24.0, 26.0]\n'
+                   'rod = [36.5, 39.0]\n')  # 1024 // 3 = 341 trajectories a batch: two batches
+    cmd = ["study", str(src), "--no-plot", "--progress", "off", "--out"]
+    assert main(cmd + [str(tmp_path / "cli-ref")]) == 0
+    ref_out = capsys.readouterr().out
+    save = Checkpoint.save
+
+    def killed(self, done, state):
+        save(self, done, state)
+        raise KeyboardInterrupt
+    monkeypatch.setattr(Checkpoint, "save", killed)
+    assert main(cmd + [str(tmp_path / "cli")]) == 130
+    monkeypatch.undo()
+    assert json.loads((tmp_path / "cli" / "checkpoint" / "state.json").read_text())["done"] == 1
+    assert main(cmd + [str(tmp_path / "cli"), "--resume"]) == 0
+    # the summary printed (its first line: the timing) and the files written
+    assert ref_out.splitlines()[1:] == capsys.readouterr().out.replace("/cli/", "/cli-ref/").splitlines()[1:]
+
+    def manifest(d):
+        data = json.loads((tmp_path / d / "study.json").read_text())
+        del data["timings_s"], data["wall_time_s"], data["report"]["fields"]["timings"]
+        return data
+    assert (tmp_path / "cli-ref" / "indices.csv").read_bytes() == (tmp_path / "cli" / "indices.csv").read_bytes()
+    assert manifest("cli-ref") == manifest("cli")
+    assert main(cmd + [str(tmp_path / "cli"), "--resume", "--seed", "5"]) == 2
+    assert "belongs to another study (different [study] seed)" in capsys.readouterr().err

@@ -26,7 +26,8 @@ EE_ij = a_j (high_j − low_j) exactly, and so are μ_j and μ*_j (σ_j = 0). Th
 `morris.analyze` numbers on the same trajectories.
 
 The sums are streamed over batches of trajectories (of EE − s, s the first batch's mean effect:
-no cancellation in σ).
+no cancellation in σ); with a checkpoint they are saved after every batch and a resumed study
+evaluates only the batches after the last saved one (the same sums in the same order).
 
 **Bootstrap.** The trajectories resampled with replacement R times (`bootstrap`; counts as in
 `sobol.bootstrap_counts`); each interval is the estimate ± z σ_boot (as SALib's `mu_star_conf`).
