@@ -358,3 +358,115 @@ def test_vector_list_centered_studies(setup, tmp_path, capsys):
                      ('method = "sample"\nsteps = 3\n[study.ranges]\ncrank = [1, 2]\n', "belongs to the vector")):
         with pytest.raises(jl.MechanismError, match=msg):
             st.read_study(jl.loads(base + bad))
+
+
+class _Stop(Exception):
+    pass
+
+
+def _stop_after(k):
+    """A `progress` callback that interrupts the study after its k-th batch (a killed study)."""
+    calls = [0]
+
+    def progress(_n):
+        calls[0] += 1
+        if calls[0] == k:
+            raise _Stop
+    return progress
+
+
+def _written(tmp_path, name, mech, rep):
+    """(indices.csv bytes, the summary, study.json without the timings, study.npz's arrays) of `rep`."""
+    from jaxlink.report import screening
+    from jaxlink.study import archive
+
+    d = tmp_path / name
+    screening.write_all(d, mech, rep, wall_time=1.0, plot=False)
+    data = json.loads((d / "study.json").read_text())
+    del data["timings_s"], data["report"]["fields"]["timings"]
+    return (d / "indices.csv").read_bytes(), screening.summary(rep), data, archive.load_npz(d / "study.npz")
+
+
+def test_morris_regression_dgsm_killed_and_resumed_give_the_same_bytes(setup, tmp_path, monkeypatch, capsys):
+    """Morris, regression and DGSM over two batches each near the toggle (infeasible designs in
+    both), interrupted after the first batch (the checkpoint written batch by batch), resumed:
+    indices.csv, the summary, study.json (but the timings) and every array of study.npz equal the
+    uninterrupted run's bit for bit. The resume reads the checkpoint (a perturbed saved state, a
+    missing chunk change the result or are refused), and a checkpoint whose key differs (seed,
+    samples, chunk, method) is refused naming the difference. From the command line: a Morris
+    study interrupted (Ctrl-C) after its first checkpoint, then `--resume`d, writes the bytes of an
+    uninterrupted one; a resume with another --seed is refused."""
+    import shutil
+
+    from jaxlink.study import archive
+    from jaxlink.study.checkpoint import Checkpoint, resume_key
+
+    mech, study = setup
+
+    def ck(name, inp, resume=False, chunk=study.chunk, what=None):
+        key = resume_key(mech, inp, chunk=chunk, what=what or inp.method)
+        return Checkpoint(tmp_path / name, key, resume=resume)
+
+    # one batch: 1024 // 5 = 204 Morris trajectories, 1024 regression designs, 256 DGSM designs
+    for method, n, fn in (("morris", 210, st.morris), ("regression", 1100, st.regression), ("dgsm", 300, st.dgsm)):
+        inp = st.read_study(mech, method=method, samples=n, ranges=TOGGLE, seed=3, bootstrap=10)
+        mv = study.moved(x0=[25.0, 38.0, 0.0, 0.0], inputs=inp)
+        ref = fn(mech, study=mv)
+        assert 0 < ref.feasible_fraction < 1
+        with pytest.raises(_Stop):
+            fn(mech, study=mv, progress=_stop_after(1), checkpoint=ck(method, inp))
+        assert json.loads((tmp_path / method / "state.json").read_text())["done"] == 1
+        shutil.copytree(tmp_path / method, tmp_path / f"{method}-copy")
+        res = fn(mech, study=mv, checkpoint=ck(method, inp, resume=True))
+        want, got = _written(tmp_path, f"{method}-ref", mech, ref), _written(tmp_path, f"{method}-res", mech, res)
+        assert want[:3] == got[:3], method
+        assert want[3].keys() == got[3].keys() and all(np.array_equal(want[3][k], got[3][k]) for k in want[3])
+        # the saved state is what the resumed study starts from
+        copy = tmp_path / f"{method}-copy"
+        if method == "regression":
+            (copy / "chunk-000000.npz").unlink()
+            with pytest.raises(jl.MechanismError, match="a chunk of the checkpoint is missing"):
+                fn(mech, study=mv, checkpoint=ck(f"{method}-copy", inp, resume=True))
+        else:
+            state = archive.load_npz(copy / "state-000001.npz")
+            archive.save_npz(copy / "state-000001.npz", {k: v * 1.5 if v.dtype == float else v
+                                                           for k, v in state.items()})
+            bad = fn(mech, study=mv, checkpoint=ck(f"{method}-copy", inp, resume=True))
+            assert _written(tmp_path, f"{method}-bad", mech, bad)[0] != want[0]
+        for other, why in ((inp._replace(seed=4), "seed"), (inp._replace(samples=n + 1), "samples")):
+            with pytest.raises(jl.MechanismError, match=f"another study .*{why}"):
+                fn(mech, study=mv, checkpoint=ck(method, other, resume=True))
+    with pytest.raises(jl.MechanismError, match="another study .*chunk"):
+        st.dgsm(mech, study=mv, checkpoint=ck("dgsm", inp, resume=True, chunk=512))
+    with pytest.raises(jl.MechanismError, match="another study .*the study's method"):
+        st.dgsm(mech, study=mv, checkpoint=ck("morris", inp, resume=True))
+
+    from jaxlink.cli import main
+
+    src = tmp_path / "slider.toml"
+    src.write_text(FILE + 'seed = 2\nmethod = "morris"\nsamples = 400\n[study.ranges]\ncrank = [24.0, 26.0]\n'
+                   'rod = [36.5, 39.0]\n')  # 1024 // 3 = 341 trajectories a batch: two batches
+    cmd = ["study", str(src), "--no-plot", "--progress", "off", "--out"]
+    assert main(cmd + [str(tmp_path / "cli-ref")]) == 0
+    ref_out = capsys.readouterr().out
+    save = Checkpoint.save
+
+    def killed(self, done, state):
+        save(self, done, state)
+        raise KeyboardInterrupt
+    monkeypatch.setattr(Checkpoint, "save", killed)
+    assert main(cmd + [str(tmp_path / "cli")]) == 130
+    monkeypatch.undo()
+    assert json.loads((tmp_path / "cli" / "checkpoint" / "state.json").read_text())["done"] == 1
+    assert main(cmd + [str(tmp_path / "cli"), "--resume"]) == 0
+    # the summary printed (its first line: the timing) and the files written
+    assert ref_out.splitlines()[1:] == capsys.readouterr().out.replace("/cli/", "/cli-ref/").splitlines()[1:]
+
+    def manifest(d):
+        data = json.loads((tmp_path / d / "study.json").read_text())
+        del data["timings_s"], data["wall_time_s"], data["report"]["fields"]["timings"]
+        return data
+    assert (tmp_path / "cli-ref" / "indices.csv").read_bytes() == (tmp_path / "cli" / "indices.csv").read_bytes()
+    assert manifest("cli-ref") == manifest("cli")
+    assert main(cmd + [str(tmp_path / "cli"), "--resume", "--seed", "5"]) == 2
+    assert "belongs to another study (different [study] seed)" in capsys.readouterr().err

@@ -56,7 +56,8 @@ def register(sub) -> None:
                    help="write the files into this folder (and, chunk by chunk, the checkpoint DIR/checkpoint/)")
     p.add_argument("--resume", action="store_true",
                    help="continue the interrupted study of --out DIR from its checkpoint (the same result as an "
-                        "uninterrupted run; refused when the file or the study's inputs differ)")
+                        "uninterrupted run; tolerance, sample, grid, sensitivity, morris, regression, dgsm; "
+                        "refused when the file or the study's inputs differ)")
     p.add_argument("--replot", metavar="DIR", default=None,
                    help="redraw every plot of the study written into DIR (study.json, study.npz) without "
                         "computing anything")
@@ -99,11 +100,14 @@ def cmd_study(args) -> int:
     from . import study_methods
 
     if study_methods.handles(inputs):  # morris, regression, dgsm, Dakota's studies, the stopping rule
-        if args.resume:
-            raise MechanismError(f"--resume covers tolerance, sample, grid and sensitivity without a stopping rule; "
-                                 f"not {inputs.method!r}" + (" with --precision" if inputs.precision else "")
+        screening = inputs.method in study_methods.SCREENING
+        if args.resume and not screening:
+            raise MechanismError(f"--resume covers tolerance, sample, grid, sensitivity without a stopping rule, "
+                                 f"morris, regression and dgsm; not {inputs.method!r}"
+                                 + (" with --precision" if inputs.precision else "")
                                  + ": run it again without --resume")
-        return study_methods.run(args, mech, study, show, t0)
+        ck = _checkpoint(args, mech, study, inputs.method) if screening else None
+        return study_methods.run(args, mech, study, show, t0, checkpoint=ck)
     if inputs.method != "tolerance":
         return _design_space(args, mech, study, show, t0, extra)
     bar = None

@@ -26,7 +26,8 @@ def _bar(show: bool, total: int, desc: str):
     return tqdm(total=total, desc=desc, unit="design", leave=False, file=sys.stderr)
 
 
-def run(args, mech, study, show: bool, t0: float) -> int:
+def run(args, mech, study, show: bool, t0: float, checkpoint=None) -> int:
+    """Run the study of `args`; `checkpoint` (morris, regression, dgsm): the checkpoint of --out."""
     from ..report import screening as _screening
 
     inputs = study.inputs
@@ -41,15 +42,15 @@ def run(args, mech, study, show: bool, t0: float) -> int:
         if inputs.method == "morris":
             from ..study.morris import morris
 
-            rep = morris(mech, study=study, progress=progress)
+            rep = morris(mech, study=study, progress=progress, checkpoint=checkpoint)
         elif inputs.method == "regression":
             from ..study.regression import regression
 
-            rep = regression(mech, study=study, progress=progress)
+            rep = regression(mech, study=study, progress=progress, checkpoint=checkpoint)
         elif inputs.method == "dgsm":
             from ..study.dgsm import dgsm
 
-            rep = dgsm(mech, study=study, progress=progress)
+            rep = dgsm(mech, study=study, progress=progress, checkpoint=checkpoint)
         elif inputs.method in GIVEN:
             from ..study.parameter_studies import parameter_study
 

@@ -1,11 +1,14 @@
-"""Write-as-you-go and resume of a long study (Monte Carlo, `sample`, `grid`, `sensitivity`), as
-`optimize` does (jaxlink/optimize/checkpoint.py): the work runs in deterministic chunks (each
-chunk's designs depend only on the seed and the chunk's index), and after every chunk
+"""Write-as-you-go and resume of a long study (Monte Carlo, `sample`, `grid`, `sensitivity`,
+`morris`, `regression`, `dgsm`), as `optimize` does (jaxlink/optimize/checkpoint.py): the work runs
+in deterministic chunks (each chunk's designs depend only on the seed and the chunk's index), and
+after every chunk
 
 1. the chunk's own rows, where the study keeps rows (`sample`, `grid`: each design's parameters,
-   flag and scalar responses), go to `DIR/chunk-NNNNNN.npz`;
-2. the streamed state (moments, histograms, Sobol' sums, counters — `archive.pack`ed) goes to
-   `DIR/state-NNNNNN.npz`, then `DIR/state.json` names it with the number of chunks done,
+   flag and scalar responses; `regression`: its designs, flags and every response), go to
+   `DIR/chunk-NNNNNN.npz`;
+2. the streamed state (moments, histograms, Sobol', Morris or DGSM sums, counters —
+   `archive.pack`ed) goes to `DIR/state-NNNNNN.npz`, then `DIR/state.json` names it with the
+   number of chunks done,
 
 each written to a temporary file and renamed (atomic: a study killed at any instant leaves the
 last complete chunk). `resume` loads them, checks the **resume key** — the mechanism file's SHA-256,

@@ -106,6 +106,16 @@ class DGSMAccumulator:
         self.n = np.zeros(self.r + 1)
         self.used = 0
 
+    FIELDS = ("sums", "n", "used", "shift")
+
+    def state(self) -> dict:
+        """The sums so far (for a checkpoint; `restore` puts them back exactly)."""
+        return {k: getattr(self, k) for k in self.FIELDS}
+
+    def restore(self, state) -> None:
+        for k in self.FIELDS:
+            setattr(self, k, int(state[k]) if k == "used" else np.array(state[k]))
+
     def update(self, start: int, grad, y, weight=None) -> None:
         """Add designs `start` … `start + n − 1`: `grad` (n, M, T), `y` (n, M), `weight` (n,)."""
         n = y.shape[0]
@@ -215,12 +225,14 @@ def _with_deviation(v, J, nominal, K: int, N: int):
 
 
 def dgsm(mech, inputs: StudyInputs | None = None, *, samples: int | None = None, chunk=None, options=None,
-         progress=None, study=None) -> DGSMReport:
+         progress=None, study=None, checkpoint=None) -> DGSMReport:
     """ν and the Sobol' total-index bound of every response along the cycle from the exact
     gradients at `samples` designs drawn by the study's sampler over its ranges (or its
     tolerances' distributions).
 
-    **Arguments:** as `sample`. **Returns:** a `DGSMReport` (see the module doc).
+    **Arguments:** as `sample` (`checkpoint`: a `checkpoint.Checkpoint`, the streamed sums saved
+    after every batch, a saved study resumed: the batches done skipped, the same result bit for
+    bit). **Returns:** a `DGSMReport` (see the module doc).
     """
     from .responses import unit_names
     from .sampling import _study
@@ -251,7 +263,20 @@ def dgsm(mech, inputs: StudyInputs | None = None, *, samples: int | None = None,
     good = 0
     start = 0
     first = True
-    for u in unit_blocks(inputs.sampler, T, n, inputs.seed, per):
+    done = 0
+    saved = None if checkpoint is None else checkpoint.load()
+    if saved is not None:
+        done, state = saved
+        nominal = state["nominal"]
+        first = False
+        acc = DGSMAccumulator(len(labels), groups, constants, counts)
+        acc.restore(state["sums"])
+        good, start = int(state["good"]), int(state["start"])
+        if progress is not None:
+            progress(start)
+    for c, u in enumerate(unit_blocks(inputs.sampler, T, n, inputs.seed, per)):
+        if c < done:
+            continue
         x = to_values(inputs, study.x0, u)
         if first:
             x = np.concatenate([study.x0[None], x])
@@ -281,6 +306,8 @@ def dgsm(mech, inputs: StudyInputs | None = None, *, samples: int | None = None,
         acc.update(start, J, v, ok)
         good += int(ok.sum())
         start += len(v)
+        if checkpoint is not None:
+            checkpoint.save(c + 1, {"nominal": nominal, "sums": acc.state(), "good": good, "start": start})
         if progress is not None:
             progress(len(v))
     assert acc is not None and nominal is not None

@@ -26,7 +26,8 @@ EE_ij = a_j (high_j − low_j) exactly, and so are μ_j and μ*_j (σ_j = 0). Th
 `morris.analyze` numbers on the same trajectories.
 
 The sums are streamed over batches of trajectories (of EE − s, s the first batch's mean effect:
-no cancellation in σ).
+no cancellation in σ); with a checkpoint they are saved after every batch and a resumed study
+evaluates only the batches after the last saved one (the same sums in the same order).
 
 **Bootstrap.** The trajectories resampled with replacement R times (`bootstrap`; counts as in
 `sobol.bootstrap_counts`); each interval is the estimate ± z σ_boot (as SALib's `mu_star_conf`).
@@ -128,6 +129,17 @@ class MorrisAccumulator:
         self.trajectories = 0
         self.shift: np.ndarray | None = None  # (D, M): the first batch's mean effect (no cancellation in σ)
 
+    FIELDS = ("sums", "n", "trajectories", "shift")
+
+    def state(self) -> dict:
+        """The sums so far (for a checkpoint; `restore` puts them back exactly)."""
+        return {k: getattr(self, k) for k in self.FIELDS}
+
+    def restore(self, state) -> None:
+        for k in self.FIELDS:
+            v = state[k]
+            setattr(self, k, int(v) if k == "trajectories" else None if v is None else np.array(v))
+
     def update(self, start: int, ee, weight) -> None:
         """Add trajectories `start` … `start + n − 1`: `ee` (n, D, M), `weight` (n, D)."""
         n = ee.shape[0]
@@ -214,11 +226,13 @@ class MorrisReport(NamedTuple):
 
 
 def morris(mech, inputs: StudyInputs | None = None, *, samples: int | None = None, chunk=None, options=None,
-           progress=None, study=None) -> MorrisReport:
+           progress=None, study=None, checkpoint=None) -> MorrisReport:
     """Morris μ, μ* and σ of every response along the cycle (and of the feasibility) from r =
     `samples` trajectories (r (D + 1) designs) over the study's ranges (or its tolerances' boxes).
 
-    **Arguments:** as `sample`. **Returns:** a `MorrisReport` (see the module doc).
+    **Arguments:** as `sample` (`checkpoint`: a `checkpoint.Checkpoint`, the streamed sums saved
+    after every batch of trajectories, a saved study resumed: the batches done skipped, the same
+    result bit for bit). **Returns:** a `MorrisReport` (see the module doc).
     """
     from .sampling import _Evaluator, _study
 
@@ -242,7 +256,20 @@ def morris(mech, inputs: StudyInputs | None = None, *, samples: int | None = Non
     resp: MorrisAccumulator | None = None
     feas = MorrisAccumulator(1, D, counts)
     ok_total = 0
-    for a in range(0, r, per):
+    done = 0
+    saved = None if checkpoint is None else checkpoint.load()
+    if saved is not None:
+        done, state = saved
+        ev.nominal = state["nominal"]
+        resp = MorrisAccumulator(len(ev.labels), D, counts)
+        resp.restore(state["responses"])
+        feas.restore(state["feasibility"])
+        ok_total = int(state["ok_total"])
+        if progress is not None:
+            progress(min(r, done * per) * (D + 1))
+    for c, a in enumerate(range(0, r, per)):
+        if c < done:
+            continue
         ub = u[a:a + per]
         n = len(ub)
         x = box_values(inputs, study.x0, ub.reshape(-1, T))
@@ -256,6 +283,9 @@ def morris(mech, inputs: StudyInputs | None = None, *, samples: int | None = Non
         fe, fw = elementary_effects(okb[..., None], order[a:a + n], sign[a:a + n], p)
         feas.update(a, fe, fw)
         ok_total += int(okb.sum())
+        if checkpoint is not None:
+            checkpoint.save(c + 1, {"nominal": ev.nominal, "responses": resp.state(), "feasibility": feas.state(),
+                                    "ok_total": ok_total})
         if progress is not None:
             progress(n * (D + 1))
     assert resp is not None and ev.nominal is not None

@@ -152,13 +152,15 @@ class RegressionReport(NamedTuple):
 
 
 def regression(mech, inputs: StudyInputs | None = None, *, samples: int | None = None, chunk=None, options=None,
-               progress=None, study=None) -> RegressionReport:
+               progress=None, study=None, checkpoint=None) -> RegressionReport:
     """Correlation and regression coefficients of every response along the cycle (and of the
     feasibility) on the parameters, from `samples` designs drawn as `sample` draws them (the
     sampler, the correlation of `[study.correlation]`). Every response of every design is kept
     (n × M numbers: the ranks need them all).
 
-    **Arguments:** as `sample`. **Returns:** a `RegressionReport` (see the module doc).
+    **Arguments:** as `sample` (`checkpoint`: a `checkpoint.Checkpoint`, every batch's designs,
+    responses and flags written as they come, a saved study resumed: the batches done read back,
+    the same result bit for bit). **Returns:** a `RegressionReport` (see the module doc).
     """
     from .sampling import _Evaluator, _study
 
@@ -172,9 +174,22 @@ def regression(mech, inputs: StudyInputs | None = None, *, samples: int | None =
         raise MechanismError(f"a regression study of {T} inputs needs at least {T + 3} designs, got {n}",
                              file=mech.file, key="study.samples")
     xs, ys, oks = [], [], []
+    done = 0
+    saved = None if checkpoint is None else checkpoint.load()
+    if saved is not None:
+        done, state = saved
+        ev.nominal = state["nominal"]
     for i, u in enumerate(unit_blocks(inputs.sampler, T, n, inputs.seed, study.chunk)):
-        x = to_values(inputs, study.x0, correlate(inputs, u, [inputs.seed, 2, i]))  # as `sample`
-        y, ok = ev(x)
+        if i < done:
+            assert checkpoint is not None
+            z = checkpoint.load_chunk(i)
+            x, y, ok = z["x"], z["responses"], z["feasible"]
+        else:
+            x = to_values(inputs, study.x0, correlate(inputs, u, [inputs.seed, 2, i]))  # as `sample`
+            y, ok = ev(x)
+            if checkpoint is not None:
+                checkpoint.save_chunk(i, x=x, feasible=ok, responses=y)
+                checkpoint.save(i + 1, {"nominal": ev.nominal})
         xs.append(x)
         ys.append(y)
         oks.append(ok)
