@@ -99,7 +99,8 @@ def _commands(paths: dict) -> list:
     for k, path in paths.items():
         if k == "yu1":
             continue
-        cmds.append((f"check-{k}", ["check", str(path)]))
+        if k in "ABE":  # `check` of C and D (a parameter, the input start) adds nothing to kin-C, kin-D
+            cmds.append((f"check-{k}", ["check", str(path)]))
         cmds.append((f"kin-{k}", ["kinematics", str(path), "--count", "9", "--step", "40",
                                   "--csv", f"{{OUT}}/kin-{k}.csv"]))
     a = str(paths["A"])
@@ -182,7 +183,9 @@ def _differences(a: dict, b: dict) -> list:
     return [name for name in a if a[name] != b[name]]
 
 
-SEARCH_SCENES = ("sewing-feed-opt", "needle-dwell")
+# the built-in search scenes other than the feed (its six-bar runs as `feed` in all three modes,
+# and `optimize` as the plain four-bar's search: 19 s of the suite for nothing new)
+SEARCH_SCENES = ("needle-dwell",)
 
 
 def _search_commands(scene: str) -> list:
@@ -294,7 +297,7 @@ def test_optimize_then_kinematics_of_its_best_file_reproduces_the_objective(runs
 
 @pytest.mark.parametrize("scene", SEARCH_SCENES)
 def test_every_search_scene_reproduces_through_the_cache(runs, scene):
-    """Every built-in search scene: `optimize` (a few designs), then `kinematics` of its best file,
+    """A built-in search scene (`SEARCH_SCENES`): `optimize` (a few designs), then `kinematics` of its best file,
     in one process with a cache, after the scene's own kinematics at the same inputs; cold and
     warm. The objective from each CSV is the reported one (1e-9)."""
     tmp, _, _, out = runs

@@ -110,8 +110,7 @@ def test_the_same_structure_loaded_twice_compiles_once():
     assert _solve_jit._cache_size() == n1 + 1
 
 
-@pytest.mark.parametrize("method", ["auto", "continuation"])
-@pytest.mark.parametrize("where", ["device", "host"])
+@pytest.mark.parametrize("method, where", [("auto", "device"), ("auto", "host"), ("continuation", "device")])
 def test_a_batch_over_the_memory_budget_is_chunked_and_identical(method, where):
     """`max_bytes` smaller than the batch: chunks of designs (the last one padded), bit-identical
     to the one-call solve — per-design inputs and guesses included. The result stays on the
