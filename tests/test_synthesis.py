@@ -86,10 +86,15 @@ def test_distance_circle_ellipse_against_scipy():
 
 
 def _floor(points, closed, n=D.N_POINTS):
-    """The discretisation floor: the target against itself resampled half a spacing along."""
+    """The discretisation floor: the target against itself resampled half a spacing along (an open
+    curve: its n samples from end to end against the n − 1 midway between them; rolling an open
+    curve's samples would join its two ends)."""
     fine = arclength_resample(points, 20 * n, closed)
-    return D.chamfer(D.normalise(arclength_resample(fine, n, closed))[0],
-                     D.normalise(arclength_resample(np.roll(fine, -10, axis=0), n, closed))[0])
+    if closed:
+        return D.chamfer(D.normalise(arclength_resample(fine, n, closed))[0],
+                         D.normalise(arclength_resample(np.roll(fine, -10, axis=0), n, closed))[0])
+    both = arclength_resample(fine, 2 * n - 1, False)
+    return D.chamfer(D.normalise(both[0::2])[0], D.normalise(both[1::2])[0])
 
 
 def test_planted_four_bar_closed_and_replay(tmp_path):
