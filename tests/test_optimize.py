@@ -151,6 +151,28 @@ def test_gradient_beats_sampling_with_ten_times_fewer_evaluations(feed):
     assert 4.9 < m["two_a"] < 5.1 and 1.9 < m["two_b"] < 2.1
 
 
+def test_a_problem_s_evaluator_is_made_once_and_changes_no_answer():
+    """`run` on a Problem reuses the Evaluator of its first search (compiled once); the second
+    search equals the first and a search on a fresh Evaluator, and another chunk has its own (a
+    key without the chunk would hand back the first)."""
+    from jaxlink.optimize.searches.runner import evaluator_for
+
+    def numbers(res):
+        doc = res.to_json()
+        return {k: v for k, v in doc.items() if k not in ("wall_s", "search_wall_s", "compile_s", "trace")}
+
+    pr = problem_from(load("sewing-feed-opt"))
+    a = run(pr, "montecarlo", budget=256, seed=5, chunk=64)
+    ev = evaluator_for(pr, 64)
+    b = run(pr, "montecarlo", budget=256, seed=5, chunk=64)
+    assert evaluator_for(pr, 64) is ev and ev.chunk == 64
+    other = evaluator_for(pr, 128)
+    assert other is not ev and other.chunk == 128
+    fresh = run(Evaluator(problem_from(load("sewing-feed-opt")), chunk=64), "montecarlo", budget=256, seed=5)
+    assert numbers(a) == numbers(b) == numbers(fresh)
+    assert a.evaluations == 256 and a.value is not None
+
+
 @pytest.mark.parametrize("method", ["montecarlo", "gradient"])
 def test_killed_and_resumed_search_ends_with_the_same_best(feed, tmp_path, method):
     kw = dict(budget=300, seed=7, starts=4) if method == "gradient" else dict(budget=300, seed=7)
