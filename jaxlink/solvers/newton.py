@@ -159,7 +159,7 @@ def newton(mech: Mechanism, q0, phi, p, *, tol, rtol: float, max_steps, limit_st
     # done; the pivot ratio, det signs, residual (and the one before), |step| at qe; the best
     # residual and the iterations since it halved; how the loop ended; (cos, sin) at qe
     def body(st):
-        qe, step, k, _, _, _, rn_last, _, dqa_prev, rn_best, stall, _, _, _, _ = st
+        qe, step, k, _, _, _, rn_last, _, dqa_prev, rn_best, stall, _, _, _, _, _ = st
         q = qe - step
         r, jac, c, s = value_and_jac(q)
         dq, piv, sg = lin(jac, r)
@@ -174,22 +174,34 @@ def newton(mech: Mechanism, q0, phi, p, *, tol, rtol: float, max_steps, limit_st
         floor = (rn <= floor_tol) | ((rn <= tol) & (dqa <= sqrt_eps) & (dqa >= 0.25 * dqa_prev))
         better = rn < 0.5 * rn_best
         rn_best = jnp.where(better, rn, rn_best)
-        stall = jnp.where(better, 0, stall + 1)
+        # linear convergence within tol_loop at a small pivot (the residual falling by 2–10× per
+        # step) is no stall, even above the best residual so far: after a step thrown out by a
+        # tiny pivot (rounding noise next to a double root), Newton comes back down the valley
+        valley = (rn <= tol_loop) & (rn <= 0.5 * rn_last) & (rn >= 0.1 * rn_last) & (piv < 0.1)
+        stall = jnp.where(better | valley, 0, stall + 1)
         give_up = (stall >= jnp.where(limit_step, 8, 4)) | ((~limit_step) & (k >= 3) & (rn > hopeless))
         stop = ~corr & (floor | give_up | ~finite)
+        # a stop may count as assembled only where the error at qe is known to be small: at the
+        # rounding floor, or where the last step (≈ the error at qe: at a double root Newton
+        # converges linearly) is ≤ √eps (or undefined: Φ_q exactly singular). A give-up with a
+        # large step is not: e.g. a float32 continuation that lands within rounding of a change
+        # point, where the step (rounding noise over a tiny pivot) throws it 0.1 rad into the
+        # double root's valley, stalls there half-way down (its best residual was the first) —
+        # the residual is within tol, the error 0.015 rad
+        trusted = corr | (stop & (floor | ~finite | (dqa <= sqrt_eps)))
         # step-limited Newton for a rough guess: at most 0.5 rad (0.5 × scale) per unknown
         shrink = jnp.where(limit_step, jnp.minimum(1.0, 0.5 / jnp.maximum(dqa, 1e-30)), 1.0)
         step = jnp.where(stop, 0.0, dq * shrink)
-        return (q, step, k + 1, corr | stop, piv, sg, rn, rn_last, dqa, rn_best, stall, corr, stop, c, s)
+        return (q, step, k + 1, corr | stop, piv, sg, rn, rn_last, dqa, rn_best, stall, corr, stop, trusted, c, s)
 
     inf = jnp.asarray(jnp.inf, dtype)
     start_bad = ~jnp.isfinite(tol) | ~jnp.all(jnp.isfinite(q0))
     false = jnp.zeros((), bool)
     zeros_a = jnp.zeros((len(ang),), dtype)
     init = (q0, jnp.zeros_like(q0), jnp.zeros((), jnp.int32), start_bad, jnp.asarray(1.0, dtype),
-            jnp.ones((nb,), dtype), inf, inf, inf, inf, jnp.zeros((), jnp.int32), false, false, zeros_a, zeros_a)
+            jnp.ones((nb,), dtype), inf, inf, inf, inf, jnp.zeros((), jnp.int32), false, false, false, zeros_a, zeros_a)
     init = batched_like(init, q0, phi, p, tol, max_steps, limit_step)
-    qe, step, k, _, piv, sg, _, _, _, _, stall, corr, stop, c, s = jax.lax.while_loop(cond, body, init)
+    qe, step, k, _, piv, sg, _, _, _, _, stall, corr, stop, trusted, c, s = jax.lax.while_loop(cond, body, init)
     # the returned q: the last evaluated iterate, after the final correction where `corr`; the
     # residual there, once per position, outside the loop and without trigonometry: the sines and
     # cosines of the corrected angles by angle addition from those at qe (the correction d is
@@ -203,7 +215,7 @@ def newton(mech: Mechanism, q0, phi, p, *, tol, rtol: float, max_steps, limit_st
         sd = da * (1.0 - d2 * (1.0 / 6.0))
         c, s = c * cd + s * sd, s * cd - c * sd
     rn = jnp.max(jnp.abs(resid(q, c, s)))
-    conv = (corr | stop) & (rn <= tol)
+    conv = trusted & (rn <= tol)
     finite = jnp.isfinite(rn) & jnp.isfinite(tol) & jnp.all(jnp.isfinite(q))
     assemble_tol = max(1e-6, 10 * sqrt_eps) * scale
     result = jnp.where(
