@@ -13,7 +13,9 @@
   enough that one final correction leaves an error below rtol / 100, applies that correction and
   reports the residual after it (evaluated once more, without trigonometry); at double roots
   (exact toggles, change points), where Newton converges only linearly, it takes extra steps while
-  the residual keeps falling by ≈ 4 and stops at the rounding floor.
+  the residual keeps falling by ≈ 4 and stops at the rounding floor. A stop that gave up (the
+  residual stagnating) is assembled only where its last step, the error left, is ≤ √eps: a residual
+  within tol next to a double root says little about the error.
 """
 
 from __future__ import annotations
@@ -97,10 +99,18 @@ def newton(mech: Mechanism, q0, phi, p, *, tol, rtol: float, max_steps, limit_st
       Newton converges only linearly, the error halving per step: up to `EXTRA_STEPS` more steps
       are allowed while the residual keeps halving, so it ends within ≈ √eps of the double root);
     - **giving up** (as `cannot_assemble`) when the residual stagnates — its best value not halved
-      for 4 iterations (8 with `limit_step`) — or, without `limit_step`, when after 4 iterations it
-      is still above 1e-4 × scale: from a continuation predictor Newton converges in 2–3 steps, so
+      for 4 iterations (8 with `limit_step`), where a step of linear convergence at a small pivot
+      ratio (< 0.1, the residual within max(rtol, √eps) × scale and falling by 2–10×) counts as
+      progress even above that best — or, without `limit_step`, when after 4 iterations it is
+      still above 1e-4 × scale: from a continuation predictor Newton converges in 2–3 steps, so
       such a position is almost surely unreachable, and under `vmap` one hopeless position would
-      otherwise hold the whole batch.
+      otherwise hold the whole batch. A give-up with max|Φ| ≤ tol is `converged` (`singular`
+      below `singular_ratio`) only where its last step — the error left at q — is ≤ √eps (or not
+      finite: Φ_q exactly singular); else it is `singular` if the pivot ratio is below
+      `singular_ratio` and max|Φ| ≤ max(rtol, √eps) × scale, and `cannot_assemble` otherwise: a
+      float32 start within rounding of a change point is thrown 0.1 rad into the double root's
+      valley by a step of rounding noise over a tiny pivot, and its residual there is within tol
+      long before its error is (it once gave up 0.015 rad off, as `converged`).
 
     The returned q is the corrected point where the final correction was applied, else the last
     evaluated iterate, and `rnorm` is max|Φ| there (evaluated once more after the loop, without
