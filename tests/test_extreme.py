@@ -176,6 +176,41 @@ def test_grashof_change_point_is_flagged_singular(method):
     assert int(sol.result[i0]) == R.singular
 
 
+def test_float32_newton_next_to_change_point_is_not_converged_off_branch():
+    """float32 Newton started within rounding of the change point (φ2 = 0, where Φ_q is singular):
+    the first step, rounding noise over a pivot ratio of 1e-6, throws q up to 0.1 rad into the
+    double root's valley, where Newton comes back only linearly. Whatever it reports assembled
+    (`converged` or `singular`) must lie within ≈ 10 √eps (3e-3 rad, the float32 accuracy at a
+    double root) of a closed-form branch: it once gave up half-way down the valley (its best
+    residual was the first, noisy one), 0.015 rad off, with a residual within tol, and called that
+    `converged` (an H200 continuation, and this CPU with XLA's legacy fusion emitters, reached
+    q0 = (3.920868e-7, 6.283185) there), or `singular` where the pivot ratio was below 10 √eps.
+    Starts up to 3e-5 rad off, inputs up to 3e-3 rad from the change point (two separate roots)."""
+    from jaxlink.solvers import dyads as _dyads
+    from jaxlink.solvers.newton import newton
+
+    dt = np.float32
+    p = jnp.asarray(_fourbar(GA, GB, GC, GD).parameters, dt)
+    eps = float(np.finfo(dt).eps)
+    rtol, thr = 1000 * eps, 10 * math.sqrt(eps)
+    tol = dt(rtol) * FOURBAR.length_scale(p)
+    tp = _dyads.parameter_trig(FOURBAR, p)
+    d = np.concatenate([[0.0], np.geomspace(3e-8, 3e-5, 7), -np.geomspace(3e-8, 3e-5, 7)])
+    q0 = np.array([0.0, 2 * np.pi]) + np.stack(np.meshgrid(d, d), -1).reshape(-1, 2)
+    q0 = np.concatenate([q0, [[3.920868e-07, 6.283185]]]).astype(dt)
+    phi = np.array([0.0, 1e-5, -1e-5, 3e-4, -3e-4, 3e-3, -3e-3], dt)
+    q0s, phis = np.repeat(q0, len(phi), 0), np.tile(phi, len(q0))
+    q, _, code, _, _ = jax.jit(jax.vmap(lambda q0, ph: newton(
+        FOURBAR, q0, ph, p, tol=tol, rtol=rtol, max_steps=12, limit_step=False, singular_ratio=thr,
+        trig_p=tp)))(jnp.asarray(q0s), jnp.asarray(phis))
+    code = np.asarray(code)
+    err = np.minimum(*[_branch_err(q, GA, GB, GC, GD, phis.astype(float), b) for b in (+1, -1)])
+    assembled = (code == R.converged) | (code == R.singular)
+    assert (code == R.singular).sum() >= len(code) // 2  # the test is not vacuous
+    assert err[assembled].max() < 3e-3
+    assert not np.any(code[-len(phi):] == R.converged)
+
+
 @pytest.mark.parametrize("method", ["auto", "continuation"])
 @pytest.mark.parametrize("dtype", DTYPES)
 def test_branch_flip_under_perturbation_is_not_silent(method, dtype):

@@ -13,7 +13,9 @@
   enough that one final correction leaves an error below rtol / 100, applies that correction and
   reports the residual after it (evaluated once more, without trigonometry); at double roots
   (exact toggles, change points), where Newton converges only linearly, it takes extra steps while
-  the residual keeps falling by ≈ 4 and stops at the rounding floor.
+  the residual keeps falling by ≈ 4 and stops at the rounding floor. A stop that gave up (the
+  residual stagnating) is assembled only where its last step, the error left, is ≤ √eps: a residual
+  within tol next to a double root says little about the error.
 """
 
 from __future__ import annotations
@@ -97,10 +99,18 @@ def newton(mech: Mechanism, q0, phi, p, *, tol, rtol: float, max_steps, limit_st
       Newton converges only linearly, the error halving per step: up to `EXTRA_STEPS` more steps
       are allowed while the residual keeps halving, so it ends within ≈ √eps of the double root);
     - **giving up** (as `cannot_assemble`) when the residual stagnates — its best value not halved
-      for 4 iterations (8 with `limit_step`) — or, without `limit_step`, when after 4 iterations it
-      is still above 1e-4 × scale: from a continuation predictor Newton converges in 2–3 steps, so
+      for 4 iterations (8 with `limit_step`), where a step of linear convergence at a small pivot
+      ratio (< 0.1, the residual within max(rtol, √eps) × scale and falling by 2–10×) counts as
+      progress even above that best — or, without `limit_step`, when after 4 iterations it is
+      still above 1e-4 × scale: from a continuation predictor Newton converges in 2–3 steps, so
       such a position is almost surely unreachable, and under `vmap` one hopeless position would
-      otherwise hold the whole batch.
+      otherwise hold the whole batch. A give-up with max|Φ| ≤ tol is `converged` (`singular`
+      below `singular_ratio`) only where its last step — the error left at q — is ≤ √eps (or not
+      finite: Φ_q exactly singular); else it is `singular` if the pivot ratio is below
+      `singular_ratio` and max|Φ| ≤ max(rtol, √eps) × scale, and `cannot_assemble` otherwise: a
+      float32 start within rounding of a change point is thrown 0.1 rad into the double root's
+      valley by a step of rounding noise over a tiny pivot, and its residual there is within tol
+      long before its error is (it once gave up 0.015 rad off, as `converged`).
 
     The returned q is the corrected point where the final correction was applied, else the last
     evaluated iterate, and `rnorm` is max|Φ| there (evaluated once more after the loop, without
@@ -159,7 +169,7 @@ def newton(mech: Mechanism, q0, phi, p, *, tol, rtol: float, max_steps, limit_st
     # done; the pivot ratio, det signs, residual (and the one before), |step| at qe; the best
     # residual and the iterations since it halved; how the loop ended; (cos, sin) at qe
     def body(st):
-        qe, step, k, _, _, _, rn_last, _, dqa_prev, rn_best, stall, _, _, _, _ = st
+        qe, step, k, _, _, _, rn_last, _, dqa_prev, rn_best, stall, _, _, _, _, _ = st
         q = qe - step
         r, jac, c, s = value_and_jac(q)
         dq, piv, sg = lin(jac, r)
@@ -174,22 +184,34 @@ def newton(mech: Mechanism, q0, phi, p, *, tol, rtol: float, max_steps, limit_st
         floor = (rn <= floor_tol) | ((rn <= tol) & (dqa <= sqrt_eps) & (dqa >= 0.25 * dqa_prev))
         better = rn < 0.5 * rn_best
         rn_best = jnp.where(better, rn, rn_best)
-        stall = jnp.where(better, 0, stall + 1)
+        # linear convergence within tol_loop at a small pivot (the residual falling by 2–10× per
+        # step) is no stall, even above the best residual so far: after a step thrown out by a
+        # tiny pivot (rounding noise next to a double root), Newton comes back down the valley
+        valley = (rn <= tol_loop) & (rn <= 0.5 * rn_last) & (rn >= 0.1 * rn_last) & (piv < 0.1)
+        stall = jnp.where(better | valley, 0, stall + 1)
         give_up = (stall >= jnp.where(limit_step, 8, 4)) | ((~limit_step) & (k >= 3) & (rn > hopeless))
         stop = ~corr & (floor | give_up | ~finite)
+        # a stop may count as assembled only where the error at qe is known to be small: at the
+        # rounding floor, or where the last step (≈ the error at qe: at a double root Newton
+        # converges linearly) is ≤ √eps (or undefined: Φ_q exactly singular). A give-up with a
+        # large step is not: e.g. a float32 continuation that lands within rounding of a change
+        # point, where the step (rounding noise over a tiny pivot) throws it 0.1 rad into the
+        # double root's valley, stalls there half-way down (its best residual was the first) —
+        # the residual is within tol, the error 0.015 rad
+        trusted = corr | (stop & (floor | ~finite | (dqa <= sqrt_eps)))
         # step-limited Newton for a rough guess: at most 0.5 rad (0.5 × scale) per unknown
         shrink = jnp.where(limit_step, jnp.minimum(1.0, 0.5 / jnp.maximum(dqa, 1e-30)), 1.0)
         step = jnp.where(stop, 0.0, dq * shrink)
-        return (q, step, k + 1, corr | stop, piv, sg, rn, rn_last, dqa, rn_best, stall, corr, stop, c, s)
+        return (q, step, k + 1, corr | stop, piv, sg, rn, rn_last, dqa, rn_best, stall, corr, stop, trusted, c, s)
 
     inf = jnp.asarray(jnp.inf, dtype)
     start_bad = ~jnp.isfinite(tol) | ~jnp.all(jnp.isfinite(q0))
     false = jnp.zeros((), bool)
     zeros_a = jnp.zeros((len(ang),), dtype)
     init = (q0, jnp.zeros_like(q0), jnp.zeros((), jnp.int32), start_bad, jnp.asarray(1.0, dtype),
-            jnp.ones((nb,), dtype), inf, inf, inf, inf, jnp.zeros((), jnp.int32), false, false, zeros_a, zeros_a)
+            jnp.ones((nb,), dtype), inf, inf, inf, inf, jnp.zeros((), jnp.int32), false, false, false, zeros_a, zeros_a)
     init = batched_like(init, q0, phi, p, tol, max_steps, limit_step)
-    qe, step, k, _, piv, sg, _, _, _, _, stall, corr, stop, c, s = jax.lax.while_loop(cond, body, init)
+    qe, step, k, _, piv, sg, _, _, _, _, stall, corr, stop, trusted, c, s = jax.lax.while_loop(cond, body, init)
     # the returned q: the last evaluated iterate, after the final correction where `corr`; the
     # residual there, once per position, outside the loop and without trigonometry: the sines and
     # cosines of the corrected angles by angle addition from those at qe (the correction d is
@@ -203,7 +225,7 @@ def newton(mech: Mechanism, q0, phi, p, *, tol, rtol: float, max_steps, limit_st
         sd = da * (1.0 - d2 * (1.0 / 6.0))
         c, s = c * cd + s * sd, s * cd - c * sd
     rn = jnp.max(jnp.abs(resid(q, c, s)))
-    conv = (corr | stop) & (rn <= tol)
+    conv = trusted & (rn <= tol)
     finite = jnp.isfinite(rn) & jnp.isfinite(tol) & jnp.all(jnp.isfinite(q))
     assemble_tol = max(1e-6, 10 * sqrt_eps) * scale
     result = jnp.where(
