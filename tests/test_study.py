@@ -18,6 +18,7 @@ import math
 
 import numpy as np
 import pytest
+from interrupt import Stop, stop_after
 
 import jaxlink as jl
 from jaxlink import study as st
@@ -648,21 +649,6 @@ def test_the_command_line_sample_grid_sensitivity(tmp_path, capsys):
     capsys.readouterr()
 
 
-class _Stop(Exception):
-    pass
-
-
-def _stop_after(k):
-    """A `progress` callback that interrupts the study after its k-th batch (a killed study)."""
-    calls = [0]
-
-    def progress(_n):
-        calls[0] += 1
-        if calls[0] == k:
-            raise _Stop
-    return progress
-
-
 def test_a_killed_study_resumes_to_the_same_result(setup, tmp_path):
     """Monte Carlo, sample and sensitivity over two batches each, interrupted after the first
     (the checkpoint written batch by batch), resumed: every array equals the uninterrupted run's
@@ -678,8 +664,8 @@ def test_a_killed_study_resumes_to_the_same_result(setup, tmp_path):
         return Checkpoint(tmp_path / name, resume_key(m, inp, chunk=study.chunk, what=what, **extra), resume=resume)
 
     ref = study.monte_carlo(n, first)
-    with pytest.raises(_Stop):
-        study.monte_carlo(n, first, progress=_stop_after(1), checkpoint=ck("mc", inputs, "mc", samples=n))
+    with pytest.raises(Stop):
+        study.monte_carlo(n, first, progress=stop_after(1), checkpoint=ck("mc", inputs, "mc", samples=n))
     assert {p.name for p in (tmp_path / "mc").iterdir()} == {"state.json", "state-000001.npz"}
     res = study.monte_carlo(n, first, checkpoint=ck("mc", inputs, "mc", resume=True, samples=n))
     for f in ref._fields:
@@ -693,8 +679,8 @@ def test_a_killed_study_resumes_to_the_same_result(setup, tmp_path):
     sin = st.read_study(mech, method="sample", samples=4096 + 7, seed=4, ranges=RANGES)
     s2 = study.moved(inputs=sin)
     ref = st.sample(mech, study=s2)
-    with pytest.raises(_Stop):
-        st.sample(mech, study=s2, progress=_stop_after(1), checkpoint=ck("s", sin, "sample"))
+    with pytest.raises(Stop):
+        st.sample(mech, study=s2, progress=stop_after(1), checkpoint=ck("s", sin, "sample"))
     res = st.sample(mech, study=s2, checkpoint=ck("s", sin, "sample", resume=True))
     for f in ("values", "feasible", "responses", "nominal"):
         assert np.array_equal(getattr(ref, f), getattr(res, f)), f
@@ -704,8 +690,8 @@ def test_a_killed_study_resumes_to_the_same_result(setup, tmp_path):
     sin = st.read_study(mech, method="sensitivity", samples=700, seed=4, ranges=RANGES, bootstrap=10)
     s3 = study.moved(inputs=sin)
     ref = st.sensitivity(mech, study=s3)
-    with pytest.raises(_Stop):
-        st.sensitivity(mech, study=s3, progress=_stop_after(1), checkpoint=ck("x", sin, "sensitivity"))
+    with pytest.raises(Stop):
+        st.sensitivity(mech, study=s3, progress=stop_after(1), checkpoint=ck("x", sin, "sensitivity"))
     res = st.sensitivity(mech, study=s3, checkpoint=ck("x", sin, "sensitivity", resume=True))
     for f in ("S1", "ST", "S1_low", "ST_high"):
         assert np.array_equal(getattr(ref.indices, f), getattr(res.indices, f)), f
@@ -960,6 +946,54 @@ def test_copula_correlation_and_moments_against_closed_forms_and_draws():
                                  correlation={"crank": {"rod": r}})
         d = st.draws(study_in, 1 << 16)
         assert abs(np.corrcoef(d.T)[0, 1] - rho) <= 4 * (1 - rho * rho) / math.sqrt(1 << 16), (da, db)
+
+
+def test_the_copula_memo_is_the_quadrature_and_keys_every_input():
+    """`copula._moment` is memoized (`lru_cache`) on (each tolerance's distribution, half-width, σ,
+    k; r; p; q): requested warm after each one-input change of a base request, every value equals
+    the quadrature computed afresh (`__wrapped__`), and each change moves the value — so a key
+    without that input would hand back the base's. A memo keyed without r (a deliberately wrong
+    key) is caught by the same comparison."""
+    from jaxlink.study import copula
+    from jaxlink.study.inputs import Tolerance
+
+    def tol(dist, t, k=3.0):
+        sigma = {"uniform": t / math.sqrt(3), "triangular": t / math.sqrt(6), "normal": t / k}.get(dist)
+        if sigma is None:  # truncated normal: σ of N(0, (t/k)²) cut at ±t
+            from scipy.stats import truncnorm
+            sigma = t / k * float(truncnorm.std(-k, k))
+        return Tolerance("x", ("x",), "length", dist, t, sigma, k=k)
+
+    base = (tol("truncated-normal", 0.02, 2.0), tol("triangular", 0.05), 0.6, 1, 1)
+    variants = [base,
+                (tol("truncated-normal", 0.02, 2.5), *base[1:]),              # k
+                (tol("truncated-normal", 0.03, 2.0), *base[1:]),              # half-width (and σ)
+                (tol("uniform", 0.02), *base[1:]),                            # distribution
+                (base[0], tol("triangular", 0.07), *base[2:]),                # the other tolerance
+                (*base[:2], 0.3, 1, 1), (*base[:3], 2, 1), (*base[:3], 1, 3)]  # r, p, q
+
+    def fresh(ta, tb, r, p, q):
+        return copula._moment.__wrapped__(copula._tolerance_key(ta), copula._tolerance_key(tb), r, p, q)
+
+    def same_as_fresh(moment):
+        moment(*base)  # the base first: each variant then meets a warm memo
+        return all(moment(*v) == fresh(*v) for v in variants)
+
+    want = [fresh(*v) for v in variants]
+    assert len({round(w, 15) for w in want}) == len(want)  # each input changes the answer
+    assert same_as_fresh(copula.moment)
+    assert copula.moment(*base) == copula.moment(*base) == want[0]  # warm = cold
+
+    cache: dict = {}
+
+    def blind_moment(ta, tb, r, p, q):  # keyed without r: the first r seen stands for every r
+        ka, kb = copula._tolerance_key(ta), copula._tolerance_key(tb)
+        key = (ka, kb, p, q)
+        if key not in cache:
+            cache[key] = copula._moment.__wrapped__(ka, kb, r, p, q)
+        return cache[key]
+
+    assert not same_as_fresh(blind_moment)
 
 
 def test_correlated_second_order_and_the_agreement_on_a_quadratic():

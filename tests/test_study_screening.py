@@ -19,6 +19,7 @@ import json
 
 import numpy as np
 import pytest
+from interrupt import Stop, stop_after
 
 import jaxlink as jl
 from jaxlink import study as st
@@ -360,21 +361,6 @@ def test_vector_list_centered_studies(setup, tmp_path, capsys):
             st.read_study(jl.loads(base + bad))
 
 
-class _Stop(Exception):
-    pass
-
-
-def _stop_after(k):
-    """A `progress` callback that interrupts the study after its k-th batch (a killed study)."""
-    calls = [0]
-
-    def progress(_n):
-        calls[0] += 1
-        if calls[0] == k:
-            raise _Stop
-    return progress
-
-
 def _written(tmp_path, name, mech, rep):
     """(indices.csv bytes, the summary, study.json without the timings, study.npz's arrays) of `rep`."""
     from jaxlink.report import screening
@@ -413,8 +399,8 @@ def test_morris_regression_dgsm_killed_and_resumed_give_the_same_bytes(setup, tm
         mv = study.moved(x0=[25.0, 38.0, 0.0, 0.0], inputs=inp)
         ref = fn(mech, study=mv)
         assert 0 < ref.feasible_fraction < 1
-        with pytest.raises(_Stop):
-            fn(mech, study=mv, progress=_stop_after(1), checkpoint=ck(method, inp))
+        with pytest.raises(Stop):
+            fn(mech, study=mv, progress=stop_after(1), checkpoint=ck(method, inp))
         assert json.loads((tmp_path / method / "state.json").read_text())["done"] == 1
         shutil.copytree(tmp_path / method, tmp_path / f"{method}-copy")
         res = fn(mech, study=mv, checkpoint=ck(method, inp, resume=True))

@@ -49,6 +49,7 @@ from ..errors import MechanismError
 from .design import to_values, unit_blocks
 from .inputs import Range, StudyInputs
 from .sobol import bootstrap_counts
+from .streamed import Streamed
 
 #: j'₁,₁: the first zero of J₁' (the uniform disc's Poincaré constant r² / j'₁,₁²)
 J11 = 1.8411837813406593
@@ -88,7 +89,7 @@ def poincare_constants(inputs: StudyInputs) -> np.ndarray:
     return np.asarray(out)
 
 
-class DGSMAccumulator:
+class DGSMAccumulator(Streamed):
     """Streamed sums of the DGSM estimators of M outputs, T columns grouped into D factors.
 
     **Arguments:** `m`, `groups` (a list of column-index arrays), `constants` (D,) the Poincaré
@@ -107,14 +108,7 @@ class DGSMAccumulator:
         self.used = 0
 
     FIELDS = ("sums", "n", "used", "shift")
-
-    def state(self) -> dict:
-        """The sums so far (for a checkpoint; `restore` puts them back exactly)."""
-        return {k: getattr(self, k) for k in self.FIELDS}
-
-    def restore(self, state) -> None:
-        for k in self.FIELDS:
-            setattr(self, k, int(state[k]) if k == "used" else np.array(state[k]))
+    COUNT = "used"
 
     def update(self, start: int, grad, y, weight=None) -> None:
         """Add designs `start` … `start + n − 1`: `grad` (n, M, T), `y` (n, M), `weight` (n,)."""

@@ -50,6 +50,7 @@ from ..errors import MechanismError
 from .design import to_values
 from .inputs import StudyInputs
 from .sobol import bootstrap_counts
+from .streamed import Streamed
 
 
 class MorrisIndices(NamedTuple):
@@ -115,7 +116,7 @@ def elementary_effects(y, order, sign, levels: int, weight=None) -> tuple[np.nda
     return np.where(w[..., None] > 0, ee, 0.0), w
 
 
-class MorrisAccumulator:
+class MorrisAccumulator(Streamed):
     """Streamed sums of the Morris estimators (see the module doc) over batches of trajectories.
 
     **Arguments:** `m` (outputs), `d` (factors), `counts` (R, r) the bootstrap counts."""
@@ -130,15 +131,7 @@ class MorrisAccumulator:
         self.shift: np.ndarray | None = None  # (D, M): the first batch's mean effect (no cancellation in σ)
 
     FIELDS = ("sums", "n", "trajectories", "shift")
-
-    def state(self) -> dict:
-        """The sums so far (for a checkpoint; `restore` puts them back exactly)."""
-        return {k: getattr(self, k) for k in self.FIELDS}
-
-    def restore(self, state) -> None:
-        for k in self.FIELDS:
-            v = state[k]
-            setattr(self, k, int(v) if k == "trajectories" else None if v is None else np.array(v))
+    COUNT = "trajectories"
 
     def update(self, start: int, ee, weight) -> None:
         """Add trajectories `start` … `start + n − 1`: `ee` (n, D, M), `weight` (n, D)."""
