@@ -173,6 +173,19 @@ def test_a_problem_s_evaluator_is_made_once_and_changes_no_answer():
     assert a.evaluations == 256 and a.value is not None
 
 
+@pytest.mark.parametrize("chunk", [-4, 0, 2.5, True, "64", 2_000_000])
+def test_a_chunk_outside_its_domain_is_refused_naming_the_key(chunk):
+    """A chunk ≤ 0 once made `run` loop for ever (every batch empty); any chunk outside 1 … 1e6
+    given to an `Evaluator` (or to `run` on one it builds: 0 there means the default) is refused."""
+    pr = problem_from(load("sewing-feed-opt"))
+    with pytest.raises(MechanismError, match="chunk") as e:
+        Evaluator(pr, chunk=chunk)
+    assert e.value.key == "optimize.chunk"
+    if chunk != 0:
+        with pytest.raises(MechanismError, match="chunk"):
+            run(pr, "montecarlo", budget=16, chunk=chunk)
+
+
 @pytest.mark.parametrize("method", ["montecarlo", "gradient"])
 def test_killed_and_resumed_search_ends_with_the_same_best(feed, tmp_path, method):
     kw = dict(budget=300, seed=7, starts=4) if method == "gradient" else dict(budget=300, seed=7)

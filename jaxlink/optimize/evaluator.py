@@ -36,11 +36,12 @@ import numpy as np
 
 from ..analysis import feasibility as _feasibility
 from ..analysis.transfer import transfer_one
+from ..errors import MechanismError
 from ..solvers import dyads as _dyads
 from ..solvers.assemble import solve_path
 from ..solvers.options import NewtonOptions, default_rtol
 from .objectives import OBJECTIVES, PathData, to_python
-from .problem import Problem, start_method
+from .problem import INTEGER_DOMAINS, Problem, start_method
 from .sharding import default_chunk, design_sharding, pad_rows, put
 from .start import circuit_signs, closed_form_start, continuation_start, file_configuration
 
@@ -65,6 +66,12 @@ class Evaluator:
         self.problem = problem
         mech = problem.mech
         self.mech = mech
+        lo, hi = INTEGER_DOMAINS["chunk"]
+        if chunk is not None and (isinstance(chunk, bool) or not isinstance(chunk, (int, np.integer))
+                                  or not lo <= chunk <= hi):
+            # (a chunk ≤ 0 would make every batch loop empty: a search that never advances)
+            raise MechanismError(f"chunk = {chunk!r}: designs per batch must be an integer from {lo} to {hi}",
+                                 file=mech.file, key="optimize.chunk")
         self.objective = OBJECTIVES.build(problem)
         self.options = options
         self.sharding = design_sharding(devices)
