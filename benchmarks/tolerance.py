@@ -166,7 +166,12 @@ def run_stream(samples: int) -> dict:
     mc = study.monte_carlo(samples, first)
     dt = time.perf_counter() - t
     rss1 = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
-    return {"samples": samples, "seconds": dt, "samples_per_s": samples / dt, "peak_rss_after_compile_mib": rss0 / 1024,
+    try:  # GPU/TPU: the device's own peak (None on the CPU)
+        dev_peak = int(jax.devices()[0].memory_stats()["peak_bytes_in_use"]) / 2**20
+    except Exception:
+        dev_peak = None
+    return {"samples": samples, "peak_device_mib": dev_peak, "device": str(jax.devices()[0].device_kind),
+            "seconds": dt, "samples_per_s": samples / dt, "peak_rss_after_compile_mib": rss0 / 1024,
             "peak_rss_end_mib": rss1 / 1024, "feasible": mc.feasible, "chunk": study.chunk,
             "load_1min": os.getloadavg()[0]}
 
@@ -236,21 +241,34 @@ def main() -> None:
     ap.add_argument("--pylinkage-samples", type=int, default=2048,
                     help="samples of the comparison with pylinkage's tolerance analysis (0: skip)")
     ap.add_argument("--stream", default="", help="comma-separated sample counts: the flat-memory runs (1e6,1e7)")
+    ap.add_argument("--stream-only", action="store_true", help="only the --stream runs")
+    ap.add_argument("--stream-timeout", type=float, default=None, help="seconds allowed each --stream run")
+    ap.add_argument("--json", default=None, help="where to write the JSON (default benchmarks/results/latest/)")
     ap.add_argument("--stream-one", type=float, default=None, help=argparse.SUPPRESS)
     args = ap.parse_args()
     if args.stream_one is not None:  # a subprocess of --stream
         print(json.dumps(run_stream(int(args.stream_one))))
         return
-    rows = [] if args.robust_only else [run_case("four-bar-sketch", args.samples), run_case("sewing-feed", 0)]
-    pyl = run_pylinkage(args.pylinkage_samples) if args.pylinkage_samples and not args.robust_only else {}
+    only = args.robust_only or args.stream_only
+    rows = [] if only else [run_case("four-bar-sketch", args.samples), run_case("sewing-feed", 0)]
+    pyl = run_pylinkage(args.pylinkage_samples) if args.pylinkage_samples and not only else {}
     stream = []
     for n in filter(None, args.stream.split(",")):
         import subprocess
         import sys
 
-        out = subprocess.run([sys.executable, __file__, "--stream-one", n], capture_output=True, text=True, check=True)
+        try:
+            out = subprocess.run([sys.executable, __file__, "--stream-one", n], capture_output=True, text=True,
+                                 check=True, timeout=args.stream_timeout)
+        except subprocess.TimeoutExpired:
+            print(f"stream {float(n):.0e} samples: not finished in {args.stream_timeout} s", flush=True)
+            stream.append({"samples": int(float(n)), "error": "timeout", "timeout_s": args.stream_timeout})
+            continue
         stream.append(json.loads(out.stdout.strip().splitlines()[-1]))
-    robust = [run_robust(name, args.designs) for name in ROBUST_CASES] if args.designs else []
+        r = stream[-1]
+        print(f"stream {r['samples']:.0e} samples: {r['samples_per_s']:.0f}/s, "
+              f"peak RSS {r['peak_rss_end_mib']:.0f} MiB, device peak {r['peak_device_mib']} MiB", flush=True)
+    robust = [run_robust(name, args.designs) for name in ROBUST_CASES] if args.designs and not args.stream_only else []
     print(f"{'case':<16} {'T':>3} {'M':>6} {'1st order cold s':>17} {'warm s':>8} {'+worst s':>9} {'MC samples/s':>13}")
     for r in rows:
         mc = f"{r['mc_samples_per_s']:13.0f}" if "mc_samples_per_s" in r else f"{'–':>13}"
@@ -262,7 +280,7 @@ def main() -> None:
               f"{pyl['pylinkage_samples_per_s']:.0f} samples/s: {pyl['ratio_warm']:.0f}× warm, "
               f"{pyl['ratio_cold']:.1f}× cold; nominal paths differ by {pyl['nominal_path_difference_mm']:.1e} mm; "
               f"load {pyl['load_1min']}")
-    for r in stream:
+    for r in (r for r in stream if "error" not in r):
         print(f"stream {r['samples']:.0e} samples: {r['samples_per_s']:.0f}/s, peak RSS "
               f"{r['peak_rss_after_compile_mib']:.0f} MiB after compile, {r['peak_rss_end_mib']:.0f} MiB at the end")
     if robust:
@@ -272,7 +290,7 @@ def main() -> None:
             print(f"{r['case']:<16} {r['designs']:>8} {r['parameters']:>3} {r['robust_cold_s']:8.2f} "
                   f"{r['robust_warm_s']:8.2f} {r['robust_only_warm_s']:15.2f} "
                   f"{r['check_max_relative_difference']:11.1e}")
-    out = pathlib.Path(__file__).parent / "results" / "latest" / "tolerance.json"
+    out = pathlib.Path(args.json or pathlib.Path(__file__).parent / "results" / "latest" / "tolerance.json")
     out.parent.mkdir(parents=True, exist_ok=True)
     meta = {"machine": platform.machine(), "cpus": os.cpu_count(), "jax": jax.__version__,
             "device": str(jax.devices()[0])}

@@ -332,7 +332,8 @@ def test_a_damaged_or_truncated_entry_is_recomputed(runs):
     kin = [c for c in cmds if c[0].startswith("kin-")]
     again = _run(tmp / "damaged", kin, cache)
     assert _differences(again, {k: v for k, v in out["off"].items() if k in again}) == []
-    assert _damage(p for p in cache.iterdir() if not p.name.startswith("trace-")) > 5
+    # files only: on a GPU, XLA keeps its autotuning results in a folder beside the entries
+    assert _damage(p for p in cache.iterdir() if p.is_file() and not p.name.startswith("trace-")) > 5
     again = _run(tmp / "damaged-xla", [c for c in kin if c[0] in ("kin-A", "kin-E")], cache)
     for name, text in again.items():
         ref = out["off"][name]
