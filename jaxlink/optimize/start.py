@@ -31,24 +31,42 @@ from ..solvers.linalg import solve_small
 
 
 def file_configuration(mech, phi0) -> np.ndarray:
-    """The file's design solved at φ₀ (continued from the file's `[input] start`)."""
-    sol = solve(mech, np.asarray([phi0]))
-    if int(sol.result[0]) != RESULTS.converged:
+    """The file's design solved at φ₀ (continued from the file's `[input] start`); the points are
+    not computed (a smaller program: 0.3 s less to compile on 2 CPU cores)."""
+    sol = solve(mech, np.asarray([phi0]), points=False)
+    # indexed as numpy arrays: an indexed JAX array compiles a one-operation program per call site
+    # in a new process (≈ 20 ms each on the CPU)
+    result, q = np.asarray(sol.result), np.asarray(sol.q)
+    if int(result[0]) != RESULTS.converged:
         from ..errors import MechanismError
 
         raise MechanismError(
             f"the file's own design cannot be assembled at the first input of the search "
             f"({RESULTS.messages[int(sol.result[0])]}); the search needs an assemblable design in the "
             "file to define the assembly branch", file=mech.file, key="parameters")
-    return np.asarray(sol.q[0])
+    return q[0]
+
+
+def _nearest_signs(mech, q_file, phi0):
+    """The dyads' branch signs σ of the configuration nearest to `q_file` at φ₀ (a stored trace:
+    `jaxlink.cache.traced`, the mechanism an argument)."""
+    return _dyads.solve_nearest(mech, _dyads.classify(mech), q_file, phi0, mech.parameters)[3]
 
 
 def circuit_signs(mech, q_file, phi0, *, all_circuits: bool) -> np.ndarray:
     """(C, n_dyads) branch signs: the file's (C = 1) or every combination (C = 2^n_dyads, the
-    file's first)."""
-    dyads = _dyads.classify(mech)
-    own = np.asarray(_dyads.solve_nearest(mech, dyads, jnp.asarray(q_file), jnp.asarray(phi0),
-                                          jnp.asarray(mech.parameters))[3])
+    file's first).
+
+    The file's σ is one compiled program (`traced`, stored with the compilation cache): evaluated
+    operation by operation it compiled ≈ 28 one-operation programs in a new process (0.5 s of a
+    cold study's or search's set-up on 2 CPU cores). The same operations on the same numbers: σ
+    is a sign, the same either way."""
+    from ..cache import traced
+
+    p = np.asarray(mech.parameters)
+    own = np.asarray(traced("circuit_signs", _nearest_signs,
+                            (mech.replace(guess=np.asarray(mech.guess, p.dtype)), np.asarray(q_file, p.dtype),
+                             np.asarray(phi0, p.dtype))))
     if not all_circuits:
         return own[None]
     combos = [own]
