@@ -50,7 +50,7 @@ def study_key(mech, inputs, options, chunk) -> tuple:
     return (s.key, s.name, s.file, s.description, _numbers(mech.parameters), _numbers(mech.guess),
             json.dumps(tree, sort_keys=True), tuple((k, _numbers(v)) for k, v in sorted(arrays.items())),
             options, chunk, jax.device_count(), jax.process_count(), jax.default_backend(),
-            bool(jax.config.jax_enable_x64))
+            bool(jax.config.read("jax_enable_x64")))
 
 
 def study_for(mech, inputs, *, options=None, chunk=None):
