@@ -132,7 +132,8 @@ def converged_sensitivity(mech, inputs=None, *, precision: float | None = None, 
     """`sensitivity` with the stopping rule (see the module doc): (`SensitivityReport` at the N
     reached, `Convergence`). `precision` and `max_samples` default to the inputs'; `checkpoint`
     (a `checkpoint.Checkpoint`): every round checkpointed batch by batch, a killed study resumed
-    in its round (see the module doc)."""
+    in its round (see the module doc). Its resume key sees `inputs`: give `precision` and
+    `max_samples` there (`read_study(..., precision=...)`), not as arguments, when resuming."""
     from .sampling import _study, sensitivity
 
     study = _study(mech, inputs, study, chunk, options)
