@@ -14,6 +14,7 @@ tolerances (`Study.moved`, nothing recompiled). Its slider B on the guide y = e:
 and the crank pin A = O1 + a (cos θ, sin θ) is linear in (a, O1_x, O1_y): there first order is exact.
 """
 
+import json
 import math
 
 import numpy as np
@@ -696,6 +697,85 @@ def test_a_killed_study_resumes_to_the_same_result(setup, tmp_path):
     for f in ("S1", "ST", "S1_low", "ST_high"):
         assert np.array_equal(getattr(ref.indices, f), getattr(res.indices, f)), f
     assert (res.feasible_fraction, res.complete) == (ref.feasible_fraction, ref.complete)
+
+
+def test_the_monte_carlo_stopping_rule_killed_and_resumed(setup, tmp_path):
+    """The precision rule on the Monte Carlo (rounds of 512, 1024, 2048 samples) killed after its
+    second round and resumed: it starts again in the round saved (its batches read back, the first
+    round not evaluated again) and ends with the uninterrupted result, history and statistics bit
+    for bit; another `max_samples` is refused naming it."""
+    from jaxlink.study.checkpoint import Checkpoint, resume_key
+
+    mech, inputs, study = setup
+    tin = inputs._replace(samples=512, precision=1e-6, max_samples=2048)
+    mv = study.moved(inputs=tin)
+
+    def ck(inp, resume=False):
+        return Checkpoint(tmp_path / "mc", resume_key(mech, inp, chunk=study.chunk, what="tolerance"), resume=resume)
+
+    rep, conv = st.converged_tolerance(mech, study=mv, worst=False)
+    assert [n for n, _ in conv.history] == [512, 1024, 2048] and not conv.converged
+    with pytest.raises(Stop):
+        st.converged_tolerance(mech, study=mv, worst=False, progress=stop_after(2), checkpoint=ck(tin))
+    saved = json.loads((tmp_path / "mc" / "state.json").read_text())
+    assert saved["state"]["samples"] == 1024 and saved["state"]["history"] == [[512, conv.history[0][1]]]
+    calls = []
+    res, rconv = st.converged_tolerance(mech, study=mv, worst=False, progress=calls.append, checkpoint=ck(tin, True))
+    assert rconv == conv and calls == [1024, 2048]  # the round saved read back, then the last one evaluated
+    for f in rep.monte_carlo._fields:
+        assert np.array_equal(np.asarray(getattr(rep.monte_carlo, f)), np.asarray(getattr(res.monte_carlo, f))), f
+    assert np.array_equal(rep.first_order.sigma_rss, res.first_order.sigma_rss)
+    with pytest.raises(jl.MechanismError, match=r"another study .*\[study\] max_samples"):
+        st.converged_tolerance(mech, study=mv, worst=False, checkpoint=ck(tin._replace(max_samples=4096), True))
+
+
+def test_a_study_built_without_study_is_kept_and_reused(setup, monkeypatch):
+    """`tolerance(mech, inputs)` without `study=` builds its `Study` once (`reuse.study_for`): a
+    second identical call gets the same one and both give a fresh Study's numbers bit for bit (the
+    fixture's, built apart); a change of any one key input (a tolerance, the seed, the samples, a
+    parameter's value — also changed in place —, the solver options, the chunk) gives another Study,
+    whose numbers are a fresh one's. A key that ignored the tolerances would hand back the Study
+    of the old ones: the same check then fails."""
+    from jaxlink.solvers.options import NewtonOptions
+    from jaxlink.study import reuse
+
+    mech, inputs, study = setup
+
+    def check(inp, samples=1024):
+        """st.tolerance without study= against a fresh Study's (the fixture's moved: nothing kept)."""
+        got = st.tolerance(mech, inp, samples=samples, worst=False)
+        want = st.tolerance(mech, study=study.moved(inputs=inp), samples=samples, worst=False)
+        for a, b in ((got.first_order, want.first_order), (got.monte_carlo, want.monte_carlo)):
+            for f in () if a is None else a._fields:
+                assert np.array_equal(np.asarray(getattr(a, f)), np.asarray(getattr(b, f))), f
+        assert np.array_equal(got.nominal, want.nominal)
+
+    check(inputs)
+    kept = reuse.study_for(mech, inputs)
+    check(inputs)  # the second call: the Study kept
+    assert reuse.study_for(mech, inputs) is kept and kept.inputs == inputs
+    wider = inputs._replace(tolerances=(inputs.tolerances[0]._replace(half_width=0.02, sigma=0.02 / 3 ** 0.5),)
+                            + inputs.tolerances[1:])
+    check(wider, samples=0)  # another tolerance: a fresh Study, its numbers (first order: one compile less)
+    assert reuse.study_for(mech, wider) is not kept
+    p = np.array(mech.parameters)
+    moved = mech.replace(parameters=p)
+    s = reuse.study_for(moved, inputs)
+    assert s is kept  # another Mechanism object, the same structure and numbers: the same key
+    p[mech.parameter_index("rod")] += 1e-6  # changed in place: another key; the Study kept has the old numbers
+    for other in (reuse.study_for(mech, inputs._replace(seed=5)), reuse.study_for(mech, inputs._replace(samples=9)),
+                  reuse.study_for(moved, inputs), reuse.study_for(mech, inputs, options=NewtonOptions(max_steps=20)),
+                  reuse.study_for(mech, inputs, chunk=2048)):
+        assert other is not kept
+    assert np.array_equal(s.mech.parameters, mech.parameters)
+    assert np.array_equal(reuse.study_for(moved, inputs).mech.parameters, p)
+    # a key blind to the tolerances: the Study of the old tolerances comes back, and the check fails
+    key = reuse.study_key
+    monkeypatch.setattr(reuse, "study_key", lambda m, i, o, c: key(m, i._replace(tolerances=inputs.tolerances), o, c))
+    narrower = inputs._replace(tolerances=(inputs.tolerances[0]._replace(half_width=0.005, sigma=0.005 / 3 ** 0.5),)
+                               + inputs.tolerances[1:])
+    with pytest.raises(AssertionError):
+        check(narrower, samples=0)
 
 
 def test_the_robust_design_map_against_the_closed_form_and_replot(setup, tmp_path, monkeypatch):

@@ -456,3 +456,89 @@ def test_morris_regression_dgsm_killed_and_resumed_give_the_same_bytes(setup, tm
     assert manifest("cli-ref") == manifest("cli")
     assert main(cmd + [str(tmp_path / "cli"), "--resume", "--seed", "5"]) == 2
     assert "belongs to another study (different [study] seed)" in capsys.readouterr().err
+
+
+def _sample_written(tmp_path, name, mech, rep):
+    """(study.csv bytes, the summary, study.json without the timings, study.npz's arrays) of `rep`."""
+    from jaxlink.report import sampling
+    from jaxlink.study import archive
+
+    d = tmp_path / name
+    sampling.write_sample_all(d, mech, rep, wall_time=1.0, plot=False)
+    data = json.loads((d / "study.json").read_text())
+    del data["timings_s"], data["report"]["fields"]["timings"]
+    return (d / "study.csv").read_bytes(), sampling.sample_summary(rep), data, archive.load_npz(d / "study.npz")
+
+
+def _same_files(want, got):
+    assert want[:3] == got[:3]
+    assert want[3].keys() == got[3].keys() and all(np.array_equal(want[3][k], got[3][k]) for k in want[3])
+
+
+def test_vector_study_and_the_stopping_rule_killed_and_resumed(setup, tmp_path, monkeypatch, capsys):
+    """A vector study over two batches (1501 designs, chunk 1024, infeasible ones among them) killed
+    after its first batch and resumed writes the uninterrupted study's study.csv, summary,
+    study.json (but the timings) and study.npz bit for bit; another `steps` is refused naming the
+    designs. The stopping rule (Sobol': rounds 8 … 256, the last of two batches) killed mid-round
+    resumes in its round to the uninterrupted result: the same indices and history bit for bit, the
+    rounds before not evaluated again (the Monte Carlo's: tests/test_study.py). From the command
+    line: a vector study killed (Ctrl-C) and `--resume`d writes the bytes of an uninterrupted one."""
+    from jaxlink.study.checkpoint import Checkpoint, resume_key
+
+    mech, study = setup
+
+    def ck(name, inp, resume=False):
+        return Checkpoint(tmp_path / name, resume_key(mech, inp, chunk=study.chunk, what=inp.method), resume=resume)
+
+    final = {"crank": 25.0, "rod": 34.0, "O1_x": 0.0, "O1_y": 2.0}
+    vec = st.read_study(mech, method="vector", steps=1500, final=final)
+    mv = study.moved(inputs=vec)
+    ref = st.parameter_study(mech, study=mv)
+    assert len(ref.feasible) == 1501 and 0 < ref.feasible.sum() < 1501
+    with pytest.raises(Stop):
+        st.parameter_study(mech, study=mv, progress=stop_after(1), checkpoint=ck("vector", vec))
+    assert json.loads((tmp_path / "vector" / "state.json").read_text())["done"] == 1
+    res = st.parameter_study(mech, study=mv, checkpoint=ck("vector", vec, resume=True))
+    _same_files(_sample_written(tmp_path, "v-ref", mech, ref), _sample_written(tmp_path, "v-res", mech, res))
+    with pytest.raises(jl.MechanismError, match=r"another study .*\[study\] designs"):
+        st.parameter_study(mech, study=mv, checkpoint=ck("vector", st.read_study(mech, method="vector", steps=1400,
+                                                                                  final=final), resume=True))
+
+    # the stopping rule: Sobol' killed in its last round (256 base samples: 2 batches of 170)
+    sin = _moved(mech, study, method="sensitivity", samples=8, ranges=SMALL, bootstrap=20, precision=1e-4,
+                 max_samples=256)
+    rep, conv = st.converged_sensitivity(mech, study=sin)
+    assert [n for n, _ in conv.history] == [8, 16, 32, 64, 128, 256] and not conv.converged
+    with pytest.raises(Stop):
+        st.converged_sensitivity(mech, study=sin, progress=stop_after(6), checkpoint=ck("sobol", sin.inputs))
+    saved = json.loads((tmp_path / "sobol" / "state.json").read_text())
+    assert saved["done"] == 1 and saved["state"]["samples"] == 256 and len(saved["state"]["history"]) == 5
+    calls = []
+    res, rconv = st.converged_sensitivity(mech, study=sin, progress=calls.append,
+                                          checkpoint=ck("sobol", sin.inputs, resume=True))
+    assert rconv == conv and calls == [170 * 6, 86 * 6]  # the batch done counted, then the last one
+    for f in ("S1", "ST", "S1_low", "S1_high", "ST_low", "ST_high"):
+        for a, b in ((rep.indices, res.indices), (rep.feasibility, res.feasibility)):
+            assert np.array_equal(getattr(a, f), getattr(b, f)), f
+    with pytest.raises(jl.MechanismError, match=r"another study .*\[study\] precision"):
+        st.converged_sensitivity(mech, study=sin, checkpoint=ck("sobol", sin.inputs._replace(precision=1e-3),
+                                                                resume=True))
+
+    from jaxlink.cli import main
+
+    src = tmp_path / "slider.toml"
+    src.write_text(FILE + 'method = "vector"\nsteps = 1100\n[study.final]\ncrank = 25.0\nrod = 34.0\n')
+    cmd = ["study", str(src), "--no-plot", "--progress", "off", "--out"]
+    assert main(cmd + [str(tmp_path / "cli-ref")]) == 0
+    ref_out = capsys.readouterr().out
+    save = Checkpoint.save
+
+    def killed(self, done, state):
+        save(self, done, state)
+        raise KeyboardInterrupt
+    monkeypatch.setattr(Checkpoint, "save", killed)
+    assert main(cmd + [str(tmp_path / "cli")]) == 130
+    monkeypatch.undo()
+    assert main(cmd + [str(tmp_path / "cli"), "--resume"]) == 0
+    assert ref_out.splitlines()[1:] == capsys.readouterr().out.replace("/cli/", "/cli-ref/").splitlines()[1:]
+    assert (tmp_path / "cli-ref" / "study.csv").read_bytes() == (tmp_path / "cli" / "study.csv").read_bytes()

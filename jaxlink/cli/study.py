@@ -56,8 +56,8 @@ def register(sub) -> None:
                    help="write the files into this folder (and, chunk by chunk, the checkpoint DIR/checkpoint/)")
     p.add_argument("--resume", action="store_true",
                    help="continue the interrupted study of --out DIR from its checkpoint (the same result as an "
-                        "uninterrupted run; tolerance, sample, grid, sensitivity, morris, regression, dgsm; "
-                        "refused when the file or the study's inputs differ)")
+                        "uninterrupted run; every method, the --precision rule too: it resumes in the round it was "
+                        "killed in; refused when the file or the study's inputs differ)")
     p.add_argument("--replot", metavar="DIR", default=None,
                    help="redraw every plot of the study written into DIR (study.json, study.npz) without "
                         "computing anything")
@@ -84,7 +84,8 @@ def cmd_study(args) -> int:
     enable_dtype(args.dtype)
     mech = load_from_args(args)
     from ..report import tolerance as _report
-    from ..study import Study, read_study, tolerance
+    from ..study import read_study, tolerance
+    from ..study.reuse import study_for
 
     for opt, v, lo in (("--samples", args.samples, 0), ("--positions", args.positions, 8), ("--seed", args.seed, 0),
                        ("--chunk", args.chunk, 1), ("--bootstrap", args.bootstrap, 0)):
@@ -93,21 +94,14 @@ def cmd_study(args) -> int:
     inputs = read_study(mech, method=args.method, samples=args.samples, positions=args.positions, seed=args.seed,
                         chunk=args.chunk, sampler=args.sampler, bootstrap=args.bootstrap, robust=args.robust,
                         precision=args.precision, max_samples=args.max_samples, second_order=args.second_order)
-    study = Study(mech, inputs)
+    study = study_for(mech, inputs)  # in one process (tests, scripts calling `main`): compiled once per key
     extra = {"chunk": study.chunk, "command_line": {"set": list(args.set), "dtype": args.dtype,
                                                     "resume": bool(args.resume)}}
     show = sys.stderr.isatty() if args.progress == "auto" else args.progress == "on"
     from . import study_methods
 
     if study_methods.handles(inputs):  # morris, regression, dgsm, Dakota's studies, the stopping rule
-        screening = inputs.method in study_methods.SCREENING
-        if args.resume and not screening:
-            raise MechanismError(f"--resume covers tolerance, sample, grid, sensitivity without a stopping rule, "
-                                 f"morris, regression and dgsm; not {inputs.method!r}"
-                                 + (" with --precision" if inputs.precision else "")
-                                 + ": run it again without --resume")
-        ck = _checkpoint(args, mech, study, inputs.method) if screening else None
-        return study_methods.run(args, mech, study, show, t0, checkpoint=ck)
+        return study_methods.run(args, mech, study, show, t0, checkpoint=_checkpoint(args, mech, study, inputs.method))
     if inputs.method != "tolerance":
         return _design_space(args, mech, study, show, t0, extra)
     bar = None

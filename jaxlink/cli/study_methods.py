@@ -27,7 +27,7 @@ def _bar(show: bool, total: int, desc: str):
 
 
 def run(args, mech, study, show: bool, t0: float, checkpoint=None) -> int:
-    """Run the study of `args`; `checkpoint` (morris, regression, dgsm): the checkpoint of --out."""
+    """Run the study of `args`; `checkpoint`: the checkpoint of --out (None without it)."""
     from ..report import screening as _screening
 
     inputs = study.inputs
@@ -54,15 +54,15 @@ def run(args, mech, study, show: bool, t0: float, checkpoint=None) -> int:
         elif inputs.method in GIVEN:
             from ..study.parameter_studies import parameter_study
 
-            rep = parameter_study(mech, study=study, progress=progress)
+            rep = parameter_study(mech, study=study, progress=progress, checkpoint=checkpoint)
         elif inputs.method == "sensitivity":
             from ..study.convergence import converged_sensitivity
 
-            rep, conv = converged_sensitivity(mech, study=study)
+            rep, conv = converged_sensitivity(mech, study=study, checkpoint=checkpoint)
         else:
             from ..study.convergence import converged_tolerance
 
-            rep, conv = converged_tolerance(mech, study=study)
+            rep, conv = converged_tolerance(mech, study=study, checkpoint=checkpoint)
     finally:
         if bar is not None:
             bar.close()

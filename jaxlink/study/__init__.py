@@ -21,7 +21,8 @@ along the cycle and of the feasibility).
   (derivative-based measures from the exact gradients, `dgsm_indices`);
 - correlated inputs: `iman_conover` (`[study.correlation]`);
 - the stopping rule: `converged_sensitivity`, `converged_tolerance`, `Convergence`;
-- Dakota's parameter studies: `parameter_study` (`vector`, `list`, `centered`).
+- Dakota's parameter studies: `parameter_study` (`vector`, `list`, `centered`);
+- the `Study` of a call without `study=`, kept for the next identical call: `study_for`.
 
 docs/methods/tolerance.md and docs/methods/sensitivity.md give the formulas;
 docs/reference/file-format.md §17 the table.
@@ -56,6 +57,7 @@ from .regression import RegressionReport as RegressionReport
 from .regression import regression as regression
 from .regression import regression_indices as regression_indices
 from .responses import Responses as Responses
+from .reuse import study_for as study_for
 from .robust import RobustMap as RobustMap
 from .sampling import SampleReport as SampleReport
 from .sampling import SensitivityReport as SensitivityReport

@@ -14,6 +14,14 @@ Each round is a complete study at its size (the earlier rounds' evaluations are 
 most twice the final round's work), so the result is exactly that of `sensitivity` or
 `tolerance` at the size reached — `--samples N` reproduces it. `Convergence` says the size
 reached, whether the rule was met, and each round's largest half-width.
+
+**Resume.** With a `checkpoint.Checkpoint`, the round under way is checkpointed batch by batch as
+`sensitivity`'s or the Monte Carlo's own (`Rounds`: the saved state is the round's size, the
+half-widths of the rounds completed before it and the round's own streamed state). A killed study
+resumed starts again in the round it was killed in, from its last batch, the rounds before it not
+evaluated again (their half-widths were saved exactly, JSON keeping a float's every bit): the
+rounds are deterministic (their sizes N₀ 2ᵏ, their samples from the seed), so the resumed study
+ends with the uninterrupted one's result, history and convergence.
 """
 
 from __future__ import annotations
@@ -65,6 +73,51 @@ def monte_carlo_half_width(mc, confidence: float) -> float:
     return float(z * rel.max())
 
 
+class Rounds:
+    """The checkpoint of one round of the stopping rule, over the study's `checkpoint.Checkpoint`
+    `base`: what `sensitivity` and `Study.monte_carlo` load and save (the round's streamed state)
+    wrapped with the round's size `samples` and the completed rounds' `history`. `load()` gives
+    the round's state only when the saved round is this one (else None: the round starts afresh);
+    `saved_round()` the saved (samples, history), or None."""
+
+    def __init__(self, base, samples: int, history: list):
+        self.base = base
+        self.samples = int(samples)
+        self.history = history
+
+    @staticmethod
+    def saved_round(base):
+        saved = None if base is None else base.load()
+        if saved is None:
+            return None
+        state = saved[1]
+        return int(state["samples"]), [(int(n), float(h)) for n, h in state["history"]]
+
+    def load(self):
+        saved = self.base.load()
+        if saved is None or int(saved[1]["samples"]) != self.samples:
+            return None
+        return saved[0], saved[1]["round"]
+
+    def save(self, done: int, state) -> None:
+        self.base.save(done, {"samples": self.samples, "history": [list(r) for r in self.history], "round": state})
+
+
+def _resumed(checkpoint, n0: int, cap: int) -> tuple[list, list]:
+    """(the rounds' sizes still to run, the history of the rounds completed) of a resumed study."""
+    sizes = list(_rounds(n0, cap))
+    saved = Rounds.saved_round(checkpoint)
+    if saved is None:
+        return sizes, []
+    n, history = saved
+    if n not in sizes or [h[0] for h in history] != sizes[:sizes.index(n)]:
+        from ..errors import MechanismError
+
+        raise MechanismError(f"{checkpoint.dir}: the checkpoint's round of {n} samples is not a round of this study; "
+                             "run without --resume to start afresh")
+    return sizes[sizes.index(n):], history
+
+
 def _rounds(n0: int, cap: int):
     n = max(int(n0), 2)
     while True:
@@ -75,9 +128,12 @@ def _rounds(n0: int, cap: int):
 
 
 def converged_sensitivity(mech, inputs=None, *, precision: float | None = None, max_samples: int | None = None,
-                          chunk=None, options=None, progress=None, study=None):
+                          chunk=None, options=None, progress=None, study=None, checkpoint=None):
     """`sensitivity` with the stopping rule (see the module doc): (`SensitivityReport` at the N
-    reached, `Convergence`). `precision` and `max_samples` default to the inputs'."""
+    reached, `Convergence`). `precision` and `max_samples` default to the inputs'; `checkpoint`
+    (a `checkpoint.Checkpoint`): every round checkpointed batch by batch, a killed study resumed
+    in its round (see the module doc). Its resume key sees `inputs`: give `precision` and
+    `max_samples` there (`read_study(..., precision=...)`), not as arguments, when resuming."""
     from .sampling import _study, sensitivity
 
     study = _study(mech, inputs, study, chunk, options)
@@ -87,10 +143,12 @@ def converged_sensitivity(mech, inputs=None, *, precision: float | None = None, 
     if eps is None:
         raise ValueError("converged_sensitivity needs a precision ([study] precision)")
     t0 = time.perf_counter()
-    history = []
+    sizes, history = _resumed(checkpoint, inputs.samples, cap) if checkpoint is not None else (
+        list(_rounds(inputs.samples, cap)), [])
     rep = None
-    for n in _rounds(inputs.samples, cap):
-        rep = sensitivity(mech, study=study, samples=n, progress=progress)
+    for n in sizes:
+        rep = sensitivity(mech, study=study, samples=n, progress=progress,
+                          checkpoint=None if checkpoint is None else Rounds(checkpoint, n, list(history)))
         h = sobol_half_width(rep)
         history.append((n, h))
         if h <= eps:
@@ -105,28 +163,26 @@ def converged_sensitivity(mech, inputs=None, *, precision: float | None = None, 
 
 
 def converged_tolerance(mech, inputs=None, *, precision: float | None = None, max_samples: int | None = None,
-                        chunk=None, options=None, progress=None, study=None, worst: bool = True):
+                        chunk=None, options=None, progress=None, study=None, worst: bool = True, checkpoint=None):
     """`tolerance` with the stopping rule on its Monte Carlo (see the module doc):
-    (`ToleranceReport` at the n reached, `Convergence`)."""
-    from ..solvers.options import NewtonOptions
-    from .tolerance import Study, tolerance
+    (`ToleranceReport` at the n reached, `Convergence`); `checkpoint` as `converged_sensitivity`'s."""
+    from .sampling import _study
+    from .tolerance import tolerance
     from .worstcase import worst_case
 
-    if study is None:
-        from .inputs import read_study
-
-        inputs = read_study(mech) if inputs is None else inputs
-        study = Study(mech, inputs, options=options or NewtonOptions(), chunk=chunk)
+    study = _study(mech, inputs, study, chunk, options)
     inputs = study.inputs
     eps = inputs.precision if precision is None else float(precision)
     cap = inputs.max_samples if max_samples is None else int(max_samples)
     if eps is None:
         raise ValueError("converged_tolerance needs a precision ([study] precision)")
     t0 = time.perf_counter()
-    history = []
+    sizes, history = _resumed(checkpoint, inputs.samples, cap) if checkpoint is not None else (
+        list(_rounds(inputs.samples, cap)), [])
     rep = None
-    for n in _rounds(inputs.samples, cap):
-        rep = tolerance(mech, study=study, samples=n, progress=progress, worst=False)
+    for n in sizes:
+        rep = tolerance(mech, study=study, samples=n, progress=progress, worst=False,
+                        checkpoint=None if checkpoint is None else Rounds(checkpoint, n, list(history)))
         h = monte_carlo_half_width(rep.monte_carlo, inputs.confidence)
         history.append((n, h))
         if h <= eps:

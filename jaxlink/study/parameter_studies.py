@@ -1,7 +1,9 @@
 """Dakota's parameter studies: the designs a `vector`, `list` or `centered` study evaluates, read
 from `[study]` (file units), every one evaluated in one batched call (`parameter_study`) and
 reported as a `sample` study's (`SampleReport`: study.csv, one row per design, its feasibility
-flag and its scalar responses).
+flag and its scalar responses). With a `checkpoint.Checkpoint` the designs run in batches of
+`chunk`, each batch's rows written as it ends and a killed study resumed exactly as `sample`'s
+(the batches done read back, the others evaluated: the same rows bit for bit).
 
 - `vector` (Dakota's `vector_parameter_study`): `final = { NAME = value, … }` and `steps = n`
   (default 10): the n + 1 designs x_k = x₀ + (k / n) (x_final − x₀), k = 0 … n, from the file's
@@ -30,12 +32,14 @@ from .sampling import SampleReport, _Evaluator, _study, _units
 
 
 def parameter_study(mech, inputs: StudyInputs | None = None, *, chunk=None, options=None, progress=None,
-                    study=None):
+                    study=None, checkpoint=None):
     """Evaluate the designs of a `vector`, `list` or `centered` study (`inputs.designs`, see the
     module doc) in batches of `chunk` (one batched call where they fit one).
 
-    **Arguments:** as `sample`. **Returns:** a `SampleReport` (`grid_shape` None), its rows the
-    designs in the order above; an infeasible design kept and flagged, as `sample`'s.
+    **Arguments:** as `sample` (`checkpoint`: a `checkpoint.Checkpoint`, every batch's rows written
+    as they come, a saved study resumed; `progress` called with the designs done after each batch).
+    **Returns:** a `SampleReport` (`grid_shape` None), its rows the designs in the order above; an
+    infeasible design kept and flagged, as `sample`'s.
     """
     t0 = time.perf_counter()
     study = _study(mech, inputs, study, chunk, options)
@@ -45,10 +49,29 @@ def parameter_study(mech, inputs: StudyInputs | None = None, *, chunk=None, opti
     ev = _Evaluator(study)
     values = np.asarray(inputs.designs, float)
     scalar = np.asarray([k is None for (_, _, k) in ev.labels], bool)
+    done = 0
+    saved = None if checkpoint is None else checkpoint.load()
+    if saved is not None:
+        done, state = saved
+        ev.nominal = state["nominal"]
     vs, oks = [], []
-    for a in range(0, len(values), study.chunk):
-        v, ok = ev(values[a:a + study.chunk])
-        vs.append(v[:, scalar])
+    for c, a in enumerate(range(0, len(values), study.chunk)):
+        if c < done:
+            assert checkpoint is not None
+            z = checkpoint.load_chunk(c)
+            v, ok = z["responses"], z["feasible"]
+            if not np.array_equal(z["x"], values[a:a + study.chunk]):
+                from ..errors import MechanismError
+
+                raise MechanismError(f"{checkpoint.dir}: chunk {c} of the checkpoint holds other designs; run "
+                                     "without --resume to start afresh")
+        else:
+            v, ok = ev(values[a:a + study.chunk])
+            v = v[:, scalar]
+            if checkpoint is not None:
+                checkpoint.save_chunk(c, x=values[a:a + study.chunk], feasible=ok, responses=v)
+                checkpoint.save(c + 1, {"nominal": ev.nominal})
+        vs.append(v)
         oks.append(ok)
         if progress is not None:
             progress(len(ok))

@@ -181,13 +181,15 @@ class _Evaluator:
 
 
 def _study(mech, inputs, study, chunk, options):
-    from ..solvers.options import NewtonOptions
+    """`study`, else the `Study` of `mech` and `inputs` (default its `[study]` table) kept for reuse
+    (`reuse.study_for`: a second identical call compiles nothing)."""
     from .inputs import read_study
+    from .reuse import study_for
 
     if study is not None:
         return study
     inputs = read_study(mech) if inputs is None else inputs
-    return Study(mech, inputs, options=options or NewtonOptions(), chunk=chunk)
+    return study_for(mech, inputs, options=options, chunk=chunk)
 
 
 def _units(mech, inputs) -> tuple:

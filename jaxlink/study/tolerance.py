@@ -521,7 +521,9 @@ def tolerance(mech, inputs: StudyInputs | None = None, *, samples: int | None = 
     - `mech`: the mechanism; `inputs`: `StudyInputs` (default: its `[study]` table, `read_study`);
     - `samples` (keyword-only): Monte Carlo samples (default the inputs'; 0: first order only);
     - `chunk`: designs per compiled batch; `options`: `NewtonOptions`; `progress`: called with
-      the samples done after each Monte Carlo batch; `study`: a `Study` already compiled (warm);
+      the samples done after each Monte Carlo batch; `study`: a `Study` already compiled (warm;
+      without it, the `Study` of `mech`, `inputs`, `options` and `chunk` kept from an earlier call
+      is reused, `reuse.study_for`);
     - `worst`: search the true worst case over the tolerance box (`worstcase.worst_case`);
     - `checkpoint`: a `checkpoint.Checkpoint` of the Monte Carlo (saved batch by batch, resumed);
     - `second_order`: the second-order mean shift and σ from the exact Hessian (`second_order.py`; off by
@@ -535,9 +537,11 @@ def tolerance(mech, inputs: StudyInputs | None = None, *, samples: int | None = 
 
     timings = {}
     t0 = time.perf_counter()
-    if study is None:
+    if study is None:  # kept for the next identical call (`reuse.study_for`)
+        from .reuse import study_for
+
         inputs = read_study(mech) if inputs is None else inputs
-        study = Study(mech, inputs, options=options, chunk=chunk)
+        study = study_for(mech, inputs, options=options, chunk=chunk)
     inputs = study.inputs
     r = study.responses
     t1 = time.perf_counter()
