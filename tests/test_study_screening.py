@@ -339,7 +339,7 @@ def test_vector_list_centered_studies(setup, tmp_path, capsys):
     base = FILE + "seed = 2\n"
     src.write_text(base + 'method = "centered"\nsteps = 2\n[study.step]\ncrank = 0.5\nrod = 22.0\n')
     out = tmp_path / "centered"
-    assert main(["study", str(src), "--out", str(out), "--no-plot", "--progress", "off"]) == 0
+    assert main(["study", str(src), "--out", str(out), "--progress", "off"]) == 0
     rows = list(csv.DictReader((out / "study.csv").open()))
     x = np.asarray([[float(r["crank (mm)"]), float(r["rod (mm)"])] for r in rows])
     want = np.asarray([[25, 80], [24, 80], [24.5, 80], [25.5, 80], [26, 80], [25, 36], [25, 58], [25, 102],
@@ -347,6 +347,17 @@ def test_vector_list_centered_studies(setup, tmp_path, capsys):
     np.testing.assert_allclose(x, want, atol=1e-9)
     assert [int(r["feasible"]) for r in rows] == (want[:, 1] >= want[:, 0] + E).astype(int).tolist()
     assert json.loads((out / "study.json").read_text())["method"] == "centered"
+    # its plot: each parameter's line in the order of its offsets −k … k, the file's design at 0;
+    # redrawn by --replot from study.json and study.npz alone
+    from jaxlink.report.parameter_studies import centered_offsets
+    from jaxlink.report.replot import read
+
+    k, order = centered_offsets(read(out)[1])
+    assert k == 2
+    np.testing.assert_allclose(x[order[0], 0], [24, 24.5, 25, 25.5, 26], atol=1e-9)
+    np.testing.assert_allclose(x[order[1], 1], [36, 58, 80, 102, 124], atol=1e-9)
+    (out / "centered.png").unlink()
+    assert main(["study", str(src), "--replot", str(out)]) == 0 and (out / "centered.png").is_file()
     src.write_text(base + 'method = "morris"\nsamples = 6\n[study.ranges]\ncrank = [24.0, 26.0]\nrod = [36.5, 39.0]\n')
     out = tmp_path / "morris"
     assert main(["study", str(src), "--out", str(out), "--progress", "off"]) == 0

@@ -107,9 +107,14 @@ def _two_ranges(rep: SampleReport) -> bool:
 
 
 def draw_sample_plots(d: pathlib.Path, mech, rep: SampleReport) -> list:
-    """grid.png (a grid over two ranges) and robust.png (with the robust-design map) into `d`;
-    their paths. `mech` needs only its names (`study_files.MechanismNames`)."""
+    """grid.png (a grid over two ranges) and robust.png (with the robust-design map), or the plot of
+    a vector, list or centered study (`parameter_studies.py`: vector.png, list.png, centered.png)
+    into `d`; their paths. `mech` needs only its names (`study_files.MechanismNames`)."""
+    from .parameter_studies import plot_parameter_study
+
     files = []
+    if rep.inputs.method in GIVEN and plot_parameter_study(d / f"{rep.inputs.method}.png", mech, rep):
+        files.append(d / f"{rep.inputs.method}.png")
     if _two_ranges(rep) and rep.labels:
         files.append(d / "grid.png")
         plot_grid(files[-1], mech, rep)
