@@ -730,7 +730,7 @@ def test_the_monte_carlo_stopping_rule_killed_and_resumed(setup, tmp_path):
 
 
 def test_a_study_built_without_study_is_kept_and_reused(setup, monkeypatch):
-    """`tolerance(mech, inputs)` without `study=` builds its `Study` once (`reuse.study_for`): a
+    """`tolerance(mech, inputs)` without `study=` builds its `Study` once (`study_for`): a
     second identical call gets the same one and both give a fresh Study's numbers bit for bit (the
     fixture's, built apart); a change of any one key input (a tolerance, the seed, the samples, a
     parameter's value — also changed in place —, the solver options, the chunk) gives another Study,
@@ -751,24 +751,24 @@ def test_a_study_built_without_study_is_kept_and_reused(setup, monkeypatch):
         assert np.array_equal(got.nominal, want.nominal)
 
     check(inputs)
-    kept = reuse.study_for(mech, inputs)
+    kept = st.study_for(mech, inputs)
     check(inputs)  # the second call: the Study kept
-    assert reuse.study_for(mech, inputs) is kept and kept.inputs == inputs
+    assert st.study_for(mech, inputs) is kept and kept.inputs == inputs
     wider = inputs._replace(tolerances=(inputs.tolerances[0]._replace(half_width=0.02, sigma=0.02 / 3 ** 0.5),)
                             + inputs.tolerances[1:])
     check(wider, samples=0)  # another tolerance: a fresh Study, its numbers (first order: one compile less)
-    assert reuse.study_for(mech, wider) is not kept
+    assert st.study_for(mech, wider) is not kept
     p = np.array(mech.parameters)
     moved = mech.replace(parameters=p)
-    s = reuse.study_for(moved, inputs)
+    s = st.study_for(moved, inputs)
     assert s is kept  # another Mechanism object, the same structure and numbers: the same key
     p[mech.parameter_index("rod")] += 1e-6  # changed in place: another key; the Study kept has the old numbers
-    for other in (reuse.study_for(mech, inputs._replace(seed=5)), reuse.study_for(mech, inputs._replace(samples=9)),
-                  reuse.study_for(moved, inputs), reuse.study_for(mech, inputs, options=NewtonOptions(max_steps=20)),
-                  reuse.study_for(mech, inputs, chunk=2048)):
+    for other in (st.study_for(mech, inputs._replace(seed=5)), st.study_for(mech, inputs._replace(samples=9)),
+                  st.study_for(moved, inputs), st.study_for(mech, inputs, options=NewtonOptions(max_steps=20)),
+                  st.study_for(mech, inputs, chunk=2048)):
         assert other is not kept
     assert np.array_equal(s.mech.parameters, mech.parameters)
-    assert np.array_equal(reuse.study_for(moved, inputs).mech.parameters, p)
+    assert np.array_equal(st.study_for(moved, inputs).mech.parameters, p)
     # a key blind to the tolerances: the Study of the old tolerances comes back, and the check fails
     key = reuse.study_key
     monkeypatch.setattr(reuse, "study_key", lambda m, i, o, c: key(m, i._replace(tolerances=inputs.tolerances), o, c))

@@ -85,7 +85,7 @@ def cmd_study(args) -> int:
     mech = load_from_args(args)
     from ..report import tolerance as _report
     from ..study import read_study, tolerance
-    from ..study.reuse import study_for
+    from ..study.tolerance import study_for
 
     for opt, v, lo in (("--samples", args.samples, 0), ("--positions", args.positions, 8), ("--seed", args.seed, 0),
                        ("--chunk", args.chunk, 1), ("--bootstrap", args.bootstrap, 0)):

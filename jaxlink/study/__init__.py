@@ -57,7 +57,6 @@ from .regression import RegressionReport as RegressionReport
 from .regression import regression as regression
 from .regression import regression_indices as regression_indices
 from .responses import Responses as Responses
-from .reuse import study_for as study_for
 from .robust import RobustMap as RobustMap
 from .sampling import SampleReport as SampleReport
 from .sampling import SensitivityReport as SensitivityReport
@@ -74,4 +73,5 @@ from .tolerance import Study as Study
 from .tolerance import ToleranceReport as ToleranceReport
 from .tolerance import draw as draw
 from .tolerance import draws as draws
+from .tolerance import study_for as study_for
 from .tolerance import tolerance as tolerance

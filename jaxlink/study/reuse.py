@@ -9,9 +9,9 @@ used) keyed on everything that changes a Study's compiled programs or its answer
 - the mechanism: its structure (`Structure.key`: loops, points, units, tables, …), its labels
   (name, file, description: the messages name the file) and its numbers (the parameters' and the
   guess's dtype, shape and bytes — a mechanism whose numbers changed in place is another key);
-- the inputs: every field of `StudyInputs` (`archive.pack`: method, seed, samples, tolerances and
+- the inputs: every field of `StudyInputs` (`_frozen`: method, seed, samples, tolerances and
   their distributions, ranges, designs, correlation, positions, points, metrics, limits, …, the
-  arrays by their bytes);
+  arrays by their bytes, a float by its exact hexadecimal value);
 - the solver options (`NewtonOptions`), the chunk as given, and JAX's device and process counts,
   backend and x64 mode.
 
@@ -23,13 +23,10 @@ kept holds a copy of a NumPy parameter vector (not the caller's array, which may
 from __future__ import annotations
 
 import collections
-import json
 import threading
 
 import jax
 import numpy as np
-
-from . import archive
 
 #: the most Studies kept (each holds its compiled programs)
 STUDIES = 8
@@ -43,24 +40,40 @@ def _numbers(a) -> tuple:
     return str(a.dtype), a.shape, a.tobytes()
 
 
+def _frozen(obj):
+    """A hashable image of `obj` that two objects share only when every value is the same: a
+    NamedTuple by its type and fields, an array by dtype, shape and bytes, a float by its exact
+    hexadecimal value (NaN included), containers item by item."""
+    if isinstance(obj, tuple) and hasattr(obj, "_fields"):
+        return (type(obj).__qualname__, tuple((f, _frozen(getattr(obj, f))) for f in obj._fields))
+    if isinstance(obj, np.ndarray) or isinstance(obj, jax.Array):
+        return ("array",) + _numbers(obj)
+    if isinstance(obj, np.generic):
+        obj = obj.item()
+    if isinstance(obj, float):
+        return ("float", obj.hex())
+    if obj is None or isinstance(obj, (str, bool, int)):
+        return (type(obj).__name__, obj)
+    if isinstance(obj, (tuple, list)):
+        return (type(obj).__name__, tuple(_frozen(v) for v in obj))
+    if isinstance(obj, dict):
+        return ("dict", tuple(sorted((str(k), _frozen(v)) for k, v in obj.items())))
+    raise TypeError(f"study_for: cannot key a {type(obj).__name__}")
+
+
 def study_key(mech, inputs, options, chunk) -> tuple:
     """The key of `study_for` (see the module doc): a hashable tuple."""
     s = mech.structure
-    tree, arrays = archive.pack(inputs)
     return (s.key, s.name, s.file, s.description, _numbers(mech.parameters), _numbers(mech.guess),
-            json.dumps(tree, sort_keys=True), tuple((k, _numbers(v)) for k, v in sorted(arrays.items())),
-            options, chunk, jax.device_count(), jax.process_count(), jax.default_backend(),
+            _frozen(inputs), options, chunk, jax.device_count(), jax.process_count(), jax.default_backend(),
             bool(jax.config.read("jax_enable_x64")))
 
 
-def study_for(mech, inputs, *, options=None, chunk=None):
-    """The `Study` of `mech` and `inputs` (`options` default `NewtonOptions()`, `chunk` designs per
-    batch as `Study`'s), built at the first call with this key (see the module doc) and reused by
-    the later ones: a second identical call compiles nothing."""
-    from ..solvers.options import NewtonOptions
-    from .tolerance import Study
-
-    options = options or NewtonOptions()
+def kept(mech, inputs, options, chunk, make):
+    """The Study kept under `study_key(mech, inputs, options, chunk)`, else `make(mech, inputs)` kept
+    (with a copy of a NumPy parameter vector or guess, not the caller's array, which may change
+    later). `tolerance.study_for` is the public entry (this module imports no Study: the
+    package's modules import it)."""
     key = study_key(mech, inputs, options, chunk)
     with _lock:
         study = _kept.get(key)
@@ -71,7 +84,7 @@ def study_for(mech, inputs, *, options=None, chunk=None):
     if isinstance(p, np.ndarray) or isinstance(g, np.ndarray):
         mech = mech.replace(parameters=np.array(p) if isinstance(p, np.ndarray) else p,
                             guess=np.array(g) if isinstance(g, np.ndarray) else g)
-    study = Study(mech, inputs, options=options, chunk=chunk)
+    study = make(mech, inputs)
     with _lock:
         _kept[key] = study
         while len(_kept) > STUDIES:

@@ -37,7 +37,7 @@ from .inputs import StudyInputs
 from .responses import unit_names
 from .robust import RobustMap, robust_evaluator
 from .sobol import SobolAccumulator, SobolIndices, bootstrap_counts
-from .tolerance import Study
+from .tolerance import Study, study_for
 
 
 class SampleReport(NamedTuple):
@@ -184,7 +184,6 @@ def _study(mech, inputs, study, chunk, options):
     """`study`, else the `Study` of `mech` and `inputs` (default its `[study]` table) kept for reuse
     (`reuse.study_for`: a second identical call compiles nothing)."""
     from .inputs import read_study
-    from .reuse import study_for
 
     if study is not None:
         return study

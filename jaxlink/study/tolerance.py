@@ -46,6 +46,7 @@ import numpy as np
 
 from ..analysis.feasibility import MARGIN_SLACK
 from ..solvers.options import NewtonOptions
+from . import reuse
 from .distributions import deviations
 from .inputs import StudyInputs
 from .moments import Moments
@@ -511,6 +512,16 @@ def _bonferroni(m: int) -> float:
     return float(norm.isf(0.005 / max(m, 1)))
 
 
+def study_for(mech, inputs: StudyInputs, *, options: NewtonOptions | None = None, chunk: int | None = None) -> Study:
+    """The `Study` of `mech` and `inputs` (`options` default `NewtonOptions()`, `chunk` designs per
+    batch as `Study`'s), built at the first call with its key (`reuse.study_key`: the mechanism's
+    structure, labels and numbers, every input, the options, the chunk, the devices and x64 mode)
+    and reused by the later ones: a second identical call compiles nothing (`reuse.py`)."""
+    options = options or NewtonOptions()
+    return reuse.kept(mech, inputs, options, chunk,
+                      lambda m, i: Study(m, i, options=options, chunk=chunk))
+
+
 def tolerance(mech, inputs: StudyInputs | None = None, *, samples: int | None = None, chunk=None,
               options: NewtonOptions = NewtonOptions(), progress=None, study: Study | None = None,
               worst: bool = True, checkpoint=None, second_order: bool = False) -> ToleranceReport:
@@ -537,9 +548,7 @@ def tolerance(mech, inputs: StudyInputs | None = None, *, samples: int | None = 
 
     timings = {}
     t0 = time.perf_counter()
-    if study is None:  # kept for the next identical call (`reuse.study_for`)
-        from .reuse import study_for
-
+    if study is None:  # kept for the next identical call (`study_for`)
         inputs = read_study(mech) if inputs is None else inputs
         study = study_for(mech, inputs, options=options, chunk=chunk)
     inputs = study.inputs
