@@ -316,13 +316,141 @@ def plot_band(path, mech, rep: ToleranceReport, *, k: float = 3.0, ellipses: int
     plt.close(fig)
 
 
+def _pyplot():
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+def tornado_rows(mech, rep: ToleranceReport) -> list:
+    """The tornado's panels: per scalar response `(title, unit, low (T,), high (T,))`, the first-order
+    change of the response with each parameter alone at −t and +t (J_j · ∓t_j, t_j its half-width);
+    per studied point `(title, unit, 0, c (T,))`, each parameter's share t_j ‖∂P/∂x_j‖ of the linear
+    bound of the path deviation at the input where that bound is largest."""
+    f = rep.first_order
+    t = np.asarray(f.half_width, float)
+    out = []
+    for i, (name, unit, k) in enumerate(rep.labels):
+        if k is None:
+            out.append((name, unit, -np.asarray(f.jacobian[i]) * t, np.asarray(f.jacobian[i]) * t))
+    lu = unit_names(mech)[0]
+    for p in rep.inputs.points:
+        rx = [i for i, (nm, _u, k) in enumerate(rep.labels) if nm == f"{p}.x" and k is not None]
+        ry = [i for i, (nm, _u, k) in enumerate(rep.labels) if nm == f"{p}.y" and k is not None]
+        if not rx or len(rx) != len(ry):
+            continue
+        c = t[None, :] * np.hypot(f.jacobian[rx], f.jacobian[ry])  # (N, T)
+        k = int(np.argmax(c.sum(axis=1)))
+        where = rep.input_values[rep.labels[rx[k]][2]]
+        out.append((f"deviation({p}) at {where:.4g} {unit_names(mech)[1]}", lu, np.zeros(len(t)), c[k]))
+    return out
+
+
+def plot_tornado(path, mech, rep: ToleranceReport) -> bool:
+    """tornado.png: one panel per scalar response and studied point (`tornado_rows`), the
+    parameters sorted by their effect, the largest on top; False (nothing drawn) without rows."""
+    rows = tornado_rows(mech, rep)
+    if not rows or not len(rep.parameters):
+        return False
+    plt = _pyplot()
+    T = len(rep.parameters)
+    cols = min(2, len(rows))
+    nr = -(-len(rows) // cols)
+    fig, axes = plt.subplots(nr, cols, figsize=(5.6 * cols, 0.9 + 0.32 * T * nr + 0.6 * nr), squeeze=False)
+    for ax, (title, unit, lo, hi) in zip(axes.ravel(), rows):
+        order = np.argsort(np.maximum(np.abs(lo), np.abs(hi)))  # the largest last: on top
+        y = np.arange(T)
+        if np.any(lo != 0):
+            ax.barh(y, lo[order], color="tab:blue", label="parameter at −t")
+            ax.barh(y, hi[order], color="tab:orange", label="parameter at +t")
+        else:  # a point: each parameter's share of the deviation bound
+            ax.barh(y, hi[order], color="0.5")
+        ax.set_yticks(y)
+        ax.set_yticklabels([rep.parameters[j] for j in order], fontsize=8)
+        ax.axvline(0, color="k", lw=0.8)
+        ax.set_xlabel(f"change ({unit})" if np.any(lo != 0) else f"share of the deviation bound ({unit})")
+        ax.set_title(title, fontsize=9)
+        ax.grid(True, axis="x", lw=0.3)
+    for ax in axes.ravel()[len(rows):]:
+        ax.axis("off")
+    h, lab = axes.ravel()[0].get_legend_handles_labels()
+    if any(np.any(r[2] != 0) for r in rows):
+        fig.legend(h, lab, loc="lower center", ncol=2, fontsize=8)
+    fig.suptitle(f"{mech.name}: first-order effect of each tolerance (±t, one at a time)", fontsize=10)
+    fig.tight_layout(rect=(0, 0.04, 1, 0.96))
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+    return True
+
+
+def plot_histograms(path, mech, rep: ToleranceReport, *, bins: int = 64) -> bool:
+    """histograms.png: the Monte Carlo distribution of every scalar response (its streamed
+    histogram, `MonteCarlo.histogram`, merged into `bins` bars), the nominal, the first-order
+    normal density (σ_RSS), and the specification limits of `[study] limits` with the percent out
+    of spec and Cpk; False (nothing drawn) without Monte Carlo or scalar responses."""
+    mc = rep.monte_carlo
+    if mc is None or mc.histogram is None or not mc.feasible:
+        return False
+    scalar = [i for i, (_n, _u, k) in enumerate(rep.labels) if k is None]
+    hist, width = np.asarray(mc.histogram), np.asarray(mc.histogram_width, float)
+    plt = _pyplot()
+    cols = min(3, len(scalar))
+    nr = -(-len(scalar) // cols)
+    fig, axes = plt.subplots(nr, cols, figsize=(4.8 * cols, 3.5 * nr), squeeze=False)
+    limits = {idx: (lo, hi, q) for q, (_nm, lo, hi, idx) in enumerate(mc.limits)}
+    for s, (ax, i) in enumerate(zip(axes.ravel(), scalar)):
+        name, unit, _k = rep.labels[i]
+        inner = hist[s, 1:-1]
+        group = max(1, len(inner) // bins)
+        counts = inner[: len(inner) // group * group].reshape(-1, group).sum(axis=1)
+        edges = rep.nominal[i] + np.linspace(-width[s], width[s], len(counts) + 1)
+        dens = counts / max(mc.feasible, 1) / np.diff(edges)
+        ax.stairs(dens, edges, fill=True, alpha=0.6, label=f"Monte Carlo ({mc.feasible} feasible)")
+        sig = float(rep.first_order.sigma_rss[i])
+        if sig > 0:
+            xs = np.linspace(edges[0], edges[-1], 400)
+            ax.plot(xs, np.exp(-0.5 * ((xs - rep.nominal[i]) / sig) ** 2) / (sig * math.sqrt(2 * math.pi)),
+                    color="k", lw=1, label="first order (normal, σ_RSS)")
+        ax.axvline(rep.nominal[i], color="k", ls=":", lw=1, label="nominal")
+        note = ""
+        if i in limits:
+            lo, hi, q = limits[i]
+            for v in (lo, hi):
+                if np.isfinite(v):
+                    ax.axvline(v, color="tab:red", lw=1.5)
+            note = f"\n{mc.percent_out[q]:.3g} % out of spec, Cpk {mc.cpk[q]:.3g}"
+        outside = int(hist[s, 0] + hist[s, -1])
+        if outside:
+            note += f"\n{outside} samples beyond the plotted range"
+        ax.set_title(name + note, fontsize=9)
+        ax.set_xlabel(unit)
+        ax.set_ylabel(f"density (1/{unit})")
+    for ax in axes.ravel()[len(scalar):]:
+        ax.axis("off")
+    h, lab = axes.ravel()[0].get_legend_handles_labels()
+    fig.legend(h, lab, loc="lower center", ncol=3, fontsize=8)
+    fig.suptitle(f"{mech.name}: Monte Carlo of {mc.samples} samples (red: the specification limits)", fontsize=10)
+    fig.tight_layout(rect=(0, 0.05, 1, 0.95))
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+    return True
+
+
 def draw_plots(d: pathlib.Path, mech, rep: ToleranceReport) -> list:
-    """The study's plots into folder `d` (tolerance.png where there are points); their paths.
-    `mech` needs only its names (`study_files.MechanismNames`)."""
+    """The study's plots into folder `d`: tolerance.png (where there are points), tornado.png
+    (`plot_tornado`), histograms.png (with Monte Carlo and scalar responses, `plot_histograms`);
+    their paths. `mech` needs only its names (`study_files.MechanismNames`)."""
     files = []
     if rep.inputs.points:
         files.append(d / "tolerance.png")
         plot_band(files[-1], mech, rep)
+    if plot_tornado(d / "tornado.png", mech, rep):
+        files.append(d / "tornado.png")
+    if plot_histograms(d / "histograms.png", mech, rep):
+        files.append(d / "histograms.png")
     return files
 
 

@@ -89,7 +89,12 @@ class MonteCarlo(NamedTuple):
     `limits` ((output, low, high, response index) per limited response), `out_of_spec` (L,) the
     feasible samples outside [low, high] (counted exactly, sample by sample), `percent_out` (L,)
     100 × that / `feasible`, `cp` (L,) (U − L) / (6 s) (NaN for a one-sided limit), `cpk` (L,)
-    min(U − μ, μ − L) / (3 s) — μ the samples' mean (nominal + `mean_shift`), s their `std`."""
+    min(U − μ, μ − L) / (3 s) — μ the samples' mean (nominal + `mean_shift`), s their `std`.
+
+    `histogram` (S, bins + 2) the feasible samples' deviations of the S scalar responses (the
+    metrics, in the order of the labels) counted in `bins` equal bins over [−w, w] (w =
+    `histogram_width` (S,)), with the counts below and above first and last (`moments.Moments`:
+    the streamed histogram the quantiles come from); None when there is no scalar response."""
 
     samples: int
     feasible: int
@@ -109,6 +114,8 @@ class MonteCarlo(NamedTuple):
     percent_out: np.ndarray = np.zeros(0)
     cp: np.ndarray = np.zeros(0)
     cpk: np.ndarray = np.zeros(0)
+    histogram: np.ndarray | None = None
+    histogram_width: np.ndarray | None = None
 
 
 class ToleranceReport(NamedTuple):
@@ -379,14 +386,16 @@ class Study:
                 progress(take)
         M = len(nominal)
         cap = capability(limits, nominal, mom.mean, mom.std, out_of_spec, mom.n)
+        scalar = [i for i, (_nm, _u, k) in enumerate(r.labels) if k is None]
+        hist = (mom.hist[scalar].copy(), mom.width[scalar].copy()) if scalar else (None, None)
         if mom.n == 0:
             z = np.zeros(M)
-            return MonteCarlo(n, 0, infeasible, z, z, z, z, z, z, z, dev_max, dev_sum, np.ones(M, bool), *cap)
+            return MonteCarlo(n, 0, infeasible, z, z, z, z, z, z, z, dev_max, dev_sum, np.ones(M, bool), *cap, *hist)
         std, se, me = mom.std, mom.std_error, mom.mean_error
         agree = agreement(mom.mean, std, me, se, mom.n, nominal, first, second)
         return MonteCarlo(n, feasible, infeasible, mom.mean, std, se, me, mom.quantile(QUANTILES[0]),
                           mom.quantile(QUANTILES[1]), np.maximum(np.abs(mom.low), np.abs(mom.high)),
-                          dev_max, dev_sum / max(feasible, 1), agree, *cap)
+                          dev_max, dev_sum / max(feasible, 1), agree, *cap, *hist)
 
 
 def agreement(mean_shift, std, mean_error, std_error, n: int, nominal, first: FirstOrder,
