@@ -674,7 +674,7 @@ def test_the_command_line_sample_grid_sensitivity(tmp_path, capsys):
     capsys.readouterr()
 
 
-def test_a_killed_study_resumes_to_the_same_result(setup, tmp_path):
+def test_a_killed_study_resumes_to_the_same_result(setup, tmp_path, monkeypatch):
     """Monte Carlo, sample and sensitivity over two batches each, interrupted after the first
     (the checkpoint written batch by batch), resumed: every array equals the uninterrupted run's
     bit for bit. A resume whose key differs (another seed, another sample count, other parameters)
@@ -711,6 +711,21 @@ def test_a_killed_study_resumes_to_the_same_result(setup, tmp_path):
         assert np.array_equal(getattr(ref, f), getattr(res, f)), f
     with pytest.raises(jl.MechanismError, match="sampler"):
         st.sample(mech, study=s2, checkpoint=ck("s", sin._replace(sampler="halton"), "sample", resume=True))
+    # incremental refinement (the command line's key of a sequence's sample leaves the count out): the
+    # finished sample of 4103 designs extended to 8197 reuses its whole first chunk, evaluates the
+    # rest (its partial chunk again), and equals the sample of 8197 made at once
+    from jaxlink.study import sampling as _sampling
+
+    st.sample(mech, study=s2, checkpoint=ck("e", sin._replace(samples=0), "sample"))
+    big = sin._replace(samples=2 * 4096 + 5)
+    s4 = study.moved(inputs=big)
+    evaluated, call = [], _sampling._Evaluator.__call__
+    monkeypatch.setattr(_sampling._Evaluator, "__call__", lambda self, x: evaluated.append(len(x)) or call(self, x))
+    res = st.sample(mech, study=s4, checkpoint=ck("e", big._replace(samples=0), "sample", resume=True))
+    assert evaluated == [4096, 5]
+    ref = st.sample(mech, study=s4)
+    for f in ("values", "feasible", "responses", "nominal"):
+        assert np.array_equal(getattr(ref, f), getattr(res, f)), f
 
     sin = st.read_study(mech, method="sensitivity", samples=700, seed=4, ranges=RANGES, bootstrap=10)
     s3 = study.moved(inputs=sin)

@@ -138,7 +138,12 @@ def _checkpoint(args, mech, study, what: str):
 
     if not args.out:
         return None
-    key = resume_key(mech, study.inputs, chunk=study.chunk, what=what)
+    inputs = study.inputs
+    if what == "sample" and inputs.sampler != "lhs":
+        # a sequence's first n points are the same whatever n: a resumed sample may ask for more
+        # (incremental refinement) or fewer samples; its chunks done are reused where they are whole
+        inputs = inputs._replace(samples=0)
+    key = resume_key(mech, inputs, chunk=study.chunk, what=what)
     return Checkpoint(pathlib.Path(args.out) / "checkpoint", key, resume=args.resume)
 
 

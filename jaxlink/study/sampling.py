@@ -205,7 +205,9 @@ def sample(mech, inputs: StudyInputs | None = None, *, samples: int | None = Non
     **Arguments:** as `tolerance` (`inputs`, `samples`, `chunk`, `options`, `progress` called with
     the designs done after each batch, `study` a compiled `Study` whose parameters are the ranges'),
     `checkpoint` (a `checkpoint.Checkpoint`: every batch's rows written as they come, a saved
-    study resumed).
+    study resumed; a sample of a sequence — Sobol', Halton, random — resumed with more samples
+    reuses its whole chunks done and evaluates the rest: incremental refinement, the same designs
+    and rows as a study run at once with that many samples).
 
     **Returns:** a `SampleReport` (see the module doc for what is done with infeasible designs).
     """
@@ -234,9 +236,13 @@ def sample(mech, inputs: StudyInputs | None = None, *, samples: int | None = Non
     xs, oks, vs, rs = [], [], [], []
     scalar = np.asarray([k is None for (_, _, k) in ev.labels], bool)
     for c, x in enumerate(blocks):
+        z = None
         if c < done:
             assert checkpoint is not None
             z = checkpoint.load_chunk(c)
+            if len(z["x"]) != len(x):  # a sample resumed with more or fewer samples: this chunk's rows differ
+                z = None
+        if z is not None:
             x, ok, v, rv = z["x"], z["feasible"], z["responses"], z["robust"]
         else:
             v, ok = ev(x)
