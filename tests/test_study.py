@@ -655,6 +655,13 @@ def test_the_command_line_sample_grid_sensitivity(tmp_path, capsys):
     assert main(["study", str(src), "--method", "sample", "--samples", "64", "--out", str(out), "--resume"]
                 + common[:-1] + ["4"]) == 2
     assert "belongs to another study (different [study] seed)" in capsys.readouterr().err
+    # incremental refinement: resumed with --samples 100, the sample keeps its first 64 designs' rows;
+    # --replot draws its scatter matrix
+    assert main(["study", str(src), "--method", "sample", "--samples", "100", "--out", str(out), "--resume"]
+                + common) == 0
+    more = (out / "study.csv").read_text().splitlines()
+    assert len(more) == 101 and more[:65] == before.splitlines()
+    assert main(["study", str(src), "--replot", str(out)]) == 0 and (out / "scatter.png").is_file()
     out = tmp_path / "sensitivity"
     assert main(["study", str(src), "--method", "sensitivity", "--samples", "32", "--bootstrap", "20",
                  "--out", str(out)] + common) == 0

@@ -107,14 +107,17 @@ def _two_ranges(rep: SampleReport) -> bool:
 
 
 def draw_sample_plots(d: pathlib.Path, mech, rep: SampleReport) -> list:
-    """grid.png (a grid over two ranges) and robust.png (with the robust-design map), or the plot of
-    a vector, list or centered study (`parameter_studies.py`: vector.png, list.png, centered.png)
-    into `d`; their paths. `mech` needs only its names (`study_files.MechanismNames`)."""
+    """grid.png (a grid over two ranges) and robust.png (with the robust-design map), scatter.png (a
+    `sample`: `plot_scatter`), or the plot of a vector, list or centered study
+    (`parameter_studies.py`: vector.png, list.png, centered.png) into `d`;
+    their paths. `mech` needs only its names (`study_files.MechanismNames`)."""
     from .parameter_studies import plot_parameter_study
 
     files = []
     if rep.inputs.method in GIVEN and plot_parameter_study(d / f"{rep.inputs.method}.png", mech, rep):
         files.append(d / f"{rep.inputs.method}.png")
+    if rep.grid_shape is None and rep.inputs.method not in GIVEN and plot_scatter(d / "scatter.png", mech, rep):
+        files.append(d / "scatter.png")
     if _two_ranges(rep) and rep.labels:
         files.append(d / "grid.png")
         plot_grid(files[-1], mech, rep)
@@ -331,6 +334,43 @@ def plot_curves(path, mech, rep: SensitivityReport) -> None:
     fig.tight_layout()
     fig.savefig(path, dpi=120)
     plt.close(fig)
+
+
+def plot_scatter(path, mech, rep: SampleReport, *, most: int = 20000) -> bool:
+    """scatter.png of a `sample` study: every scalar response (rows) against every studied
+    parameter (columns), one dot per feasible design, the file's design marked; the designs that
+    do not assemble as red crosses on the bottom edge of each panel (they have no response). At
+    most `most` designs are drawn (the first ones: a sequence's first points cover the space).
+    False (nothing drawn) without designs or scalar responses."""
+    n, T = rep.values.shape
+    S = len(rep.labels)
+    if not n or not S or not T:
+        return False
+    plt = _plt()
+    k = min(n, most)
+    x, ok, y = rep.values[:k], np.asarray(rep.feasible[:k], bool), rep.responses[:k]
+    fig, axes = plt.subplots(S, T, figsize=(2.6 * T + 0.8, 2.2 * S + 0.8), squeeze=False, sharex="col", sharey="row")
+    ms = 4.0 if k <= 500 else 1.0
+    for i, (name, unit) in enumerate(rep.labels):
+        for j in range(T):
+            ax = axes[i, j]
+            ax.plot(x[ok, j], y[ok, i], ".", ms=ms, alpha=0.5, color="tab:blue", rasterized=True)
+            ax.plot(rep.nominal_x[j], rep.nominal[i], "k*", ms=8)
+            if (~ok).any():
+                ax.plot(x[~ok, j], np.zeros(int((~ok).sum())), "x", ms=3, color="tab:red",
+                        transform=ax.get_xaxis_transform(), clip_on=False)
+            if i == S - 1:
+                ax.set_xlabel(f"{rep.parameters[j]} ({rep.units[j]})", fontsize=8)
+            if j == 0:
+                ax.set_ylabel(f"{name}\n({unit})", fontsize=8)
+            ax.tick_params(labelsize=7)
+    bad = int((~ok).sum())
+    fig.suptitle(f"{mech.name}: {k} designs{' (the first ' + str(k) + ' of ' + str(n) + ')' if k < n else ''}, "
+                 f"{bad} do not assemble (red crosses); ★ the file's design", fontsize=10)
+    fig.tight_layout(rect=(0, 0, 1, 0.96))
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return True
 
 
 def plot_grid(path, mech, rep: SampleReport, *, labels=None, values=None, title: str | None = None) -> None:
