@@ -18,12 +18,14 @@ def handles(inputs) -> bool:
         inputs.precision is not None and inputs.method in ("tolerance", "sensitivity"))
 
 
-def _bar(show: bool, total: int, desc: str):
-    if not show or total <= 0:
+def _bar(show: bool, total: int | None, desc: str, unit: str = "design"):
+    """A progress bar on standard error (None when not shown); `total` None: of unknown length
+    (the stopping rule's rounds: the designs or samples done so far, and their rate)."""
+    if not show or (total is not None and total <= 0):
         return None
     from tqdm import tqdm
 
-    return tqdm(total=total, desc=desc, unit="design", leave=False, file=sys.stderr)
+    return tqdm(total=total, desc=desc, unit=unit, leave=False, file=sys.stderr)
 
 
 def run(args, mech, study, show: bool, t0: float, checkpoint=None) -> int:
@@ -34,7 +36,10 @@ def run(args, mech, study, show: bool, t0: float, checkpoint=None) -> int:
     D = len(inputs.factors)
     total = {"morris": inputs.samples * (D + 1), "regression": inputs.samples, "dgsm": inputs.samples,
              "sensitivity": 0, "tolerance": 0}.get(inputs.method, len(inputs.designs))
-    bar = _bar(show, total, inputs.method)
+    rule = inputs.method in ("sensitivity", "tolerance")  # the precision stopping rule: rounds until it holds
+    bar = (_bar(show, None, f"{inputs.method} (rounds to precision {inputs.precision:g})",
+                "sample" if inputs.method == "tolerance" else "design")
+           if rule else _bar(show, total, inputs.method))
     progress = None if bar is None else bar.update
     conv = None
     rep: Any
@@ -58,11 +63,11 @@ def run(args, mech, study, show: bool, t0: float, checkpoint=None) -> int:
         elif inputs.method == "sensitivity":
             from ..study.convergence import converged_sensitivity
 
-            rep, conv = converged_sensitivity(mech, study=study, checkpoint=checkpoint)
+            rep, conv = converged_sensitivity(mech, study=study, progress=progress, checkpoint=checkpoint)
         else:
             from ..study.convergence import converged_tolerance
 
-            rep, conv = converged_tolerance(mech, study=study, checkpoint=checkpoint)
+            rep, conv = converged_tolerance(mech, study=study, progress=progress, checkpoint=checkpoint)
     finally:
         if bar is not None:
             bar.close()
