@@ -173,6 +173,37 @@ def test_a_problem_s_evaluator_is_made_once_and_changes_no_answer():
     assert a.evaluations == 256 and a.value is not None
 
 
+def test_the_file_configuration_in_closed_form_is_the_path_solve_s():
+    """The file's configuration at its start, taken from the dyads' closed form nearest to the
+    guesses (a set-up of two small programs instead of the path solve's), is the path solve's to
+    rounding (≤ 4 ulp of π), on the same branches; away from the start, or for a design that does
+    not assemble there, the path solve decides (and refuses the latter, naming the result)."""
+    from jaxlink.optimize import start
+    from jaxlink.solvers.assemble import solve
+
+    rng = np.random.default_rng(3)
+    for name in ("four-bar-sketch", "sewing-feed-opt"):
+        m0 = load(name)
+        for k in range(3):
+            scale = 1 + 0.01 * k * rng.uniform(-1, 1, len(m0.parameters))
+            m = m0.replace(parameters=np.asarray(m0.parameters) * scale)
+            phi0 = float(m.input_start)
+            fast = start._closed_form_configuration(m, phi0)
+            path = np.asarray(solve(m, np.asarray([phi0]), points=False).q)[0]
+            assert fast is not None and np.max(np.abs(fast - path)) <= 4 * np.spacing(np.pi), name
+            assert np.array_equal(start.circuit_signs(m, fast, phi0, all_circuits=False),
+                                  start.circuit_signs(m, path, phi0, all_circuits=False))
+            assert np.array_equal(start.file_configuration(m, phi0), fast)
+    # away from its start the path solve decides
+    m = load("four-bar-sketch")
+    assert start._closed_form_configuration(m, float(m.input_start) + 0.1) is None
+    # a rocker that cannot reach at the start: refused by the path solve, naming the result
+    bad = m.replace(parameters=m.with_parameters(rocker=1.0))
+    assert start._closed_form_configuration(bad, float(bad.input_start)) is None
+    with pytest.raises(MechanismError, match="cannot be assembled at the first input"):
+        start.file_configuration(bad, float(bad.input_start))
+
+
 @pytest.mark.parametrize("chunk", [-4, 0, 2.5, True, "64", 2_000_000])
 def test_a_chunk_outside_its_domain_is_refused_naming_the_key(chunk):
     """A chunk ≤ 0 once made `run` loop for ever (every batch empty); any chunk outside 1 … 1e6
