@@ -194,8 +194,38 @@ def test_the_file_configuration_in_closed_form_is_the_path_solve_s():
             assert np.array_equal(start.circuit_signs(m, fast, phi0, all_circuits=False),
                                   start.circuit_signs(m, path, phi0, all_circuits=False))
             assert np.array_equal(start.file_configuration(m, phi0), fast)
-    # away from its start the path solve decides
+    # a differential test: a study's responses (their branches σ, and the turn solved from the
+    # configuration: every angle, point and result code) are the same bit for bit with the
+    # closed-form configuration and with the path solve's; a configuration on the other branch
+    # (a wrong one) changes them
+    from jaxlink import study as st
+    from jaxlink.solvers import dyads as _dyads
+    from jaxlink.study.responses import Responses
+
     m = load("four-bar-sketch")
+    inp = st.read_study(m, {"positions": 36, "samples": 0, "tolerances": {"crank": 0.05}})
+
+    def numbers():
+        r = Responses(m, inp)
+        sol = solve(m, r.phis, np.asarray(m.parameters), r.q_file)
+        return [r.sigma, *(np.asarray(x) for x in (sol.q, sol.points, sol.result))]
+
+    fast = numbers()
+    real = start._closed_form_configuration
+
+    def mirrored(mech, phi0):
+        g, p, dyads = np.asarray(mech.guess), mech.parameters, _dyads.classify(mech)
+        sig = np.asarray(_dyads.solve_nearest(mech, dyads, g, phi0, p)[3])
+        return np.asarray(_dyads.solve(mech, dyads, -sig, g, phi0, p)[0])
+
+    for variant, same in ((lambda mech, phi0: None, True), (mirrored, False)):
+        start._closed_form_configuration = variant
+        try:
+            other = numbers()
+        finally:
+            start._closed_form_configuration = real
+        assert all(np.array_equal(a, b) for a, b in zip(fast, other)) == same
+    # away from its start the path solve decides
     assert start._closed_form_configuration(m, float(m.input_start) + 0.1) is None
     # a rocker that cannot reach at the start: refused by the path solve, naming the result
     bad = m.replace(parameters=m.with_parameters(rocker=1.0))
