@@ -372,6 +372,30 @@ def test_vector_list_centered_studies(setup, tmp_path, capsys):
             st.read_study(jl.loads(base + bad))
 
 
+def _killed_and_resumed_on_the_command_line(src, tmp_path, monkeypatch, capsys, after_kill=None):
+    """`jaxlink study SRC --out DIR`: a run into cli-ref/; a run into cli/ interrupted (Ctrl-C) just
+    after its first checkpoint is saved (exit status 130; `after_kill()` must then hold); the same
+    command with `--resume` prints what the uninterrupted run printed (but its first line, the
+    timing)."""
+    from jaxlink.cli import main
+    from jaxlink.study.checkpoint import Checkpoint
+
+    cmd = ["study", str(src), "--no-plot", "--progress", "off", "--out"]
+    assert main(cmd + [str(tmp_path / "cli-ref")]) == 0
+    ref_out = capsys.readouterr().out
+    save = Checkpoint.save
+
+    def killed(self, done, state):
+        save(self, done, state)
+        raise KeyboardInterrupt
+    monkeypatch.setattr(Checkpoint, "save", killed)
+    assert main(cmd + [str(tmp_path / "cli")]) == 130
+    monkeypatch.undo()
+    assert after_kill is None or after_kill()
+    assert main(cmd + [str(tmp_path / "cli"), "--resume"]) == 0
+    assert ref_out.splitlines()[1:] == capsys.readouterr().out.replace("/cli/", "/cli-ref/").splitlines()[1:]
+
+
 def _written(tmp_path, name, mech, rep):
     """(indices.csv bytes, the summary, study.json without the timings, study.npz's arrays) of `rep`."""
     from jaxlink.report import screening
@@ -443,21 +467,9 @@ def test_morris_regression_dgsm_killed_and_resumed_give_the_same_bytes(setup, tm
     src = tmp_path / "slider.toml"
     src.write_text(FILE + 'seed = 2\nmethod = "morris"\nsamples = 400\n[study.ranges]\ncrank = [24.0, 26.0]\n'
                    'rod = [36.5, 39.0]\n')  # 1024 // 3 = 341 trajectories a batch: two batches
-    cmd = ["study", str(src), "--no-plot", "--progress", "off", "--out"]
-    assert main(cmd + [str(tmp_path / "cli-ref")]) == 0
-    ref_out = capsys.readouterr().out
-    save = Checkpoint.save
-
-    def killed(self, done, state):
-        save(self, done, state)
-        raise KeyboardInterrupt
-    monkeypatch.setattr(Checkpoint, "save", killed)
-    assert main(cmd + [str(tmp_path / "cli")]) == 130
-    monkeypatch.undo()
-    assert json.loads((tmp_path / "cli" / "checkpoint" / "state.json").read_text())["done"] == 1
-    assert main(cmd + [str(tmp_path / "cli"), "--resume"]) == 0
-    # the summary printed (its first line: the timing) and the files written
-    assert ref_out.splitlines()[1:] == capsys.readouterr().out.replace("/cli/", "/cli-ref/").splitlines()[1:]
+    _killed_and_resumed_on_the_command_line(
+        src, tmp_path, monkeypatch, capsys,
+        after_kill=lambda: json.loads((tmp_path / "cli" / "checkpoint" / "state.json").read_text())["done"] == 1)
 
     def manifest(d):
         data = json.loads((tmp_path / d / "study.json").read_text())
@@ -465,7 +477,8 @@ def test_morris_regression_dgsm_killed_and_resumed_give_the_same_bytes(setup, tm
         return data
     assert (tmp_path / "cli-ref" / "indices.csv").read_bytes() == (tmp_path / "cli" / "indices.csv").read_bytes()
     assert manifest("cli-ref") == manifest("cli")
-    assert main(cmd + [str(tmp_path / "cli"), "--resume", "--seed", "5"]) == 2
+    assert main(["study", str(src), "--no-plot", "--progress", "off", "--out", str(tmp_path / "cli"), "--resume",
+                 "--seed", "5"]) == 2
     assert "belongs to another study (different [study] seed)" in capsys.readouterr().err
 
 
@@ -535,21 +548,7 @@ def test_vector_study_and_the_stopping_rule_killed_and_resumed(setup, tmp_path, 
         st.converged_sensitivity(mech, study=sin, checkpoint=ck("sobol", sin.inputs._replace(precision=1e-3),
                                                                 resume=True))
 
-    from jaxlink.cli import main
-
     src = tmp_path / "slider.toml"
     src.write_text(FILE + 'method = "vector"\nsteps = 1100\n[study.final]\ncrank = 25.0\nrod = 34.0\n')
-    cmd = ["study", str(src), "--no-plot", "--progress", "off", "--out"]
-    assert main(cmd + [str(tmp_path / "cli-ref")]) == 0
-    ref_out = capsys.readouterr().out
-    save = Checkpoint.save
-
-    def killed(self, done, state):
-        save(self, done, state)
-        raise KeyboardInterrupt
-    monkeypatch.setattr(Checkpoint, "save", killed)
-    assert main(cmd + [str(tmp_path / "cli")]) == 130
-    monkeypatch.undo()
-    assert main(cmd + [str(tmp_path / "cli"), "--resume"]) == 0
-    assert ref_out.splitlines()[1:] == capsys.readouterr().out.replace("/cli/", "/cli-ref/").splitlines()[1:]
+    _killed_and_resumed_on_the_command_line(src, tmp_path, monkeypatch, capsys)
     assert (tmp_path / "cli-ref" / "study.csv").read_bytes() == (tmp_path / "cli" / "study.csv").read_bytes()

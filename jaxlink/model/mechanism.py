@@ -243,11 +243,13 @@ class Structure:
         return jnp.stack(rows)
 
     def length_scale(self, p):
-        """A length that sets the residual tolerance: the largest |length parameter| (m)."""
+        """A length that sets the residual tolerance: the largest |length parameter| (m). In NumPy
+        for a NumPy `p` (no JAX operation dispatched outside a program; the same exact value)."""
         idx = [i for i, k in enumerate(self.parameter_kinds) if k == "length"]
+        xp = np if isinstance(p, np.ndarray) else jnp
         if not idx:
-            return jnp.asarray(1.0, dtype=jnp.result_type(p))
-        return jnp.maximum(jnp.max(jnp.abs(p[jnp.asarray(idx)])), jnp.finfo(jnp.result_type(p)).tiny)
+            return xp.asarray(1.0, dtype=xp.result_type(p))
+        return xp.maximum(xp.max(xp.abs(p[xp.asarray(idx)])), xp.finfo(xp.result_type(p)).tiny)
 
     def mobility_from_loops(self) -> int:
         """Coordinates (unknowns + input) minus independent scalar loop equations."""

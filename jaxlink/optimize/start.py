@@ -64,7 +64,7 @@ def file_configuration(mech, phi0) -> np.ndarray:
 
         raise MechanismError(
             f"the file's own design cannot be assembled at the first input of the search "
-            f"({RESULTS.messages[int(sol.result[0])]}); the search needs an assemblable design in the "
+            f"({RESULTS.messages[int(result[0])]}); the search needs an assemblable design in the "
             "file to define the assembly branch", file=mech.file, key="parameters")
     return q[0]
 
@@ -82,9 +82,7 @@ def _closed_form_configuration(mech, phi0):
         return None
     q, rn, sine = (np.asarray(x) for x in traced("file_configuration", _nearest_closed_form,
                                                    (mech.replace(guess=g), np.asarray(phi0, p.dtype))))
-    lengths = [i for i, k in enumerate(mech.parameter_kinds) if k == "length"]  # `length_scale`, in numpy
-    scale = max(float(np.abs(p[lengths]).max()), float(np.finfo(p.dtype).tiny)) if lengths else 1.0
-    tol = default_rtol(p.dtype) * scale
+    tol = default_rtol(p.dtype) * float(mech.length_scale(p))
     thr = singular_threshold(NewtonOptions(), p.dtype)
     if np.isfinite(q).all() and float(rn) <= 0.5 * tol and float(sine) >= 2 * thr:
         return q

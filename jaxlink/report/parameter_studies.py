@@ -19,15 +19,6 @@ import numpy as np
 from ..study.sampling import SampleReport
 
 
-def _plt():
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    return plt
-
-
 def centered_offsets(rep: SampleReport) -> tuple[int, list]:
     """(k, rows): the study's steps k and, per parameter, the rows of its designs in the order of the
     offsets −k … −1, 0, 1 … k (row 0, the file's design, at offset 0)."""
@@ -46,7 +37,9 @@ def plot_parameter_study(path, mech, rep: SampleReport) -> bool:
     method = rep.inputs.method
     if method not in ("vector", "list", "centered") or not rep.labels or not len(rep.values):
         return False
-    plt = _plt()
+    from .plot import pyplot
+
+    plt = pyplot()
     S = len(rep.labels)
     cols = min(3, S)
     rows_ = -(-S // cols)

@@ -316,13 +316,20 @@ def plot_band(path, mech, rep: ToleranceReport, *, k: float = 3.0, ellipses: int
     plt.close(fig)
 
 
-def _pyplot():
-    import matplotlib
+def _finish(fig, axes, used: int, path, title: str, legend_cols: int | None) -> None:
+    """The unused panels off, the first panel's legend below the figure (`legend_cols` columns;
+    None: no legend), the title, and the figure written to `path` and closed."""
+    from .plot import pyplot
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    return plt
+    for ax in axes.ravel()[used:]:
+        ax.axis("off")
+    if legend_cols:
+        h, lab = axes.ravel()[0].get_legend_handles_labels()
+        fig.legend(h, lab, loc="lower center", ncol=legend_cols, fontsize=8)
+    fig.suptitle(title, fontsize=10)
+    fig.tight_layout(rect=(0, 0.05 if legend_cols else 0, 1, 0.95))
+    fig.savefig(path, dpi=120)
+    pyplot().close(fig)
 
 
 def tornado_rows(mech, rep: ToleranceReport) -> list:
@@ -355,7 +362,9 @@ def plot_tornado(path, mech, rep: ToleranceReport) -> bool:
     rows = tornado_rows(mech, rep)
     if not rows or not len(rep.parameters):
         return False
-    plt = _pyplot()
+    from .plot import pyplot
+
+    plt = pyplot()
     T = len(rep.parameters)
     cols = min(2, len(rows))
     nr = -(-len(rows) // cols)
@@ -374,15 +383,8 @@ def plot_tornado(path, mech, rep: ToleranceReport) -> bool:
         ax.set_xlabel(f"change ({unit})" if np.any(lo != 0) else f"share of the deviation bound ({unit})")
         ax.set_title(title, fontsize=9)
         ax.grid(True, axis="x", lw=0.3)
-    for ax in axes.ravel()[len(rows):]:
-        ax.axis("off")
-    h, lab = axes.ravel()[0].get_legend_handles_labels()
-    if any(np.any(r[2] != 0) for r in rows):
-        fig.legend(h, lab, loc="lower center", ncol=2, fontsize=8)
-    fig.suptitle(f"{mech.name}: first-order effect of each tolerance (±t, one at a time)", fontsize=10)
-    fig.tight_layout(rect=(0, 0.04, 1, 0.96))
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
+    _finish(fig, axes, len(rows), path, f"{mech.name}: first-order effect of each tolerance (±t, one at a time)",
+            2 if any(np.any(r[2] != 0) for r in rows) else None)
     return True
 
 
@@ -396,17 +398,20 @@ def plot_histograms(path, mech, rep: ToleranceReport, *, bins: int = 64) -> bool
         return False
     scalar = [i for i, (_n, _u, k) in enumerate(rep.labels) if k is None]
     hist, width = np.asarray(mc.histogram), np.asarray(mc.histogram_width, float)
-    plt = _pyplot()
+    from .plot import pyplot
+
+    plt = pyplot()
     cols = min(3, len(scalar))
     nr = -(-len(scalar) // cols)
     fig, axes = plt.subplots(nr, cols, figsize=(4.8 * cols, 3.5 * nr), squeeze=False)
     limits = {idx: (lo, hi, q) for q, (_nm, lo, hi, idx) in enumerate(mc.limits)}
     for s, (ax, i) in enumerate(zip(axes.ravel(), scalar)):
         name, unit, _k = rep.labels[i]
-        inner = hist[s, 1:-1]
+        inner = hist[s, 1:-1]  # equal bins over [−w, w]
         group = max(1, len(inner) // bins)
-        counts = inner[: len(inner) // group * group].reshape(-1, group).sum(axis=1)
-        edges = rep.nominal[i] + np.linspace(-width[s], width[s], len(counts) + 1)
+        kept = len(inner) // group * group  # whole groups (the rest, if any, is left out of the plot)
+        counts = inner[:kept].reshape(-1, group).sum(axis=1)
+        edges = rep.nominal[i] - width[s] + (2 * width[s] / len(inner)) * np.arange(0, kept + 1, group)
         dens = counts / max(mc.feasible, 1) / np.diff(edges)
         ax.stairs(dens, edges, fill=True, alpha=0.6, label=f"Monte Carlo ({mc.feasible} feasible)")
         sig = float(rep.first_order.sigma_rss[i])
@@ -422,20 +427,14 @@ def plot_histograms(path, mech, rep: ToleranceReport, *, bins: int = 64) -> bool
                 if np.isfinite(v):
                     ax.axvline(v, color="tab:red", lw=1.5)
             note = f"\n{mc.percent_out[q]:.3g} % out of spec, Cpk {mc.cpk[q]:.3g}"
-        outside = int(hist[s, 0] + hist[s, -1])
+        outside = int(hist[s, 0] + hist[s, -1] + inner[kept:].sum())
         if outside:
             note += f"\n{outside} samples beyond the plotted range"
         ax.set_title(name + note, fontsize=9)
         ax.set_xlabel(unit)
         ax.set_ylabel(f"density (1/{unit})")
-    for ax in axes.ravel()[len(scalar):]:
-        ax.axis("off")
-    h, lab = axes.ravel()[0].get_legend_handles_labels()
-    fig.legend(h, lab, loc="lower center", ncol=3, fontsize=8)
-    fig.suptitle(f"{mech.name}: Monte Carlo of {mc.samples} samples (red: the specification limits)", fontsize=10)
-    fig.tight_layout(rect=(0, 0.05, 1, 0.95))
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
+    _finish(fig, axes, len(scalar), path,
+            f"{mech.name}: Monte Carlo of {mc.samples} samples (red: the specification limits)", 3)
     return True
 
 
