@@ -25,6 +25,9 @@ def register(sub) -> None:
     p.add_argument("--time-limit", type=float, default=60.0, metavar="S",
                    help="seconds for the search (default 60; at least one round runs)")
     p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+    p.add_argument("--rounds", type=int, default=None, metavar="N",
+                   help="run exactly N rounds (polishing rounds counted) whatever the time: a result that does "
+                        "not depend on the machine's speed (--time-limit then only chooses the compile level)")
     p.add_argument("--max-links", type=int, default=8, help="most links, the frame counted (default 8)")
     p.add_argument("--topologies", default=None, metavar="NAMES",
                    help="comma-separated topology names to search (default: all up to --max-links)")
@@ -38,14 +41,28 @@ def register(sub) -> None:
     p.add_argument("--out", metavar="DIR", default="synthesis",
                    help="write the files into this folder (default synthesis)")
     p.add_argument("--no-plot", action="store_true", help="do not draw the plot")
+    d = p.add_argument_group(
+        "several processes", "spread every round's candidates over N processes (hosts, or several on one host) "
+                             "with jax.distributed: start the same command N times, with --process-id 0 … N-1 and "
+                             "the same --coordinator; process 0 decides the rounds and writes the files, the others "
+                             "print nothing (docs/methods/synthesis.md)")
+    d.add_argument("--coordinator", metavar="HOST:PORT", default=None,
+                   help="address of process 0, which coordinates (a free port on its host)")
+    d.add_argument("--num-processes", type=int, default=None, metavar="N", help="number of processes")
+    d.add_argument("--process-id", type=int, default=None, metavar="I", help="this process's index, 0 … N-1")
     p.set_defaults(func=cmd_synthesize)
 
 
 def cmd_synthesize(args) -> int:
+    from ..errors import MechanismError
+    from .optimize import _distributed
+
+    if args.rounds is not None and args.rounds < 1:
+        raise MechanismError(f"--rounds must be at least 1, got {args.rounds}")
+    printer = _distributed(args)  # before any JAX work
     import jax
 
     jax.config.update("jax_enable_x64", True)
-    from ..errors import MechanismError
     from ..report.synthesis import table, write_all
     from ..synthesis.api import synthesize
     from ..synthesis.target import load_target
@@ -54,9 +71,11 @@ def cmd_synthesize(args) -> int:
         raise MechanismError("--points and --count must be >= 8, --samples >= 1")
     tgt = load_target(args.target, closed=args.closed, flip_y=args.flip_y)
     names = [n.strip() for n in args.topologies.split(",") if n.strip()] if args.topologies else None
-    res = synthesize(tgt, time_limit=args.time_limit, seed=args.seed, max_links=args.max_links,
+    res = synthesize(tgt, time_limit=args.time_limit, seed=args.seed, rounds=args.rounds, max_links=args.max_links,
                      topologies=names, n_points=args.points, count=args.count, samples=args.samples,
-                     log=lambda s: print(s, file=sys.stderr))
+                     log=(lambda s: print(s, file=sys.stderr)) if printer else None)
+    if not printer:
+        return 0 if res.designs else 1
     if not res.designs:
         print("no design assembled over its interval: give more --time-limit or --samples", file=sys.stderr)
         return 1

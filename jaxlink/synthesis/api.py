@@ -87,8 +87,8 @@ def _design(c: Candidate, target: Target, n_trace: int, name: str) -> Design:
 
 
 def synthesize(target: Any, *, closed: bool | None = None, time_limit: float = 60.0, seed: int = 0,
-               max_links: int = 8, topologies: list[str | Topology] | None = None, n_points: int = _dist.N_POINTS,
-               count: int = 1000, samples: int = 8192, name: str = "synthesized",
+               rounds: int | None = None, max_links: int = 8, topologies: list[str | Topology] | None = None,
+               n_points: int = _dist.N_POINTS, count: int = 1000, samples: int = 8192, name: str = "synthesized",
                log: Callable[[str], None] | None = None, **search_options) -> Synthesis:
     """Find linkages whose traced point follows `target` (a path to a .csv/.npy/.svg file, an
     (N, 2) array or a `Target`), up to `max_links` links, within about `time_limit` seconds.
@@ -98,7 +98,15 @@ def synthesize(target: Any, *, closed: bool | None = None, time_limit: float = 6
     grown by `topology.grow`, at most `topology.MAX_DYADS` dyads, every name distinct); default the
     built-ins up to `max_links`.
     Returns the best design of each topology, best first (`Synthesis.best`); `seed` makes it
-    repeatable for a given number of rounds. Computes in float64 for the answers (NumPy) whatever JAX's x64 setting."""
+    repeatable for a given number of rounds: `rounds` = N runs exactly N rounds (the polishing
+    rounds counted, `search.search`) whatever the time, `time_limit` then only choosing the
+    programs' compile level (quick at ≤ 15 s), so that the result is the same on any machine, any
+    number of devices, any number of processes. Spread over this process's devices, and over the
+    processes of a `jax.distributed` group (`jaxlink.optimize.initialize_distributed`, called first
+    in every process): every process returns the same designs (`search`).
+    Computes in float64 for the answers (NumPy) whatever JAX's x64 setting."""
+    if rounds is not None and (isinstance(rounds, bool) or not isinstance(rounds, (int, np.integer)) or rounds < 1):
+        raise MechanismError(f"rounds = {rounds!r}: the number of rounds must be a whole number, at least 1")
     t0 = time.perf_counter()
     if isinstance(target, Target):
         tgt = target if closed is None else target._replace(closed=bool(closed))
@@ -120,7 +128,7 @@ def synthesize(target: Any, *, closed: bool | None = None, time_limit: float = 6
         if len(set(names)) < len(names):
             raise MechanismError(f"two topologies named {next(n for n in names if names.count(n) > 1)!r}: "
                                  "name each (`grow(..., name=...)`); the answers are keyed by name")
-    found = search(tgt, topos, time_limit=time_limit, seed=seed, samples=samples, n_trace=count,
+    found = search(tgt, topos, time_limit=time_limit, seed=seed, rounds=rounds, samples=samples, n_trace=count,
                    n_points=n_points, t0=t0, log=log, **search_options)
     best: dict[str, Candidate] = {}
     for c in found:

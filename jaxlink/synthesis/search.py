@@ -21,6 +21,13 @@ One **round** (repeated with fresh candidates until the time limit):
 After each full round, and while a full round would not fit in the time left, a **polishing
 round**: refine and score only, every slot on the best three topologies' best refined so far
 (`_polish_slots`). The three programs are compiled before the first round, at once (`programs`).
+With `rounds` = N the search runs exactly N rounds, full and polishing alternating (what it does
+when time is no limit), whatever the time: the same result on any machine.
+
+The screen's, the rank's and the refinement's candidates are spread over this process's devices
+and over the processes of a `jax.distributed` group (`spread`): the same candidates and numbers as
+on one device in one process. Several processes take the same decisions: every one holds every
+batch's results, and the time decisions are process 0's (`spread.agreed`).
 """
 
 from __future__ import annotations
@@ -36,6 +43,7 @@ import numpy as np
 import optax
 
 from . import distance as _dist
+from . import spread as _spread
 from .assembly import Assembly, certify
 from .sortnet import sort_first
 from .target import Target, arclength_resample
@@ -65,38 +73,75 @@ class Programs(NamedTuple):
 
 
 def programs(n_topos: int, n_dyads: int, closed: bool, *, samples: int, screen_keep: int, refine: int,
-             steps: int, quick: bool = False) -> Programs:
+             steps: int, quick: bool = False, where: _spread.Layout | None = None) -> Programs:
     """Compile the screen, the rank and the refinement for these shapes, all three at once (XLA
     compiles in parallel threads; on a cold start compiling is most of a short search's time).
     The rank compiles at XLA's lowest optimisation level (about half the compile time, its run
     time about the same); the refinement too when `quick` (it then runs about twice as long: for
     short searches), and the screen when `quick` and `closed` (an open target's screen, 64
-    sub-arcs a candidate, would run longer than its compiling saves)."""
+    sub-arcs a candidate, would run longer than its compiling saves).
+    `where` (default `spread.layout()`): several devices or processes get programs for their share
+    of each batch, called on whole batches (`spread.Spread`)."""
     keep = min(screen_keep, samples * len(_subarcs(closed)))
-    jobs = [("screen", samples, n_dyads, closed, 0, quick and closed),
-            ("rank", keep * n_topos, n_dyads, False, 0, True),
-            ("refine", min(refine, keep) * n_topos, n_dyads, False, steps, quick)]
+    sizes = (samples, keep * n_topos, min(refine, keep) * n_topos)
+    jobs = [("screen", n_dyads, closed, 0, quick and closed), ("rank", n_dyads, False, 0, True),
+            ("refine", n_dyads, False, steps, quick)]
     x64 = bool(jax.config.read("jax_enable_x64"))  # the traced program's default dtypes depend on it
+    where = _spread.layout() if where is None else where
+    if where.single:
+        with ThreadPoolExecutor(len(jobs)) as ex:
+            return Programs(*ex.map(lambda job, n: _compiled(job[0], n, *job[1:], x64), jobs, sizes))
+    shares = [where.share(n) for n in sizes]
+    parts = [(where.devices, lo, n) for (lo, _, _), n in zip(shares, sizes)]
     with ThreadPoolExecutor(len(jobs)) as ex:
-        return Programs(*ex.map(lambda job: _compiled(*job, x64), jobs))
+        compiled = list(ex.map(lambda job, sh, part: _compiled(job[0], sh[2], *job[1:], x64, part),
+                               jobs, shares, parts))
+    rows = ((1, 2, 3), (0, 1, 2, 3, 4), (0, 1, 2, 3, 4))
+    return Programs(*(_spread.Spread(c, r, where, n) for c, r, n in zip(compiled, rows, sizes)))
 
 
-@functools.lru_cache(maxsize=16)
-def _compiled(which: str, b: int, n_dyads: int, closed: bool, steps: int, quick: bool, x64: bool):
+@functools.lru_cache(maxsize=32)
+def _compiled(which: str, b: int, n_dyads: int, closed: bool, steps: int, quick: bool, x64: bool,
+              part: tuple[int, int, int] | None = None):
     """One program of `programs` for a batch of `b` (kept for the process, keyed by every static input
     and the x64 mode; the dynamic data are arguments of the program: a second search of the
-    same shapes compiles nothing; the rank's and the refinement's serve open and closed targets)."""
+    same shapes compiles nothing; the rank's and the refinement's serve open and closed targets).
+    `part` = (devices, first row, batch rows): a program for this process's share, `b` rows from
+    that row of a batch, each device computing b / devices of them by the one-device program of
+    that size (`shard_map`: no partitioner between, `spread`); None: one device, a whole batch."""
     nj = CRANK + 1 + n_dyads
     i32, f32 = np.int32, np.float32
-    topo = np.zeros((b, n_dyads, 2), i32), np.zeros((b, n_dyads), bool), np.zeros(b, i32)
     options = _QUICK if quick else None
+    if part is None:
+        arg = np.zeros
+        topo = arg((b, n_dyads, 2), i32), arg((b, n_dyads), bool), arg(b, i32)
+        if which == "screen":
+            return _screen.lower(jax.random.PRNGKey(0), *topo, arg(DESC_N, f32), closed=closed).compile(options)
+        poses, arcs = arg((b, nj, 2), f32), arg((b, 2), f32)
+        if which == "rank":
+            return _rank.lower(*topo, poses, arcs, arg((RANK_T, 2), f32), f32(0), _u(RANK_T, False)).compile(options)
+        return _refine.lower(*topo, poses, arcs, arg((TARGET_N, 2), f32), f32(0.01), f32(0), _u(REFINE_T, False),
+                             steps=steps).compile(options)
+    devices, lo, total = part
+    rows = [(b, n_dyads, 2, i32), (b, n_dyads, bool), (b, i32)]
     if which == "screen":
-        return _screen.lower(jax.random.PRNGKey(0), *topo, np.zeros(DESC_N, f32), closed=closed).compile(options)
-    poses, arcs = np.zeros((b, nj, 2), f32), np.zeros((b, 2), f32)
-    if which == "rank":
-        return _rank.lower(*topo, poses, arcs, np.zeros((RANK_T, 2), f32), f32(0), _u(RANK_T, False)).compile(options)
-    return _refine.lower(*topo, poses, arcs, np.zeros((TARGET_N, 2), f32), f32(0.01), f32(0), _u(REFINE_T, False),
-                         steps=steps).compile(options)
+        fn = functools.partial(_screen_share, closed=closed, lo=lo, total=total, devices=devices)
+        specs = [((2,), np.uint32, False)] + [(r[:-1], r[-1], True) for r in rows] + [((DESC_N,), f32, False)]
+    else:
+        rows += [(b, nj, 2, f32), (b, 2, f32)]
+        specs = [(r[:-1], r[-1], True) for r in rows]
+        if which == "rank":
+            fn = _rank
+            specs += [((RANK_T, 2), f32, False), ((), f32, False), ((RANK_T,), f32, False)]
+        else:
+            fn = functools.partial(_refine, steps=steps)
+            specs += [((TARGET_N, 2), f32, False), ((), f32, False), ((), f32, False), ((REFINE_T,), f32, False)]
+    if devices > 1:
+        from jax.sharding import PartitionSpec
+
+        fn = jax.shard_map(fn, mesh=_spread.sharding().mesh, out_specs=PartitionSpec("designs"),
+                           in_specs=tuple(PartitionSpec("designs") if r else PartitionSpec() for *_, r in specs))
+    return jax.jit(fn).lower(*(_spread.abstract(*sp) for sp in specs)).compile(options)
 
 
 class Candidate(NamedTuple):
@@ -171,8 +216,25 @@ def _screen(key, parents, active, traced, target_desc, *, closed: bool):
     """Descriptor distances (B, S) of random poses (B, J, 2) over the sub-arcs; inf where a dyad does
     not close at a sample of the sub-arc. Each sub-arc's points are a static strided slice of the
     curve at half samples (`_subarc_slices`: no gathers)."""
+    poses = jax.random.uniform(key, (parents.shape[0], CRANK + 1 + parents.shape[1], 2), _DT, -1.0, 1.0)
+    return _screened(poses, parents, active, traced, target_desc, closed)
+
+
+def _screen_share(key, parents, active, traced, target_desc, *, closed: bool, lo: int, total: int, devices: int):
+    """`_screen` on one device's share (`spread`; under `shard_map` when `devices` > 1): its B rows,
+    from `lo` + B × the device's index, of the `total` poses the key draws (past `total`, the first
+    ones again: padding), the same poses as `_screen` draws for the whole batch."""
     b = parents.shape[0]
-    poses = jax.random.uniform(key, (b, CRANK + 1 + parents.shape[1], 2), _DT, -1.0, 1.0)
+    poses = jax.random.uniform(key, (total, CRANK + 1 + parents.shape[1], 2), _DT, -1.0, 1.0)
+    if lo + devices * b > total:
+        poses = jnp.concatenate([poses] * (-(-(lo + devices * b) // total)))
+    first = lo + (jax.lax.axis_index("designs") * b if devices > 1 else 0)
+    return _screened(jax.lax.dynamic_slice_in_dim(poses, first, b), parents, active, traced, target_desc, closed)
+
+
+def _screened(poses, parents, active, traced, target_desc, closed: bool):
+    """The body of `_screen` after its draw: (poses, descriptor distances)."""
+    b = parents.shape[0]
     th = jnp.asarray(2 * np.pi * np.arange(SCREEN_T + 1) / SCREEN_T, _DT)
     pos, marg = jax.vmap(trace, in_axes=(0, 0, 0, None))(parents, active, poses, th)
     curves = pos[jnp.arange(b), :, traced]                    # (B, T+1, 2), the last = the first
@@ -350,15 +412,21 @@ def _polish_slots(elites, elite_vals, n_slots, jitter, closed, rng):
 
 
 def search(target: Target, topos: list[Topology], *, time_limit: float, seed: int = 0,
-           samples: int = 8192, screen_keep: int = 128, refine: int = 8, steps: int = 300,
-           n_trace: int = 1000, n_points: int = _dist.N_POINTS, per_topology: int = 2,
+           rounds: int | None = None, samples: int = 8192, screen_keep: int = 128, refine: int = 8,
+           steps: int = 300, n_trace: int = 1000, n_points: int = _dist.N_POINTS, per_topology: int = 2,
            lr: float = 0.01, jitter: float = 0.02, quick: bool | None = None, t0: float | None = None,
            log=None) -> list[Candidate]:
     """Rounds of screen → rank → refine → score until `time_limit` seconds (at least one round).
     `quick` (`programs`; default: when `time_limit` ≤ 15 s) trades run time for compile time.
     After each full round, and whenever the time left is too short for another full round but not
     for a refinement, a polishing round refines the best found again (`_polish_slots`).
+    `rounds`: exactly that many rounds (the polishing ones counted), full and polishing alternating,
+    the time limit ignored (it still chooses `quick`): the same result on any machine, any number
+    of devices or processes. Several processes (`jax.distributed`): each computes its share of
+    every batch, all hold the same results, process 0's clock decides the rounds (`spread`).
     Returns every scored candidate that assembles, best first."""
+    if rounds is not None and (isinstance(rounds, bool) or not isinstance(rounds, (int, np.integer)) or rounds < 1):
+        raise ValueError(f"rounds = {rounds!r}: a whole number of rounds, at least 1")
     t0 = time.perf_counter() if t0 is None else t0
     closed = target.closed
     arr = as_arrays(topos)
@@ -420,12 +488,23 @@ def search(target: Target, topos: list[Topology], *, time_limit: float, seed: in
             polish_dur = dur
         else:
             full_dur, polish_dur = dur, now - t_ref  # the compiling is done before the first round
+        if rounds is not None:
+            if rnd >= rounds:
+                break
+            polish = bool(elites) and not polish  # as below when time is no limit
+            continue
         can_polish = bool(elites) and now - t0 + polish_dur <= time_limit
         if can_polish and not polish:
-            polish = True  # after each full round one polishing round: the best found refined again
+            nxt = 1  # after each full round one polishing round: the best found refined again
         elif now - t0 + full_dur <= time_limit:
-            polish = False  # another full round, if one as long as the last fits
+            nxt = 0  # another full round, if one as long as the last fits
         elif not can_polish:
+            nxt = -1
+        else:
+            nxt = 1  # polishing again: a full round no longer fits
+        nxt = _spread.agreed(nxt)  # process 0's clock decides for all
+        if nxt < 0:
             break
+        polish = nxt == 1
     found.sort(key=lambda c: c.match.distance)
     return found
