@@ -123,7 +123,9 @@ def _compiled(which: str, b: int, n_dyads: int, closed: bool, steps: int, quick:
         return _refine.lower(*topo, poses, arcs, arg((TARGET_N, 2), f32), f32(0.01), f32(0), _u(REFINE_T, False),
                              steps=steps).compile(options)
     devices, lo, total = part
-    rows = [(b, n_dyads, 2, i32), (b, n_dyads, bool), (b, i32)]
+    rows: list[tuple[Any, ...]] = [(b, n_dyads, 2, i32), (b, n_dyads, bool), (b, i32)]
+    specs: list[tuple[Any, Any, bool]]
+    fn: Callable
     if which == "screen":
         fn = functools.partial(_screen_share, closed=closed, lo=lo, total=total, devices=devices)
         specs = [((2,), np.uint32, False)] + [(r[:-1], r[-1], True) for r in rows] + [((DESC_N,), f32, False)]

@@ -24,11 +24,11 @@ import numpy as np
 
 
 class Layout(NamedTuple):
-    """Where a batch's rows go: `devices` of this process, `processes` in all, this one's `index`."""
+    """Where a batch's rows go: `devices` of this process, `processes` in all, this one's index `process`."""
 
     devices: int
     processes: int
-    index: int
+    process: int
 
     @property
     def single(self) -> bool:
@@ -38,7 +38,7 @@ class Layout(NamedTuple):
         """(first row, end row, padded rows) of this process's share of a batch of `n`: the shares
         of `optimize.distributed.process_share`, padded to a multiple of the device count."""
         size = -(-n // self.processes)
-        lo = min(n, self.index * size)
+        lo = min(n, self.process * size)
         hi = min(n, lo + size)
         return lo, hi, -(-max(size, 1) // self.devices) * self.devices
 
