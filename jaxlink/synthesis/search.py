@@ -62,6 +62,11 @@ _ROT = 32
 _DT = jnp.float32
 #: XLA options of the screen and the rank (run once a round: compiling them fast matters more than running them fast)
 _QUICK: dict[str, Any] = {"xla_backend_optimization_level": 0}
+#: the most rows of one block of the screen's, the rank's and the refinement's batches (`spread.blocks`:
+#: one program per block, whatever the devices; a candidate's bits depend on its block's size)
+SCREEN_BLOCK = 1024
+RANK_BLOCK = 64
+REFINE_BLOCK = 4
 
 
 class Programs(NamedTuple):
@@ -80,70 +85,50 @@ def programs(n_topos: int, n_dyads: int, closed: bool, *, samples: int, screen_k
     time about the same); the refinement too when `quick` (it then runs about twice as long: for
     short searches), and the screen when `quick` and `closed` (an open target's screen, 64
     sub-arcs a candidate, would run longer than its compiling saves).
-    `where` (default `spread.layout()`): several devices or processes get programs for their share
-    of each batch, called on whole batches (`spread.Spread`)."""
+    Each program computes one block of its batch (`spread.blocks`, at most `SCREEN_BLOCK`,
+    `RANK_BLOCK`, `REFINE_BLOCK` rows), the same block whatever the devices and processes (`where`,
+    default `spread.layout()`), and is called on whole batches (`spread.Blocked`)."""
     keep = min(screen_keep, samples * len(_subarcs(closed)))
     sizes = (samples, keep * n_topos, min(refine, keep) * n_topos)
+    caps = (SCREEN_BLOCK, RANK_BLOCK, REFINE_BLOCK)
     jobs = [("screen", n_dyads, closed, 0, quick and closed), ("rank", n_dyads, False, 0, True),
             ("refine", n_dyads, False, steps, quick)]
     x64 = bool(jax.config.read("jax_enable_x64"))  # the traced program's default dtypes depend on it
     where = _spread.layout() if where is None else where
-    if where.single:
-        with ThreadPoolExecutor(len(jobs)) as ex:
-            return Programs(*ex.map(lambda job, n: _compiled(job[0], n, *job[1:], x64), jobs, sizes))
-    shares = [where.share(n) for n in sizes]
-    parts = [(where.devices, lo, n) for (lo, _, _), n in zip(shares, sizes)]
-    with ThreadPoolExecutor(len(jobs)) as ex:
-        compiled = list(ex.map(lambda job, sh, part: _compiled(job[0], sh[2], *job[1:], x64, part),
-                               jobs, shares, parts))
-    rows = ((1, 2, 3), (0, 1, 2, 3, 4), (0, 1, 2, 3, 4))
-    return Programs(*(_spread.Spread(c, r, where, n) for c, r, n in zip(compiled, rows, sizes)))
+    if where.devices > len(jax.local_devices()):
+        raise ValueError(f"{where.devices} devices asked for, {len(jax.local_devices())} here")
+    block = [_spread.blocks(n, cap)[1] for n, cap in zip(sizes, caps)]
+    tasks = [(job, b, d) for job, b in zip(jobs, block) for d in range(where.devices)]
+    with ThreadPoolExecutor(len(tasks)) as ex:
+        compiled = list(ex.map(lambda t: _compiled(t[0][0], t[1], *t[0][1:], x64, t[2]), tasks))
+    per = [compiled[i * where.devices:(i + 1) * where.devices] for i in range(len(jobs))]
+    rows, keyed = ((1, 2, 3), (0, 1, 2, 3, 4), (0, 1, 2, 3, 4)), (0, None, None)
+    return Programs(*(_spread.Blocked(c, r, k, where, n, b) for c, r, k, n, b in zip(per, rows, keyed, sizes, block)))
 
 
 @functools.lru_cache(maxsize=32)
-def _compiled(which: str, b: int, n_dyads: int, closed: bool, steps: int, quick: bool, x64: bool,
-              part: tuple[int, int, int] | None = None):
-    """One program of `programs` for a batch of `b` (kept for the process, keyed by every static input
-    and the x64 mode; the dynamic data are arguments of the program: a second search of the
-    same shapes compiles nothing; the rank's and the refinement's serve open and closed targets).
-    `part` = (devices, first row, batch rows): a program for this process's share, `b` rows from
-    that row of a batch, each device computing b / devices of them by the one-device program of
-    that size (`shard_map`: no partitioner between, `spread`); None: one device, a whole batch."""
+def _compiled(which: str, b: int, n_dyads: int, closed: bool, steps: int, quick: bool, x64: bool, device: int = 0):
+    """One program of `programs` for a block of `b` rows on this process's `device`-th device (kept
+    for the process, keyed by every static input and the x64 mode; the dynamic data are arguments
+    of the program: a second search of the same shapes compiles nothing; the rank's and the
+    refinement's serve open and closed targets). Every device's program is compiled from the same
+    program for the same block: the same code."""
     nj = CRANK + 1 + n_dyads
     i32, f32 = np.int32, np.float32
     options = _QUICK if quick else None
-    if part is None:
-        arg = np.zeros
-        topo = arg((b, n_dyads, 2), i32), arg((b, n_dyads), bool), arg(b, i32)
-        if which == "screen":
-            return _screen.lower(jax.random.PRNGKey(0), *topo, arg(DESC_N, f32), closed=closed).compile(options)
-        poses, arcs = arg((b, nj, 2), f32), arg((b, 2), f32)
-        if which == "rank":
-            return _rank.lower(*topo, poses, arcs, arg((RANK_T, 2), f32), f32(0), _u(RANK_T, False)).compile(options)
-        return _refine.lower(*topo, poses, arcs, arg((TARGET_N, 2), f32), f32(0.01), f32(0), _u(REFINE_T, False),
-                             steps=steps).compile(options)
-    devices, lo, total = part
-    rows: list[tuple[Any, ...]] = [(b, n_dyads, 2, i32), (b, n_dyads, bool), (b, i32)]
-    specs: list[tuple[Any, Any, bool]]
-    fn: Callable
-    if which == "screen":
-        fn = functools.partial(_screen_share, closed=closed, lo=lo, total=total, devices=devices)
-        specs = [((2,), np.uint32, False)] + [(r[:-1], r[-1], True) for r in rows] + [((DESC_N,), f32, False)]
-    else:
-        rows += [(b, nj, 2, f32), (b, 2, f32)]
-        specs = [(r[:-1], r[-1], True) for r in rows]
-        if which == "rank":
-            fn = _rank
-            specs += [((RANK_T, 2), f32, False), ((), f32, False), ((RANK_T,), f32, False)]
-        else:
-            fn = functools.partial(_refine, steps=steps)
-            specs += [((TARGET_N, 2), f32, False), ((), f32, False), ((), f32, False), ((REFINE_T,), f32, False)]
-    if devices > 1:
-        from jax.sharding import PartitionSpec
+    on = jax.sharding.SingleDeviceSharding(jax.local_devices()[device])
 
-        fn = jax.shard_map(fn, mesh=_spread.sharding().mesh, out_specs=PartitionSpec("designs"),
-                           in_specs=tuple(PartitionSpec("designs") if r else PartitionSpec() for *_, r in specs))
-    return jax.jit(fn).lower(*(_spread.abstract(*sp) for sp in specs)).compile(options)
+    def arg(shape, dtype=f32):
+        return jax.ShapeDtypeStruct(shape, dtype, sharding=on)
+
+    topo = arg((b, n_dyads, 2), i32), arg((b, n_dyads), bool), arg((b,), i32)
+    if which == "screen":
+        return _screen.lower(arg((2,), np.uint32), *topo, arg((DESC_N,)), closed=closed).compile(options)
+    poses, arcs = arg((b, nj, 2)), arg((b, 2))
+    if which == "rank":
+        return _rank.lower(*topo, poses, arcs, arg((RANK_T, 2)), arg(()), arg((RANK_T,))).compile(options)
+    return _refine.lower(*topo, poses, arcs, arg((TARGET_N, 2)), arg(()), arg(()), arg((REFINE_T,)),
+                         steps=steps).compile(options)
 
 
 class Candidate(NamedTuple):
@@ -218,25 +203,8 @@ def _screen(key, parents, active, traced, target_desc, *, closed: bool):
     """Descriptor distances (B, S) of random poses (B, J, 2) over the sub-arcs; inf where a dyad does
     not close at a sample of the sub-arc. Each sub-arc's points are a static strided slice of the
     curve at half samples (`_subarc_slices`: no gathers)."""
-    poses = jax.random.uniform(key, (parents.shape[0], CRANK + 1 + parents.shape[1], 2), _DT, -1.0, 1.0)
-    return _screened(poses, parents, active, traced, target_desc, closed)
-
-
-def _screen_share(key, parents, active, traced, target_desc, *, closed: bool, lo: int, total: int, devices: int):
-    """`_screen` on one device's share (`spread`; under `shard_map` when `devices` > 1): its B rows,
-    from `lo` + B × the device's index, of the `total` poses the key draws (past `total`, the first
-    ones again: padding), the same poses as `_screen` draws for the whole batch."""
     b = parents.shape[0]
-    poses = jax.random.uniform(key, (total, CRANK + 1 + parents.shape[1], 2), _DT, -1.0, 1.0)
-    if lo + devices * b > total:
-        poses = jnp.concatenate([poses] * (-(-(lo + devices * b) // total)))
-    first = lo + (jax.lax.axis_index("designs") * b if devices > 1 else 0)
-    return _screened(jax.lax.dynamic_slice_in_dim(poses, first, b), parents, active, traced, target_desc, closed)
-
-
-def _screened(poses, parents, active, traced, target_desc, closed: bool):
-    """The body of `_screen` after its draw: (poses, descriptor distances)."""
-    b = parents.shape[0]
+    poses = jax.random.uniform(key, (b, CRANK + 1 + parents.shape[1], 2), _DT, -1.0, 1.0)
     th = jnp.asarray(2 * np.pi * np.arange(SCREEN_T + 1) / SCREEN_T, _DT)
     pos, marg = jax.vmap(trace, in_axes=(0, 0, 0, None))(parents, active, poses, th)
     curves = pos[jnp.arange(b), :, traced]                    # (B, T+1, 2), the last = the first

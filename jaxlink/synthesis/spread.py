@@ -1,46 +1,52 @@
-"""A search round's batches spread over this process's devices and over several processes.
+"""A search round's batches cut into blocks of a fixed size and spread over this process's devices
+and over several processes, without changing a single bit of the answer.
 
-The candidate axis of every batch (the screen's random poses, the rank's and the refinement's
-candidates) is cut into one contiguous share per process (`optimize.distributed.process_share`),
-each share padded (its first row repeated) to a multiple of this process's device count and put on
-a one-axis mesh over its devices (`optimize.sharding`), and the rows each process computed are
-gathered to every process (`optimize.distributed.gathered`), so that all processes hold the whole
-batch and take the same decisions. Candidates are independent: a candidate's numbers are the same
-whatever share or device computed them (tested against one device and one process).
+XLA compiles a reduction (a sum over a candidate's samples) into code whose order of additions
+depends on the whole batch's shape, so that the same candidate computed in a batch of 8 and in a
+batch of 16 can differ in the last bit, and 300 Adam steps make that another design. So every
+batch of `n` rows is cut into `blocks(n, cap)`: the fewest blocks of at most `cap` rows, all of one
+size (the last padded with the batch's first row), a size that depends on `n` and `cap` only; one
+program compiled for one block computes every block, on whichever device. Devices and processes
+take whole blocks (`Layout.mine`: a contiguous run of blocks per process, dealt to its devices in
+turn), so the same executable code computes every candidate whatever the number of devices or
+processes, the one-device case included: bit for bit the same answer (tests/test_synthesis_spread.py).
 
-The screen draws its poses from a key: in a share, every process draws the whole batch's poses
-(a few floats a candidate: cheap beside tracing them) and keeps its rows, so that a pose does not
-depend on the split.
-
-One device and one process (`Layout.single`): the programs are called as they are, unsharded.
+The blocks are dispatched to their devices before any result is read (JAX dispatches
+asynchronously): the devices compute at once. A block's random draws (the screen's poses) come
+from the batch's key folded with the block's index: they do not depend on who computes it. Every
+process gathers every block's results (`Blocked.__call__`), so that all take the same decisions;
+a decision made from the clock is process 0's (`agreed`).
 """
 
 from __future__ import annotations
 
-from typing import Callable, NamedTuple
+from typing import Callable, NamedTuple, Sequence
 
 import jax
 import numpy as np
 
 
+def blocks(n: int, cap: int) -> tuple[int, int]:
+    """(count, size) of the blocks a batch of `n` rows is cut into: the fewest blocks of at most
+    `cap` rows, all of one size (count × size ≥ n; the excess, fewer than count rows, is padding)."""
+    if n < 1 or cap < 1:
+        raise ValueError(f"a batch of {n} rows in blocks of at most {cap}")
+    k = -(-n // cap)
+    return k, -(-n // k)
+
+
 class Layout(NamedTuple):
-    """Where a batch's rows go: `devices` of this process, `processes` in all, this one's index `process`."""
+    """Where blocks go: the first `devices` local devices of this process, `processes` processes in
+    all, this one the `process`-th."""
 
     devices: int
     processes: int
     process: int
 
-    @property
-    def single(self) -> bool:
-        return self.devices == 1 and self.processes == 1
-
-    def share(self, n: int) -> tuple[int, int, int]:
-        """(first row, end row, padded rows) of this process's share of a batch of `n`: the shares
-        of `optimize.distributed.process_share`, padded to a multiple of the device count."""
-        size = -(-n // self.processes)
-        lo = min(n, self.process * size)
-        hi = min(n, lo + size)
-        return lo, hi, -(-max(size, 1) // self.devices) * self.devices
+    def mine(self, k: int) -> range:
+        """The blocks (of `k`) this process computes: a contiguous run, ⌈k / processes⌉ a process."""
+        per = -(-k // self.processes)
+        return range(min(k, self.process * per), min(k, (self.process + 1) * per))
 
 
 def layout() -> Layout:
@@ -48,58 +54,74 @@ def layout() -> Layout:
     return Layout(len(jax.local_devices()), jax.process_count(), jax.process_index())
 
 
-def sharding():
-    """The candidate axis over this process's devices (`optimize.sharding.design_sharding`)."""
-    from ..optimize.sharding import design_sharding
-
-    return design_sharding()
-
-
-def abstract(shape: tuple[int, ...], dtype, sharded: bool) -> jax.ShapeDtypeStruct:
-    """An argument of a program lowered for a share: the candidate axis on the mesh, or replicated."""
-    from jax.sharding import NamedSharding, PartitionSpec
-
-    s = sharding()
-    return jax.ShapeDtypeStruct(shape, dtype, sharding=s if sharded else NamedSharding(s.mesh, PartitionSpec()))
-
-
 def pad(x: np.ndarray, rows: int) -> np.ndarray:
     """`x` with its first row repeated up to `rows` rows."""
-    from ..optimize.sharding import pad_rows
+    x = np.asarray(x)
+    if len(x) >= rows:
+        return x
+    return np.concatenate([x, np.repeat(x[:1], rows - len(x), 0)])
 
-    return pad_rows(np.asarray(x), rows)[0] if len(x) < rows else np.asarray(x)
 
+class Blocked:
+    """A batch of `n` rows computed block by block (`blocks(n, size)`: `size` is the block's rows)
+    by `programs` (one compiled program per device of `where`, the same code, for one block).
+    The arguments at positions `rows` have the candidate axis first and are cut into blocks; the
+    one at `keyed` (a PRNG key, or None) is folded with each block's index; the others go whole to
+    every block. The outputs (a tuple, candidate axis first) come back whole, in row order, on
+    every process (NumPy arrays)."""
 
-class Spread:
-    """A compiled program for one share (`Layout.share`) called on whole batches: the `rows`
-    arguments (their positions) cut to this process's share, padded and put on the mesh, the others
-    replicated; the outputs (a tuple, candidate axis first) cut back and gathered to every process.
-    `n`: the batch's rows."""
-
-    def __init__(self, program: Callable, rows: tuple[int, ...], where: Layout, n: int):
-        self.program, self.rows, self.where, self.n = program, rows, where, n
+    def __init__(self, programs: Sequence[Callable], rows: tuple[int, ...], keyed: int | None, where: Layout,
+                 n: int, size: int):
+        self.programs, self.rows, self.keyed, self.where, self.n, self.size = programs, rows, keyed, where, n, size
+        self.count = -(-n // size)
 
     def __call__(self, *args):
-        from jax.sharding import NamedSharding, PartitionSpec
-
-        lo, hi, b = self.where.share(self.n)
-        s = sharding()
-        rep = NamedSharding(s.mesh, PartitionSpec())
-        placed = []
-        for i, a in enumerate(args):
-            if i in self.rows:
-                if len(a) != self.n:
-                    raise AssertionError(f"a batch of {len(a)} rows for a program of {self.n}")
-                placed.append(jax.device_put(pad(np.asarray(a)[lo:hi], b), s))
-            else:
-                placed.append(jax.device_put(np.asarray(a), rep))
-        out = [np.asarray(o)[:hi - lo] for o in self.program(*placed)]
+        devices = jax.local_devices()[:self.where.devices]
+        k, size = self.count, self.size
+        cut = {i: pad(args[i], k * size) for i in self.rows}
+        for i in self.rows:
+            if len(args[i]) != self.n:
+                raise AssertionError(f"a batch of {len(args[i])} rows for a program of {self.n}")
+        whole: dict[tuple[int, int], jax.Array] = {}
+        mine = self.where.mine(k)
+        pending = []
+        for j, blk in enumerate(mine):
+            d = j % len(devices)
+            put = []
+            for i, a in enumerate(args):
+                if i in cut:
+                    put.append(jax.device_put(cut[i][blk * size:(blk + 1) * size], devices[d]))
+                elif i == self.keyed:
+                    put.append(jax.device_put(jax.random.fold_in(a, blk), devices[d]))
+                else:
+                    if (i, d) not in whole:
+                        whole[i, d] = jax.device_put(np.asarray(a), devices[d])
+                    put.append(whole[i, d])
+            pending.append(self.programs[d](*put))  # dispatched: every device starts before any is read
+        local = [np.concatenate([np.asarray(out[o]) for out in pending]) for o in range(len(pending[0]))] \
+            if pending else []
         if self.where.processes == 1:
-            return tuple(out)
-        from ..optimize.distributed import gathered
+            return tuple(x[:self.n] for x in local)
+        return tuple(x[:self.n] for x in _gathered(local, self.where, k, size, self._shapes()))
 
-        every = gathered({str(i): o for i, o in enumerate(out)}, self.n)
-        return tuple(every[str(i)] for i in range(len(out)))
+    def _shapes(self):
+        """The outputs' (row shape, dtype): what a process with no block sends (padding only)."""
+        return [(o.shape[1:], o.dtype) for o in self.programs[0].out_info]
+
+
+def _gathered(local: list, where: Layout, k: int, size: int, shapes) -> list[np.ndarray]:
+    """Every process's blocks' rows (`local`: this process's, in block order), on every process,
+    in row order: each process's run padded to ⌈k / processes⌉ blocks, gathered, concatenated."""
+    from jax.experimental import multihost_utils
+
+    per = -(-k // where.processes) * size
+    out = []
+    for o, (shape, dtype) in enumerate(shapes):
+        a = local[o] if local else np.zeros((0,) + tuple(shape), dtype)
+        a = np.concatenate([a, np.zeros((per - len(a),) + a.shape[1:], a.dtype)]) if len(a) < per else a
+        every = np.asarray(multihost_utils.process_allgather(a, tiled=False))  # (processes, per, ...)
+        out.append(every.reshape((-1,) + every.shape[2:]))
+    return out
 
 
 def agreed(value: int) -> int:
