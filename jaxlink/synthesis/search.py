@@ -24,10 +24,12 @@ round**: refine and score only, every slot on the best three topologies' best re
 With `rounds` = N the search runs exactly N rounds, full and polishing alternating (what it does
 when time is no limit), whatever the time: the same result on any machine.
 
-The screen's, the rank's and the refinement's candidates are spread over this process's devices
-and over the processes of a `jax.distributed` group (`spread`): the same candidates and numbers as
-on one device in one process. Several processes take the same decisions: every one holds every
-batch's results, and the time decisions are process 0's (`spread.agreed`).
+The screen's, the rank's and the refinement's batches are cut into blocks of a size that depends
+on the batch only, one program a block (`spread.Blocked`), the blocks spread over this process's
+devices and over the processes of a `jax.distributed` group: the same numbers bit for bit as on
+one device in one process (a program's bits depend on its batch's shape: `spread`). Several processes take the
+same decisions: every one holds every batch's results, and the time decisions are process 0's
+(`spread.agreed`).
 """
 
 from __future__ import annotations
@@ -66,7 +68,7 @@ _QUICK: dict[str, Any] = {"xla_backend_optimization_level": 0}
 #: one program per block, whatever the devices; a candidate's bits depend on its block's size)
 SCREEN_BLOCK = 1024
 RANK_BLOCK = 64
-REFINE_BLOCK = 4
+REFINE_BLOCK = 8
 
 
 class Programs(NamedTuple):

@@ -20,7 +20,7 @@ a decision made from the clock is process 0's (`agreed`).
 
 from __future__ import annotations
 
-from typing import Callable, NamedTuple, Sequence
+from typing import Any, Callable, NamedTuple, Sequence
 
 import jax
 import numpy as np
@@ -75,13 +75,13 @@ class Blocked:
         self.programs, self.rows, self.keyed, self.where, self.n, self.size = programs, rows, keyed, where, n, size
         self.count = -(-n // size)
 
-    def __call__(self, *args):
+    def __call__(self, *args: Any) -> tuple[np.ndarray, ...]:
         devices = jax.local_devices()[:self.where.devices]
         k, size = self.count, self.size
-        cut = {i: pad(args[i], k * size) for i in self.rows}
         for i in self.rows:
             if len(args[i]) != self.n:
                 raise AssertionError(f"a batch of {len(args[i])} rows for a program of {self.n}")
+        cut = {i: pad(args[i], k * size) for i in self.rows}
         whole: dict[tuple[int, int], jax.Array] = {}
         mine = self.where.mine(k)
         pending = []
