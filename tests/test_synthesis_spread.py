@@ -11,8 +11,8 @@ deterministic run length (`rounds`).
   blocks) give the same designs bit for bit (distance, interval, traced curve). A variant whose
   block depends on the device count (the batch / devices per device, as a `shard_map` of shares did)
   ends at another design: XLA's CPU code for a reduction depends on the block's shape
-  (docs/methods/synthesis.md, "Spread"); two processes (`jax.distributed`, Gloo; a process each
-  block in turn): every process ends with the designs of one process bit for bit.
+  (docs/methods/synthesis.md, "Spread"); two processes (`jax.distributed`, Gloo; a contiguous run
+  of blocks each): every process ends with the designs of one process bit for bit.
 """
 
 import os
