@@ -53,7 +53,9 @@ def test_blocks_and_their_owners():
         blocks(0, 4)
 
 
-_SEARCH = dict(closed=True, topologies=["four-bar"], time_limit=0.1, rounds=2, count=400, samples=2048, refine=16)
+# a quick search (time limit <= 15 s): its refinement's blocks are of at most REFINE_BLOCK_QUICK = 64 slots, so
+# 80 slots make two blocks of 40 (each device gets screen, rank and refinement blocks)
+_SEARCH = dict(closed=True, topologies=["four-bar"], time_limit=0.1, rounds=2, count=400, samples=2048, refine=80)
 
 _TWO_DEVICES = r"""
 import sys, jax, numpy as np

@@ -69,6 +69,10 @@ _QUICK: dict[str, Any] = {"xla_backend_optimization_level": 0}
 SCREEN_BLOCK = 1024
 RANK_BLOCK = 64
 REFINE_BLOCK = 8
+#: the refinement's block at XLA's lowest level (`quick`): its 300 steps' kernels run unfused enough that
+#: blocks of 8 slots took 9.8 s against 7.6 s for one batch of 56 (a default round; full level: the same
+#: time); the block still depends only on the batch and the level, never on the devices
+REFINE_BLOCK_QUICK = 64
 
 
 class Programs(NamedTuple):
@@ -92,7 +96,7 @@ def programs(n_topos: int, n_dyads: int, closed: bool, *, samples: int, screen_k
     default `spread.layout()`), and is called on whole batches (`spread.Blocked`)."""
     keep = min(screen_keep, samples * len(_subarcs(closed)))
     sizes = (samples, keep * n_topos, min(refine, keep) * n_topos)
-    caps = (SCREEN_BLOCK, RANK_BLOCK, REFINE_BLOCK)
+    caps = (SCREEN_BLOCK, RANK_BLOCK, REFINE_BLOCK_QUICK if quick else REFINE_BLOCK)
     jobs = [("screen", n_dyads, closed, 0, quick and closed), ("rank", n_dyads, False, 0, True),
             ("refine", n_dyads, False, steps, quick)]
     x64 = bool(jax.config.read("jax_enable_x64"))  # the traced program's default dtypes depend on it
