@@ -34,6 +34,24 @@ def _ellipse(a, b, n=4000):
     return np.stack([a * np.cos(t), b * np.sin(t)], 1)
 
 
+def test_chamfer_of_many_angles_is_each_angle_alone_bit_for_bit():
+    """The chamfer at many rotations (one k-d tree query for all, `_chamfer_rotated`) gives for each
+    angle the bits of a query of that angle alone, and the brute-force distances (scipy's cdist)
+    to rounding."""
+    rng = np.random.default_rng(3)
+    a = D.normalise(rng.normal(size=(200, 2)))[0]
+    b = D.normalise(_ellipse(1.3, 0.7, 200) + 0.05 * rng.normal(size=(200, 2)))[0]
+    phis = rng.uniform(-4.0, 7.0, 11)
+    many = D._chamfer_rotated(a, b, phis)
+    alone = np.array([D._chamfer_rotated(a, b, [phi])[0] for phi in phis])
+    assert np.array_equal(many, alone)
+    for phi, got in zip(phis, many):
+        c, s = math.cos(phi), math.sin(phi)
+        d = cdist(a @ np.array([[c, -s], [s, c]]).T, b)
+        assert abs(got - (d.min(1).mean() + d.min(0).mean())) < 1e-14
+    assert D._chamfer_rotated(a, b, []).shape == (0,)
+
+
 def test_distance_invariance_and_zero():
     c = _coupler(np.linspace(0, 2 * np.pi, 500, endpoint=False))
     e = _ellipse(1.0, 0.5, 700) + [0.2, 0.1]

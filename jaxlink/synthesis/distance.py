@@ -85,15 +85,19 @@ def _rot(phi):
 
 def _chamfer_rotated(a, b, phis, trees=None):
     """The chamfer of R(φ)a against b for each φ: R(φ)a queried in b's k-d tree, R(−φ)b in a's (the
-    same distances), so that both trees are built once."""
+    same distances), so that both trees are built once. All the angles in one query of each tree
+    (a Python loop of one query per angle took most of a search's scoring time); each point's
+    distance and each angle's mean are the ones a query per angle gives, bit for bit."""
     from scipy.spatial import cKDTree
 
     ta, tb = trees if trees is not None else (cKDTree(a), cKDTree(b))
-    out = np.empty(len(phis))
-    for k, phi in enumerate(np.asarray(phis, float)):
-        r = _rot(phi)
-        out[k] = tb.query(a @ r.T)[0].mean() + ta.query(b @ r)[0].mean()
-    return out
+    phis = np.asarray(phis, float)
+    if phis.size == 0:
+        return np.empty(0)
+    rs = [_rot(phi) for phi in phis]
+    da = tb.query(np.concatenate([a @ r.T for r in rs]))[0].reshape(len(phis), len(a))
+    db = ta.query(np.concatenate([b @ r for r in rs]))[0].reshape(len(phis), len(b))
+    return np.array([x.mean() for x in da]) + np.array([y.mean() for y in db])
 
 
 def best_rotation(a: np.ndarray, b: np.ndarray) -> tuple[float, float]:
