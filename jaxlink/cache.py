@@ -212,6 +212,90 @@ def traced(name: str, fun, args: tuple, static: tuple = ()):
     return call(*leaves)
 
 
+def compiled(name: str, fun, avals: tuple, static: tuple = (), options: dict | None = None):
+    """`fun(*args, *static)` compiled ahead of time for the arguments `avals` (a tuple of
+    `jax.ShapeDtypeStruct`, each possibly placed on a device by its `sharding`) with the XLA
+    compile `options`, through a stored trace like `traced`: the first process traces `fun` and
+    stores the program; a later one with the same key (`name`, `fun`, the shapes and dtypes, the
+    static values and the options, jaxlink's source, JAX and jaxlib, the backend, x64) loads it
+    instead of tracing, and its compilation comes from the compilation cache. The same program
+    either way: the stored one is compiled from the trace it stores (tests/test_synthesis_memo.py).
+    The arguments' placement is not part of the key (a program is traced for no device and
+    compiled for the one its arguments name). Without the cache: plain `jax.jit(...).lower(...)`."""
+    import jax
+
+    if getattr(fun, "__closure__", None) or "<locals>" in getattr(fun, "__qualname__", "<locals>"):
+        raise TypeError(f"compiled({name!r}): {fun!r} must be a module-level function without a closure")
+    static = tuple(static)
+    spec = tuple((tuple(a.shape), str(jax.dtypes.canonicalize_dtype(a.dtype))) for a in avals)
+    opts = tuple(sorted((options or {}).items()))
+
+    def flat(*xs):
+        return fun(*xs, *static)
+
+    target = None
+    if stored_traces():
+        key = _compiled_key(name, fun, static, opts, spec)
+        path = _trace_path(key)
+        target = _load_exported(key, path, spec)
+        if target is None:
+            from jax import export
+
+            try:
+                exp = export.export(jax.jit(flat))(*(jax.ShapeDtypeStruct(a.shape, a.dtype) for a in avals))
+                _store(key, path, exp.serialize())
+                target = jax.jit(exp.call)
+            except Exception:  # noqa: BLE001 (cannot be exported or serialized here: no stored trace)
+                target = None
+    if target is None:
+        target = jax.jit(flat)
+    return target.lower(*avals).compile(options)
+
+
+def _compiled_key(name: str, fun, static: tuple, options: tuple, spec: tuple) -> str:
+    """Everything a program of `compiled` depends on besides its arguments' values and placement."""
+    import jax
+    import jaxlib
+
+    return repr(("compiled", name, f"{fun.__module__}.{fun.__qualname__}", static, options, spec, source_digest(),
+                 jax.__version__, jaxlib.__version__, jax.default_backend(), bool(jax.config.read("jax_enable_x64"))))
+
+
+def _load_exported(key: str, path: str | None, spec: tuple):
+    """`jax.jit` of the stored program of `key` at `path` whose arguments are `spec`, or None."""
+    import jax
+
+    if path is None or not os.path.exists(path):
+        return None
+    from jax import export
+
+    try:
+        with open(path, "rb") as fh:
+            stored = _unpack(key, fh.read())
+        if stored is None:
+            return None
+        exp = export.deserialize(bytearray(stored))
+        if spec != tuple((tuple(a.shape), str(a.dtype)) for a in exp.in_avals):
+            return None
+        return jax.jit(exp.call)
+    except Exception:  # noqa: BLE001 (a stale or damaged file: trace again and replace it)
+        return None
+
+
+def _store(key: str, path: str | None, data) -> None:
+    """Write a serialized program under `key` to `path` (atomically; nothing when it cannot)."""
+    if path is None:
+        return
+    tmp = f"{path}.{os.getpid()}.{id(data)}.tmp"
+    try:
+        with open(tmp, "wb") as fh:
+            fh.write(_pack(key, data))
+        os.replace(tmp, path)
+    except OSError:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+
+
 def _fast_key(name: str, fun, treedef, static: tuple, leaves) -> tuple:
     """The in-process memo's key of a call: everything of `key_text` that can change within a
     process (the function, the arguments' structure — a mechanism's `Structure` included — the

@@ -55,3 +55,79 @@ def test_memoized_program_equals_a_fresh_compile_and_a_wrong_key_is_caught():
         return blind(which, b, n_dyads, None, steps, quick, x64)
 
     assert not _same_as_fresh(blind_memo)
+
+
+def _programs(static_closed: bool, screens_only: bool = False) -> dict:
+    """The four-bar's screen (open and closed target), rank and refinement (a few steps) for small
+    blocks, through `cache.compiled`, each called on fixed inputs: {name: outputs as numpy}
+    (`screens_only`: the two screens)."""
+    from jaxlink.cache import compiled
+
+    f32 = np.float32
+    b, nj = 8, search.CRANK + 1 + N_DYADS
+    rng = np.random.default_rng(5)
+    arr = as_arrays(topologies(4))
+    topo = tuple(np.repeat(a[:1], b, 0) for a in (arr.parents, arr.active, arr.traced))
+    poses = rng.uniform(-1, 1, (b, nj, 2)).astype(f32)
+    arcs = np.stack([rng.uniform(0, 6, b), rng.uniform(1, 6, b)], 1).astype(f32)
+
+    def aval(x):
+        return jax.ShapeDtypeStruct(np.shape(x), np.asarray(x).dtype)
+
+    desc = np.linspace(0.5, 1.5, search.DESC_N).astype(f32)
+    calls = {f"screen-{'closed' if c else 'open'}": (search._screen_of, (jax.random.PRNGKey(3), *topo, desc), (c,))
+             for c in (static_closed, False)}
+    calls["rank"] = (search._rank, (*topo, poses, arcs, rng.uniform(-1, 1, (search.RANK_T, 2)).astype(f32), f32(1),
+                                    rng.uniform(0, 1, search.RANK_T).astype(f32)), ())
+    calls["refine"] = (search._refine_of, (*topo, poses, arcs, rng.uniform(-1, 1, (search.TARGET_N, 2)).astype(f32),
+                                           f32(0.01), f32(1), rng.uniform(0, 1, search.REFINE_T).astype(f32)), (5,))
+    out = {}
+    for name, (fun, args, static) in calls.items():
+        if screens_only and not name.startswith("screen"):
+            continue
+        prog = compiled(f"test-{name.split('-')[0]}", fun, tuple(aval(a) for a in args), static,
+                        {"xla_backend_optimization_level": 0})
+        out[name] = [np.asarray(x) for x in jax.tree_util.tree_leaves(prog(*args))]
+    return out
+
+
+def _same(a: dict, b: dict) -> bool:
+    return a.keys() == b.keys() and all(
+        len(a[k]) == len(b[k]) and all(x.shape == y.shape and np.array_equal(x, y, equal_nan=True)
+                                       for x, y in zip(a[k], b[k])) for k in a)
+
+
+def test_stored_programs_cold_warm_and_off_give_the_same_bits_and_a_wrong_key_is_caught(tmp_path, monkeypatch):
+    """`cache.compiled` (the search's programs, stored as traces beside the compilation cache): the
+    programs traced and stored (cold), loaded from the store (warm) and compiled without a store
+    (off) give the same outputs bit for bit; with the key blind to the static options, the open
+    target's screen is the stored closed one's, and the comparison fails."""
+    import jaxlink.cache as cache
+
+    before = jax.config.jax_compilation_cache_dir
+    try:
+        jax.config.update("jax_compilation_cache_dir", None)
+        assert not cache.stored_traces()
+        off = _programs(True)
+        (tmp_path / "good").mkdir()
+        (tmp_path / "blind").mkdir()
+        jax.config.update("jax_compilation_cache_dir", str(tmp_path / "good"))
+        cold = _programs(True)
+        stored = sorted(p.name for p in (tmp_path / "good").glob("*" + cache.TRACE_SUFFIX))
+        assert len(stored) == 4  # the screen twice (open, closed), the rank, the refinement
+        stores = []
+        monkeypatch.setattr(cache, "_store", lambda *a: stores.append(a))
+        warm = _programs(True)
+        assert stores == []  # every program came from the store: none traced again
+        monkeypatch.undo()
+        assert _same(cold, off) and _same(warm, off)
+        # the closed and the open target's screens differ (else a key blind to it could not be caught)
+        assert not all(np.array_equal(x, y, equal_nan=True) for x, y in zip(off["screen-closed"], off["screen-open"]))
+        real = cache._compiled_key
+        monkeypatch.setattr(cache, "_compiled_key",
+                            lambda name, fun, static, opts, spec: real(name, fun, (), opts, spec))
+        jax.config.update("jax_compilation_cache_dir", str(tmp_path / "blind"))
+        _programs(True, True)  # stores the closed screen under the key the open one then asks for
+        assert not _same(_programs(True, True), {k: off[k] for k in off if k.startswith("screen")})
+    finally:
+        jax.config.update("jax_compilation_cache_dir", before)

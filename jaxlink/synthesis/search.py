@@ -44,6 +44,7 @@ import jax.numpy as jnp
 import numpy as np
 import optax
 
+from ..cache import compiled
 from . import distance as _dist
 from . import spread as _spread
 from .assembly import Assembly, certify
@@ -129,12 +130,24 @@ def _compiled(which: str, b: int, n_dyads: int, closed: bool, steps: int, quick:
 
     topo = arg((b, n_dyads, 2), i32), arg((b, n_dyads), bool), arg((b,), i32)
     if which == "screen":
-        return _screen.lower(arg((2,), np.uint32), *topo, arg((DESC_N,)), closed=closed).compile(options)
+        return compiled("synthesis-screen", _screen_of, (arg((2,), np.uint32), *topo, arg((DESC_N,))),
+                        (closed,), options)
     poses, arcs = arg((b, nj, 2)), arg((b, 2))
     if which == "rank":
-        return _rank.lower(*topo, poses, arcs, arg((RANK_T, 2)), arg(()), arg((RANK_T,))).compile(options)
-    return _refine.lower(*topo, poses, arcs, arg((TARGET_N, 2)), arg(()), arg(()), arg((REFINE_T,)),
-                         steps=steps).compile(options)
+        return compiled("synthesis-rank", _rank, (*topo, poses, arcs, arg((RANK_T, 2)), arg(()), arg((RANK_T,))),
+                        (), options)
+    return compiled("synthesis-refine", _refine_of, (*topo, poses, arcs, arg((TARGET_N, 2)), arg(()), arg(()),
+                                                     arg((REFINE_T,))), (steps,), options)
+
+
+def _screen_of(key, parents, active, traced, target_desc, closed):
+    """`_screen` with its static option last (a stored program's signature: `cache.compiled`)."""
+    return _screen(key, parents, active, traced, target_desc, closed=closed)
+
+
+def _refine_of(parents, active, traced, poses, arcs, target, lr, closed, u, steps):
+    """`_refine` with its static option last (`cache.compiled`)."""
+    return _refine(parents, active, traced, poses, arcs, target, lr, closed, u, steps=steps)
 
 
 class Candidate(NamedTuple):
