@@ -217,28 +217,30 @@ def compiled(name: str, fun, avals: tuple, static: tuple = (), options: dict | N
     `jax.ShapeDtypeStruct`, each possibly placed on a device by its `sharding`) with the XLA
     compile `options`, through a stored trace like `traced`: the first process traces `fun` and
     stores the program; a later one with the same key (`name`, `fun`, the shapes and dtypes, the
-    static values and the options, jaxlink's source, JAX and jaxlib, the backend, x64) loads it
-    instead of tracing, and its compilation comes from the compilation cache. The same program
-    either way: the stored one is compiled from the trace it stores (tests/test_synthesis_memo.py).
-    The arguments' placement is not part of the key (a program is traced for no device and
-    compiled for the one its arguments name). Without the cache: plain `jax.jit(...).lower(...)`."""
+    static values, jaxlink's source, JAX and jaxlib, the backend, x64) loads it instead of tracing,
+    and its compilation (keyed by the program and the `options`) comes from the compilation cache.
+    The same program either way: the stored one is compiled from the trace it stores
+    (tests/test_synthesis_memo.py). Neither the arguments' placement nor the options are part of
+    the trace's key: a program is traced for no device, then compiled for the device its arguments
+    name with the options. Without the cache: plain `jax.jit(...).lower(...)`."""
     import jax
 
     if getattr(fun, "__closure__", None) or "<locals>" in getattr(fun, "__qualname__", "<locals>"):
         raise TypeError(f"compiled({name!r}): {fun!r} must be a module-level function without a closure")
     static = tuple(static)
     spec = tuple((tuple(a.shape), str(jax.dtypes.canonicalize_dtype(a.dtype))) for a in avals)
-    opts = tuple(sorted((options or {}).items()))
 
     def flat(*xs):
         return fun(*xs, *static)
 
-    target = None
+    target = jax.jit(flat)
     if stored_traces():
-        key = _compiled_key(name, fun, static, opts, spec)
+        key = _compiled_key(name, fun, static, spec)
         path = _trace_path(key)
-        target = _load_exported(key, path, spec)
-        if target is None:
+        stored = _read_stored(key, path, spec)
+        if stored is not None:
+            target = jax.jit(stored[0].call)
+        else:
             from jax import export
 
             try:
@@ -246,25 +248,23 @@ def compiled(name: str, fun, avals: tuple, static: tuple = (), options: dict | N
                 _store(key, path, exp.serialize())
                 target = jax.jit(exp.call)
             except Exception:  # noqa: BLE001 (cannot be exported or serialized here: no stored trace)
-                target = None
-    if target is None:
-        target = jax.jit(flat)
+                pass
     return target.lower(*avals).compile(options)
 
 
-def _compiled_key(name: str, fun, static: tuple, options: tuple, spec: tuple) -> str:
+def _compiled_key(name: str, fun, static: tuple, spec: tuple) -> str:
     """Everything a program of `compiled` depends on besides its arguments' values and placement."""
     import jax
     import jaxlib
 
-    return repr(("compiled", name, f"{fun.__module__}.{fun.__qualname__}", static, options, spec, source_digest(),
+    return repr(("compiled", name, f"{fun.__module__}.{fun.__qualname__}", static, spec, source_digest(),
                  jax.__version__, jaxlib.__version__, jax.default_backend(), bool(jax.config.read("jax_enable_x64"))))
 
 
-def _load_exported(key: str, path: str | None, spec: tuple):
-    """`jax.jit` of the stored program of `key` at `path` whose arguments are `spec`, or None."""
-    import jax
-
+def _read_stored(key: str, path: str | None, spec: tuple):
+    """`(Exported, serialized bytes)` of the program stored under `key` at `path` whose arguments
+    are `spec` (shapes, dtypes), or None: no file, or one that is damaged, truncated, of another
+    key or of other arguments (then traced again and replaced)."""
     if path is None or not os.path.exists(path):
         return None
     from jax import export
@@ -277,7 +277,7 @@ def _load_exported(key: str, path: str | None, spec: tuple):
         exp = export.deserialize(bytearray(stored))
         if spec != tuple((tuple(a.shape), str(a.dtype)) for a in exp.in_avals):
             return None
-        return jax.jit(exp.call)
+        return exp, stored
     except Exception:  # noqa: BLE001 (a stale or damaged file: trace again and replace it)
         return None
 
@@ -376,27 +376,13 @@ def _load_or_store(flat, leaves, key: str, path: str | None):
         return jax.jit(flat), True
     from jax import export
 
-    if os.path.exists(path):
-        try:
-            with open(path, "rb") as fh:
-                stored = _unpack(key, fh.read())
-            if stored is not None:
-                exp = export.deserialize(bytearray(stored))
-                if _spec(leaves) == tuple((tuple(a.shape), str(a.dtype)) for a in exp.in_avals):
-                    return jax.jit(exp.call), _LAPACK_NAME in stored
-        except Exception:  # noqa: BLE001 (a stale or damaged file: trace again and replace it)
-            pass
+    stored = _read_stored(key, path, _spec(leaves))
+    if stored is not None:
+        return jax.jit(stored[0].call), _LAPACK_NAME in stored[1]
     try:
         exp = export.export(jax.jit(flat))(*leaves)
         data = exp.serialize()
     except Exception:  # noqa: BLE001 (cannot be exported or serialized here: no stored trace)
         return jax.jit(flat), True
-    tmp = f"{path}.{os.getpid()}.tmp"
-    try:
-        with open(tmp, "wb") as fh:
-            fh.write(_pack(key, data))
-        os.replace(tmp, path)
-    except OSError:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
+    _store(key, path, data)
     return jax.jit(exp.call), _LAPACK_NAME in data

@@ -47,16 +47,20 @@ def register(sub) -> None:
                         "size: 4096 designs of 36 samples on a CPU)")
     p.add_argument("--progress", choices=("auto", "on", "off"), default="auto",
                    help="progress bar (auto: when stderr is a terminal)")
-    d = p.add_argument_group(
-        "several processes", "spread the search over N processes (hosts, or several on one host) with "
-                             "jax.distributed: start the same command N times, with --process-id 0 … N-1 and the "
-                             "same --coordinator; same result as one process; process 0 writes --out "
-                             "(docs/methods/optimize.md)")
+    add_distributed_arguments(p, "spread the search over N processes (hosts, or several on one host) with "
+                                 "jax.distributed: start the same command N times, with --process-id 0 … N-1 and "
+                                 "the same --coordinator; same result as one process; process 0 writes --out "
+                                 "(docs/methods/optimize.md)")
+    p.set_defaults(func=cmd_optimize)
+
+
+def add_distributed_arguments(p, description: str) -> None:
+    """The options of a command spread over several processes (`_distributed` reads them)."""
+    d = p.add_argument_group("several processes", description)
     d.add_argument("--coordinator", metavar="HOST:PORT", default=None,
                    help="address of process 0, which coordinates (a free port on its host)")
     d.add_argument("--num-processes", type=int, default=None, metavar="N", help="number of processes")
     d.add_argument("--process-id", type=int, default=None, metavar="I", help="this process's index, 0 … N-1")
-    p.set_defaults(func=cmd_optimize)
 
 
 def _distributed(args) -> bool:

@@ -6,6 +6,8 @@ import sys
 
 
 def register(sub) -> None:
+    from .optimize import add_distributed_arguments
+
     p = sub.add_parser(
         "synthesize", help="find a linkage (topology and dimensions) whose point traces a target path",
         description=(
@@ -41,15 +43,10 @@ def register(sub) -> None:
     p.add_argument("--out", metavar="DIR", default="synthesis",
                    help="write the files into this folder (default synthesis)")
     p.add_argument("--no-plot", action="store_true", help="do not draw the plot")
-    d = p.add_argument_group(
-        "several processes", "spread every round's candidates over N processes (hosts, or several on one host) "
-                             "with jax.distributed: start the same command N times, with --process-id 0 … N-1 and "
-                             "the same --coordinator; process 0 decides the rounds and writes the files, the others "
-                             "print nothing (docs/methods/synthesis.md)")
-    d.add_argument("--coordinator", metavar="HOST:PORT", default=None,
-                   help="address of process 0, which coordinates (a free port on its host)")
-    d.add_argument("--num-processes", type=int, default=None, metavar="N", help="number of processes")
-    d.add_argument("--process-id", type=int, default=None, metavar="I", help="this process's index, 0 … N-1")
+    add_distributed_arguments(p, "spread every round's candidates over N processes (hosts, or several on one "
+                                 "host) with jax.distributed: start the same command N times, with --process-id "
+                                 "0 … N-1 and the same --coordinator; process 0 decides the rounds and writes the "
+                                 "files, the others print nothing (docs/methods/synthesis.md)")
     p.set_defaults(func=cmd_synthesize)
 
 
