@@ -72,6 +72,38 @@ def link_curve(entry, n: int = 2000):
     return pos[:, nj - 1], ok
 
 
+def summarise(rows: list[dict]) -> dict:
+    """The letter table's summary (mean, median, against LInK and the four-bar), printed."""
+    d = np.array([r["distance"] for r in rows if r["distance"] is not None])
+    ld = np.array([r["link_distance"] for r in rows if r["link_distance"] is not None])
+    summary = {"letters": len(rows), "mean": float(d.mean()) if len(d) else None,
+               "median": float(np.median(d)) if len(d) else None,
+               "link_mean": float(ld.mean()) if len(ld) else None,
+               "link_median": float(np.median(ld)) if len(ld) else None,
+               "four_bar_mean": float(np.mean([r["four_bar"] for r in rows if r["four_bar"] is not None] or [np.nan])),
+               "worse_than_four_bar": int(sum(r["distance"] > r["four_bar"] for r in rows
+                                              if r["distance"] is not None and r["four_bar"] is not None)),
+               "better_than_link": int(sum(r["distance"] < r["link_distance"] for r in rows
+                                           if r["distance"] is not None and r["link_distance"] is not None)),
+               "max_time_s": max(r["time_s"] for r in rows)}
+    print(f"mean {summary['mean']:.4f}  median {summary['median']:.4f}  (LInK's mechanisms, same metric: mean "
+          f"{summary['link_mean']}, median {summary['link_median']}); better than LInK on "
+          f"{summary['better_than_link']}/{len(rows)}; slowest {summary['max_time_s']:.1f} s")
+    return summary
+
+
+def merge(paths: list[str], out: str) -> int:
+    """One table from the JSONs of several runs (e.g. groups of letters run side by side on one device)."""
+    runs = [json.loads(Path(p).read_text()) for p in paths]
+    rows = sorted((r for run in runs for r in run["rows"]), key=lambda r: r["letter"])
+    merged = {"benchmark": "synthesis_letters", "settings": runs[0]["settings"] | {"merged": len(runs)},
+              "machine": runs[0]["machine"], "rows": rows, "summary": summarise(rows)}
+    Path(out).parent.mkdir(parents=True, exist_ok=True)
+    Path(out).write_text(json.dumps(merged, indent=2) + "\n")
+    print(f"wrote {out}")
+    return 0
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--letters", default=os.environ.get("JAXLINK_LINKABC"), help="alphabet.npy (26, 200, 2)")
@@ -81,8 +113,12 @@ def main() -> int:
     ap.add_argument("--samples", type=int, default=8192)
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--cores", type=int, default=None, help="pin to this many cores")
+    ap.add_argument("--log", action="store_true", help="print each round (its best distance and time)")
     ap.add_argument("--out", default=str(Path(__file__).parent / "results" / "synthesis_letters.json"))
+    ap.add_argument("--merge", nargs="+", metavar="JSON", help="only merge these runs' tables into --out")
     args = ap.parse_args()
+    if args.merge:
+        return merge(args.merge, args.out)
     if not args.letters:
         ap.error("give --letters PATH or set JAXLINK_LINKABC")
     letters = np.load(args.letters)
@@ -90,13 +126,23 @@ def main() -> int:
     link = np.load(res_path, allow_pickle=True) if res_path.exists() else None
     which = [c for c in (args.only or "ABCDEFGHIJKLMNOPQRSTUVWXYZ")]
     rows = []
+
+    def save(rows, summary=None):  # after every letter too: a run cut short keeps what it measured
+        out = {"benchmark": "synthesis_letters", "settings": vars(args) | {"letters": "LINK-ABC (not stored)"},
+               "machine": {"cpus": len(os.sched_getaffinity(0)), "platform": platform.platform(),
+                           "device": str(jax.devices()[0])},
+               "rows": rows, "summary": summary}
+        Path(args.out).parent.mkdir(parents=True, exist_ok=True)
+        Path(args.out).write_text(json.dumps(out, indent=2) + "\n")
+
     print(f"{'letter':<7}{'closed':<7}{'topology':<26}{'joints':>7}{'distance':>10}{'four-bar':>10}"
           f"{'time_s':>8}{'LInK':>9}{'joints':>7}{'stored':>8}")
     for ch in which:
         i = ord(ch) - 65
         t0 = time.perf_counter()
         r = jl.synthesize(letters[i], time_limit=args.time_limit, seed=args.seed, max_links=args.max_links,
-                          samples=args.samples)
+                          samples=args.samples,
+                          log=(lambda m, ch=ch: print(f"  {ch} {m}", flush=True)) if args.log else None)
         wall = time.perf_counter() - t0
         tgt = r.target
         fb = [d for d in r.designs if d.topology == "four-bar"]
@@ -113,31 +159,13 @@ def main() -> int:
                "link_stored_chamfer": stored,
                "link_joints": int((np.asarray(link[i][0][0]).sum(-1) > 0).sum()) if link is not None else None}
         rows.append(row)
+        save(rows)
         print(f"{ch:<7}{str(tgt.closed):<7}{row['topology'] or '-':<26}{row['joints'] or 0:>7}"
               f"{row['distance'] or float('nan'):>10.4f}{row['four_bar'] or float('nan'):>10.4f}{wall:>8.1f}"
               f"{theirs if theirs is not None else float('nan'):>9.4f}{row['link_joints'] or 0:>7}"
               f"{stored if stored is not None else float('nan'):>8.4f}", flush=True)
-    d = np.array([r["distance"] for r in rows if r["distance"] is not None])
-    ld = np.array([r["link_distance"] for r in rows if r["link_distance"] is not None])
-    summary = {"letters": len(rows), "mean": float(d.mean()) if len(d) else None,
-               "median": float(np.median(d)) if len(d) else None,
-               "link_mean": float(ld.mean()) if len(ld) else None,
-               "link_median": float(np.median(ld)) if len(ld) else None,
-               "four_bar_mean": float(np.mean([r["four_bar"] for r in rows if r["four_bar"] is not None] or [np.nan])),
-               "worse_than_four_bar": int(sum(r["distance"] > r["four_bar"] for r in rows
-                                              if r["distance"] is not None and r["four_bar"] is not None)),
-               "better_than_link": int(sum(r["distance"] < r["link_distance"] for r in rows
-                                           if r["distance"] is not None and r["link_distance"] is not None)),
-               "max_time_s": max(r["time_s"] for r in rows)}
-    print(f"mean {summary['mean']:.4f}  median {summary['median']:.4f}  (LInK's mechanisms, same metric: mean "
-          f"{summary['link_mean']}, median {summary['link_median']}); better than LInK on "
-          f"{summary['better_than_link']}/{len(rows)}; slowest {summary['max_time_s']:.1f} s")
-    out = {"benchmark": "synthesis_letters", "settings": vars(args) | {"letters": "LINK-ABC (not stored)"},
-           "machine": {"cpus": len(os.sched_getaffinity(0)), "platform": platform.platform(),
-                       "device": str(jax.devices()[0])},
-           "rows": rows, "summary": summary}
-    Path(args.out).parent.mkdir(parents=True, exist_ok=True)
-    Path(args.out).write_text(json.dumps(out, indent=2) + "\n")
+    summary = summarise(rows)
+    save(rows, summary)
     print(f"wrote {args.out}")
     return 0
 
