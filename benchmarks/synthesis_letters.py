@@ -96,7 +96,8 @@ def merge(paths: list[str], out: str) -> int:
     """One table from the JSONs of several runs (e.g. groups of letters run side by side on one device)."""
     runs = [json.loads(Path(p).read_text()) for p in paths]
     rows = sorted((r for run in runs for r in run["rows"]), key=lambda r: r["letter"])
-    merged = {"benchmark": "synthesis_letters", "settings": runs[0]["settings"] | {"merged": len(runs)},
+    merged = {"benchmark": "synthesis_letters", "settings": runs[0]["settings"] | {
+                  "only": "".join(r["letter"] for r in rows), "out": out, "merged": len(runs)},
               "machine": runs[0]["machine"], "rows": rows, "summary": summarise(rows)}
     Path(out).parent.mkdir(parents=True, exist_ok=True)
     Path(out).write_text(json.dumps(merged, indent=2) + "\n")
