@@ -11,9 +11,10 @@ def register(sub) -> None:
     p = sub.add_parser(
         "synthesize", help="find a linkage (topology and dimensions) whose point traces a target path",
         description=(
-            "Path synthesis: one-degree-of-freedom revolute linkages grown by dyads (the four-bar, Watt and "
-            "Stephenson six-bars) whose traced point follows TARGET (a .csv of x, y, a .npy (N, 2) array or an "
-            ".svg path) up to translation, rotation and scale, scored by the symmetric chamfer distance of the "
+            "Path synthesis: one-degree-of-freedom revolute linkages grown by dyads (the four-bar, the Watt and "
+            "Stephenson six-bars, eight-bars) whose traced point follows TARGET (a .csv of x, y, a .npy (N, 2) "
+            "array or an .svg path) up to translation, rotation and scale, scored by the symmetric chamfer "
+            "distance of the "
             "normalised curves (docs/methods/synthesis.md). Writes the best mechanism as a sketch file that "
             "`jaxlink kinematics` replays, every topology's best, a JSON of the ranked designs and a plot."
         ),

@@ -3,7 +3,7 @@
 - `target`: the target curve read from CSV, NPY or SVG; arclength resampling;
 - `distance`: the field's distance (symmetric chamfer of the normalised curves at the best
   rotation), the placement, the ordered distance, the smooth surrogate;
-- `topology`: one-DOF revolute linkages grown by dyads (four-bar, Watt and Stephenson six-bars);
+- `topology`: one-DOF revolute linkages grown by dyads (four-bar, Watt and Stephenson six-bars, eight-bars);
 - `tracer`: batched (JAX) and exact (NumPy) tracing from a pose, the dyads' reach margins;
 - `assembly`: the check that a candidate assembles over its whole interval on its branch;
 - `search`: screen → rank → refine → score rounds;

@@ -6,7 +6,8 @@ earlier joints by two lengths and a branch sign (a dyad: circle–circle interse
 two parents lie on one rigid body adds a point of that body (a ternary link, a coupler point); on
 two different bodies it adds two binary links. So the four-bar with its coupler point, the Watt and
 Stephenson six-bars and, growing further, eight-bars are all such lists (`grow`). The traced point
-is any moving joint.
+is any moving joint. A dyad may end at a joint other links already use (a frame pivot, the crank
+pin): that pin then joins three links.
 
 The topologies of one search are padded to the same number of dyads so that all of them share one
 batched program (`as_arrays`): padding dyads are inactive.
@@ -20,7 +21,8 @@ import numpy as np
 
 N_FRAME = 3
 CRANK = 3
-MAX_DYADS = 6
+#: the most dyads of a searched topology: 4 + 16 = 20 joints at most (LInK's largest)
+MAX_DYADS = 16
 MAX_JOINTS = CRANK + 1 + MAX_DYADS
 FRAME_BODY = -1
 
@@ -104,16 +106,38 @@ def _six_bar(name: str, x1: str, x2: str) -> Topology:
     return grow(t, at[x1], d)
 
 
+#: the six-bars of `topologies`: (name, the body of X1, the body of X2)
+SIX_BARS = (("watt-coupler-crank", "coupler", "crank"), ("watt-coupler-rocker", "coupler", "rocker"),
+            ("watt-rocker-frame", "rocker", "frame"), ("watt-crank-frame", "crank", "frame"),
+            ("stephenson-coupler-frame", "coupler", "frame"), ("stephenson-rocker-crank", "rocker", "crank"))
+#: the eight-bars of `topologies`: the six-bars they grow from, and the joints their last dyad ends at
+EIGHT_FROM = ("watt-coupler-crank", "watt-coupler-rocker", "stephenson-coupler-frame")
+EIGHT_AT = {"crank-pivot": 0, "rocker-pivot": 1, "crank-pin": CRANK}
+
+
+def _eight_bar(six: Topology, at: str) -> Topology:
+    """The six-bar and one more dyad D' between its traced point E (a point of its last link) and the
+    joint `at` (`EIGHT_AT`: the frame pivot of the crank or of the rocker, or the crank pin), traced
+    at a point of the new link E–D': eight links."""
+    nj = CRANK + 1 + len(six.dyads)
+    t = grow(six, six.traced, EIGHT_AT[at], name=f"{six.name}+{at}", trace=False)
+    return grow(t, six.traced, nj)
+
+
 def topologies(max_links: int = 8) -> list[Topology]:
     """The built-in topologies up to `max_links` links (the frame included): the four-bar with a
     coupler point; the six-bars — Watt (the two ternary links adjacent) with the dyad between
     coupler and crank, coupler and rocker, rocker and frame, crank and frame; Stephenson (not
-    adjacent) between coupler and frame, rocker and crank."""
+    adjacent) between coupler and frame, rocker and crank; the eight-bars grown from three of
+    the six-bars (`EIGHT_FROM`) by a dyad from the traced link to a frame pivot or the crank pin
+    (`_eight_bar`), where that joint is not already on the traced link."""
     out = [_four_bar()]
-    six = [("watt-coupler-crank", "coupler", "crank"), ("watt-coupler-rocker", "coupler", "rocker"),
-           ("watt-rocker-frame", "rocker", "frame"), ("watt-crank-frame", "crank", "frame"),
-           ("stephenson-coupler-frame", "coupler", "frame"), ("stephenson-rocker-crank", "rocker", "crank")]
-    out += [_six_bar(*s) for s in six]
+    six = [_six_bar(*s) for s in SIX_BARS]
+    out += six
+    for t in six:
+        if t.name in EIGHT_FROM:
+            on_traced = {j for b in bodies(t) if t.traced in b for j in b}
+            out += [_eight_bar(t, at) for at, j in EIGHT_AT.items() if j not in on_traced]
     return [t for t in out if t.n_links <= max_links]
 
 
