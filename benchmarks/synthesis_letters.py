@@ -96,6 +96,8 @@ def merge(paths: list[str], out: str) -> int:
     """One table from the JSONs of several runs (e.g. groups of letters run side by side on one device)."""
     runs = [json.loads(Path(p).read_text()) for p in paths]
     rows = sorted((r for run in runs for r in run["rows"]), key=lambda r: r["letter"])
+    if not rows:
+        raise SystemExit("no letter finished yet")
     merged = {"benchmark": "synthesis_letters", "settings": runs[0]["settings"] | {
                   "only": "".join(r["letter"] for r in rows), "out": out, "merged": len(runs)},
               "machine": runs[0]["machine"], "rows": rows, "summary": summarise(rows)}
@@ -114,6 +116,8 @@ def main() -> int:
     ap.add_argument("--samples", type=int, default=8192)
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--cores", type=int, default=None, help="pin to this many cores")
+    ap.add_argument("--cache", action="store_true",
+                    help="jaxlink's persistent compilation cache on (as `jaxlink synthesize` has it): a warm start")
     ap.add_argument("--log", action="store_true", help="print each round (its best distance and time)")
     ap.add_argument("--out", default=str(Path(__file__).parent / "results" / "synthesis_letters.json"))
     ap.add_argument("--merge", nargs="+", metavar="JSON", help="only merge these runs' tables into --out")
@@ -122,6 +126,8 @@ def main() -> int:
         return merge(args.merge, args.out)
     if not args.letters:
         ap.error("give --letters PATH or set JAXLINK_LINKABC")
+    if args.cache:
+        jl.enable_compilation_cache()
     letters = np.load(args.letters)
     res_path = Path(args.letters).with_name("alpha_res.npy")
     link = np.load(res_path, allow_pickle=True) if res_path.exists() else None
@@ -136,7 +142,7 @@ def main() -> int:
         Path(args.out).parent.mkdir(parents=True, exist_ok=True)
         Path(args.out).write_text(json.dumps(out, indent=2) + "\n")
 
-    print(f"{'letter':<7}{'closed':<7}{'topology':<26}{'joints':>7}{'distance':>10}{'four-bar':>10}"
+    print(f"{'letter':<7}{'closed':<7}{'topology':<38}{'joints':>7}{'distance':>10}{'four-bar':>10}"
           f"{'time_s':>8}{'LInK':>9}{'joints':>7}{'stored':>8}")
     for ch in which:
         i = ord(ch) - 65
@@ -161,7 +167,7 @@ def main() -> int:
                "link_joints": int((np.asarray(link[i][0][0]).sum(-1) > 0).sum()) if link is not None else None}
         rows.append(row)
         save(rows)
-        print(f"{ch:<7}{str(tgt.closed):<7}{row['topology'] or '-':<26}{row['joints'] or 0:>7}"
+        print(f"{ch:<7}{str(tgt.closed):<7}{row['topology'] or '-':<38}{row['joints'] or 0:>7}"
               f"{row['distance'] or float('nan'):>10.4f}{row['four_bar'] or float('nan'):>10.4f}{wall:>8.1f}"
               f"{theirs if theirs is not None else float('nan'):>9.4f}{row['link_joints'] or 0:>7}"
               f"{stored if stored is not None else float('nan'):>8.4f}", flush=True)

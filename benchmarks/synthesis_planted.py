@@ -9,8 +9,8 @@ when every dyad closes over the whole turn (`assembly.certify`, smallest margin 
 `--min-margin`). Its traced joint's path (the project's exact tracer, `tracer.trace_exact`,
 `--inputs` inputs) is the target: a closed one over the whole turn (even cases), or an open one
 over a random sub-interval of a quarter to three quarters of the turn (odd cases).
-`jaxlink.synthesize` then searches the default topologies (`--max-links`, 8: the four-bar and the
-six six-bars) within `--time-limit` seconds.
+`jaxlink.synthesize` then searches the default topologies (`--max-links`, 8: the four-bar, the
+six six-bars and the nine eight-bars) within `--time-limit` seconds.
 
 **The discretisation floor** of a target (docs/methods/synthesis.md): the distance D between two
 samplings of the planted curve itself that are half a sample apart — the exact curve (traced at 20
@@ -19,9 +19,10 @@ curve resampled at the arclength positions shifted by half a spacing (closed: s 
 k = 0 … n − 1; open: s = (k + ½) L / (n − 1), k = 0 … n − 2), both normalised, at the best
 rotation. A design is **recovered** when its D ≤ `--factor` × the floor (2 by default).
 
-The eight-bars' topology is not among the default set; with `--eight-given` each eight-bar case is
-searched once more with its own topology given (`synthesize(topologies=[topology])`), which
-separates a search failure from a missing topology.
+The planted eight-bars' topology (their last dyad between two moving joints) is not among the
+default set (whose eight-bars end their last dyad at a frame pivot or the crank pin); with
+`--eight-given` each eight-bar case is searched once more with its own topology given
+(`synthesize(topologies=[topology])`), which separates a search failure from a missing topology.
 
     python benchmarks/synthesis_planted.py [--count 4] [--time-limit 20] [--classes 4,6w,6s,8] [--cores 2]
 
