@@ -56,8 +56,8 @@ from jaxlink.synthesis import topology as T  # noqa: E402
 
 certify, arclength_resample, trace_exact = assembly.certify, target.arclength_resample, tracer.trace_exact
 
-WATT = [t for t in T.topologies() if t.name.startswith("watt")]
-STEPHENSON = [t for t in T.topologies() if t.name.startswith("stephenson")]
+WATT = [t for t in T.topologies(6) if t.name.startswith("watt")]  # the six-bars (the eight-bars grow them)
+STEPHENSON = [t for t in T.topologies(6) if t.name.startswith("stephenson")]
 
 
 def eight_bar(rng: np.random.Generator) -> T.Topology:

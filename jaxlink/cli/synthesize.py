@@ -31,7 +31,9 @@ def register(sub) -> None:
     p.add_argument("--rounds", type=int, default=None, metavar="N",
                    help="run exactly N rounds (polishing rounds counted) whatever the time: a result that does "
                         "not depend on the machine's speed (--time-limit then only chooses the compile level)")
-    p.add_argument("--max-links", type=int, default=8, help="most links, the frame counted (default 8)")
+    p.add_argument("--max-links", type=int, default=8,
+                   help="most links, the frame counted (default 8: the eight-bars too; 6: the four-bar and "
+                        "six-bars, a round about half as long)")
     p.add_argument("--topologies", default=None, metavar="NAMES",
                    help="comma-separated topology names to search (default: all up to --max-links)")
     p.add_argument("--samples", type=int, default=8192, metavar="N",
