@@ -9,6 +9,10 @@
 # into an ignored folder that travels, e.g. .whl/linkabc/ (carry ".whl"), or set LINKABC.
 # Missing packages travel as wheels in .whl/ (see device_run.sh).
 # XLA_PYTHON_CLIENT_PREALLOCATE=false: the processes share the device's memory. TOTAL=0: no tests.
+# Measured on an H200 (2026-11-26): shared 5 ways a full round took about 3.5 s (16-19 rounds a
+# letter in 60 s), shared 13 ways 15-28 s (2-3 rounds): sharing is not one letter on one GPU. The
+# GPU goal's measurement in a session's 15 minutes: ONLY=ABCDEFGHIJKLM PROCS=2 WARM=1 TOTAL=0
+# (7 letters a process, about 8 minutes), the other 13 letters in a later session, merged with --merge.
 T0=$(date +%s)
 export PYTHONUNBUFFERED=1 XLA_PYTHON_CLIENT_PREALLOCATE=false
 if ls .whl/*.whl >/dev/null 2>&1; then
