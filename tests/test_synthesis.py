@@ -253,6 +253,9 @@ def test_topology_objects_are_searched():
     r = synthesize(target, topologies=[mine], time_limit=1, count=400)
     assert [d.topology for d in r.designs] == ["my-four-bar"] and r.best.joints == 5
     assert r.best.distance <= 1.5 * _floor(target, True)
+    for bad in (3, 0, -1, 4.5, True):
+        with pytest.raises(MechanismError, match="max_links"):
+            synthesize(target, max_links=bad, time_limit=1)
     with pytest.raises(MechanismError, match="unknown topology"):
         synthesize(target, topologies=["no-such-bar"], time_limit=1)
     big = T.Topology("seventeen", tuple([(T.CRANK, 1)] * 17), 20)
