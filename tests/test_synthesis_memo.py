@@ -60,8 +60,9 @@ def test_memoized_program_equals_a_fresh_compile_and_a_wrong_key_is_caught():
 def _programs(static_closed: bool, screens_only: bool = False, only: str | None = None,
               options: dict | None = None) -> dict:
     """The four-bar's screen (open and closed target), rank and refinement (a few steps) for small
-    blocks, through `cache.compiled`, each called on fixed inputs: {name: outputs as numpy}
-    (`screens_only`: the two screens; `only`: that one). XLA's lowest level unless `options`."""
+    blocks, and the float64 polish's value and gradient, through `cache.compiled`, each called on
+    fixed inputs: {name: outputs as numpy} (`screens_only`: the two screens; `only`: that one).
+    XLA's lowest level unless `options`."""
     from jaxlink.cache import compiled
 
     f32 = np.float32
@@ -82,6 +83,12 @@ def _programs(static_closed: bool, screens_only: bool = False, only: str | None 
                                     rng.uniform(0, 1, search.RANK_T).astype(f32)), ())
     calls["refine"] = (search._refine_of, (*topo, poses, arcs, rng.uniform(-1, 1, (search.TARGET_N, 2)).astype(f32),
                                            f32(0.01), f32(1), rng.uniform(0, 1, search.REFINE_T).astype(f32)), (5,))
+    from jaxlink.synthesis import polish
+
+    x = np.concatenate([poses[0].ravel(), arcs[0]]).astype(np.float64)
+    calls["polish"] = (polish._value_and_grad, (x, topo[0][0], topo[1][0], topo[2][0],
+                                                rng.uniform(-1, 1, (polish.POLISH_T, 2)), np.float64(1),
+                                                np.linspace(0, 1, polish.POLISH_T), np.float64(0.003)), ())
     out = {}
     for name, (fun, args, static) in calls.items():
         if (screens_only and not name.startswith("screen")) or (only and name != only):
@@ -115,7 +122,7 @@ def test_stored_programs_cold_warm_and_off_give_the_same_bits_and_a_wrong_key_is
         jax.config.update("jax_compilation_cache_dir", str(tmp_path / "good"))
         cold = _programs(True)
         stored = sorted(p.name for p in (tmp_path / "good").glob("*" + cache.TRACE_SUFFIX))
-        assert len(stored) == 4  # the screen twice (open, closed), the rank, the refinement
+        assert len(stored) == 5  # the screen twice (open, closed), the rank, the refinement, the polish
         stores = []
         monkeypatch.setattr(cache, "_store", lambda *a: stores.append(a))
         warm = _programs(True)

@@ -48,6 +48,9 @@ from ..cache import compiled
 from . import distance as _dist
 from . import spread as _spread
 from .assembly import Assembly, certify
+from .polish import BACK
+from .polish import polish as _polish
+from .polish import program as _polish_program
 from .sortnet import sort_first
 from .target import Target, arclength_resample
 from .topology import CRANK, Topology, as_arrays
@@ -82,16 +85,19 @@ class Programs(NamedTuple):
     screen: Callable
     rank: Callable
     refine: Callable
+    polish: Callable | None = None
 
 
 def programs(n_topos: int, n_dyads: int, closed: bool, *, samples: int, screen_keep: int, refine: int,
-             steps: int, quick: bool = False, where: _spread.Layout | None = None) -> Programs:
+             steps: int, quick: bool = False, where: _spread.Layout | None = None,
+             polish: bool = False) -> Programs:
     """Compile the screen, the rank and the refinement for these shapes, all three at once (XLA
     compiles in parallel threads; on a cold start compiling is most of a short search's time).
     The rank compiles at XLA's lowest optimisation level (about half the compile time, its run
     time about the same); the refinement too when `quick` (it then runs about twice as long: for
     short searches), and the screen when `quick` and `closed` (an open target's screen, 64
-    sub-arcs a candidate, would run longer than its compiling saves).
+    sub-arcs a candidate, would run longer than its compiling saves). `polish`: the float64
+    polish's program too (`polish.program`, one for this process, compiled beside the others).
     Each program computes one block of its batch (`spread.blocks`, at most `SCREEN_BLOCK`,
     `RANK_BLOCK`, `REFINE_BLOCK` rows), the same block whatever the devices and processes (`where`,
     default `spread.layout()`), and is called on whole batches (`spread.Blocked`)."""
@@ -106,11 +112,15 @@ def programs(n_topos: int, n_dyads: int, closed: bool, *, samples: int, screen_k
         raise ValueError(f"{where.devices} devices asked for, {len(jax.local_devices())} here")
     block = [_spread.blocks(n, cap)[1] for n, cap in zip(sizes, caps)]
     tasks = [(job, b, d) for job, b in zip(jobs, block) for d in range(where.devices)]
-    with ThreadPoolExecutor(len(tasks)) as ex:
+    with ThreadPoolExecutor(len(tasks) + polish) as ex:
+        pol = ex.submit(_polish_program, n_dyads) if polish else None
         compiled = list(ex.map(lambda t: _compiled(t[0][0], t[1], *t[0][1:], x64, t[2]), tasks))
+        pol_prog = pol.result() if pol is not None else None
     per = [compiled[i * where.devices:(i + 1) * where.devices] for i in range(len(jobs))]
     rows, keyed = ((1, 2, 3), (0, 1, 2, 3, 4), (0, 1, 2, 3, 4)), (0, None, None)
-    return Programs(*(_spread.Blocked(c, r, k, where, n, b) for c, r, k, n, b in zip(per, rows, keyed, sizes, block)))
+    screen, rank, refine_ = (_spread.Blocked(c, r, k, where, n, b)
+                             for c, r, k, n, b in zip(per, rows, keyed, sizes, block))
+    return Programs(screen, rank, refine_, pol_prog)
 
 
 @functools.lru_cache(maxsize=32)
@@ -153,7 +163,8 @@ def _refine_of(parents, active, traced, poses, arcs, target, lr, closed, u, step
 class Candidate(NamedTuple):
     """A scored mechanism: its `topology`, `pose` (joint positions at input offset 0, the search's
     own coordinates), input offsets `start`, `span` (rad) of the traced interval, the exact
-    `match` (distance and placement), the `assembly` check, and when it was found (s)."""
+    `match` (distance and placement), the `assembly` check, when it was found (s), and whether it
+    is the result of the float64 `polish`."""
 
     topology: Topology
     pose: np.ndarray
@@ -162,6 +173,7 @@ class Candidate(NamedTuple):
     match: _dist.Match
     assembly: Assembly
     found_s: float
+    polished: bool = False
 
 
 def _radii(curve, closed: bool):
@@ -404,7 +416,7 @@ def search(target: Target, topos: list[Topology], *, time_limit: float, seed: in
            rounds: int | None = None, samples: int = 8192, screen_keep: int = 128, refine: int = 8,
            steps: int = 300, n_trace: int = 1000, n_points: int = _dist.N_POINTS, per_topology: int = 2,
            lr: float = 0.01, jitter: float = 0.02, quick: bool | None = None, t0: float | None = None,
-           log=None) -> list[Candidate]:
+           finish: int = 4, log=None) -> list[Candidate]:
     """Rounds of screen → rank → refine → score until `time_limit` seconds (at least one round).
     `quick` (`programs`; default: when `time_limit` ≤ 15 s) trades run time for compile time.
     After each full round, and whenever the time left is too short for another full round but not
@@ -413,6 +425,10 @@ def search(target: Target, topos: list[Topology], *, time_limit: float, seed: in
     the time limit ignored (it still chooses `quick`): the same result on any machine, any number
     of devices or processes. Several processes (`jax.distributed`): each computes its share of
     every batch, all hold the same results, process 0's clock decides the rounds (`spread`).
+    `finish`: after every round that round's best candidate, and after the last round up to `finish`
+    more (`_to_polish`), are polished in float64 (`polish`), each if a polish as long as the last one
+    fits in the time left (with `rounds`: always). Each polished candidate is scored like the others
+    and added beside its original.
     Returns every scored candidate that assembles, best first."""
     if rounds is not None and (isinstance(rounds, bool) or not isinstance(rounds, (int, np.integer)) or rounds < 1):
         raise ValueError(f"rounds = {rounds!r}: a whole number of rounds, at least 1")
@@ -421,7 +437,7 @@ def search(target: Target, topos: list[Topology], *, time_limit: float, seed: in
     arr = as_arrays(topos)
     prog = programs(len(topos), arr.parents.shape[1], closed, samples=samples, screen_keep=screen_keep,
                     refine=refine, steps=steps,
-                    quick=time_limit <= 15.0 if quick is None else quick)
+                    quick=time_limit <= 15.0 if quick is None else quick, polish=finish > 0)
     tpts = _dist.normalise(arclength_resample(target.points, TARGET_N, closed))[0]
     tdesc = _desc(target.points, closed)
     trank = jnp.asarray(_dist.normalise(arclength_resample(target.points, RANK_T, closed))[0], _DT)
@@ -438,8 +454,26 @@ def search(target: Target, topos: list[Topology], *, time_limit: float, seed: in
     nsl = min(refine, min(screen_keep, samples * len(arcs_all)))  # refinement slots per topology
     stix = np.repeat(np.arange(len(topos)), nsl)  # the topology of each slot (a full round)
     polish = False
+    t_polish = None  # the seconds one float64 polish took (the time kept free for the last ones)
+
+    origins: set[int] = set()  # the candidates polished (by id)
+
+    def polish_one(c: Candidate) -> None:
+        nonlocal t_polish
+        t1 = time.perf_counter()
+        origins.add(id(c))
+        ti = topos.index(c.topology)
+        new = _polished(c, arr.parents[ti], arr.active[ti], int(arr.traced[ti]), target, n_trace, n_points, t0)
+        if new is not None:
+            found.append(new)
+        t_polish = time.perf_counter() - t1  # the estimate of the next one
+        if log is not None:
+            log(f"polished {c.topology.name}: {c.match.distance:.4f} -> "
+                f"{new.match.distance if new is not None else float('nan'):.4f}, {time.perf_counter() - t0:.1f} s")
+
     while True:
         rnd += 1
+        n_before = len(found)
         if polish:
             stix, poses0, arcs0 = _polish_slots(elites, elite_vals, len(stix), jitter, closed, rng)
             rank_ok = np.ones(len(stix), bool)
@@ -472,11 +506,16 @@ def search(target: Target, topos: list[Topology], *, time_limit: float, seed: in
             log(f"round {rnd}{' (polish)' if polish else ''}: {len(found)} candidates, best distance {best:.4f}, "
                 f"{time.perf_counter() - t0:.1f} s")
         now = time.perf_counter()
-        dur, round_start = now - round_start, now
+        dur = now - round_start
         if polish:
             polish_dur = dur
         else:
             full_dur, polish_dur = dur, now - t_ref  # the compiling is done before the first round
+        if finish > 0:  # this round's best, polished in float64, if one as long as the last fits
+            mine = _to_polish(found[n_before:], origins, 1, min((c.match.distance for c in found), default=np.inf))
+            if mine and (rounds is not None or _spread.agreed(int(now - t0 + (t_polish or 0.0) <= time_limit))):
+                polish_one(mine[0])
+        now = round_start = time.perf_counter()
         if rounds is not None:
             if rnd >= rounds:
                 break
@@ -495,5 +534,43 @@ def search(target: Target, topos: list[Topology], *, time_limit: float, seed: in
         if nxt < 0:
             break
         polish = nxt == 1
+    if finish > 0 and t_polish is not None:
+        for c in _to_polish(found, origins, finish):
+            if rounds is None and not _spread.agreed(int(time.perf_counter() - t0 + t_polish <= time_limit)):
+                break
+            polish_one(c)
     found.sort(key=lambda c: c.match.distance)
     return found
+
+
+def _to_polish(found: list[Candidate], origins: set[int], n: int, best: float | None = None) -> list[Candidate]:
+    """Up to `n` candidates of `found` to polish: not polished before and not a polish's result,
+    within twice the `best` distance (default: the best of `found`), best first; the best of each
+    topology first, then the second best of each."""
+    if not found:
+        return []
+    limit = 2.0 * (min(c.match.distance for c in found) if best is None else best)
+    pool = sorted((c for c in found if not c.polished and id(c) not in origins and c.match.distance <= limit),
+                  key=lambda c: c.match.distance)
+    taken: list[Candidate] = []
+    for per in (1, 2):
+        for c in pool:
+            if len(taken) == n:
+                return taken
+            if all(t is not c for t in taken) and sum(t.topology.name == c.topology.name for t in taken) < per:
+                taken.append(c)
+    return taken
+
+
+def _polished(c: Candidate, parents, active, traced: int, target: Target, n_trace: int, n_points: int,
+              t0: float) -> Candidate | None:
+    """`c` polished (`polish.polish`) and scored; if it does not assemble, the first point back
+    towards `c` (`polish.BACK`) that does; None if none does."""
+    pose, start, span = _polish(parents, active, traced, c.pose, c.start, c.span, target, n_points=n_points)
+    for f in BACK:
+        p = c.pose + f * (pose - c.pose)
+        st, sp = c.start + f * (start - c.start), c.span + f * (span - c.span)
+        m, asm = score(c.topology, p, st, sp, target, n_trace=n_trace, n_points=n_points)
+        if np.isfinite(m.distance) and asm.ok:
+            return Candidate(c.topology, p, st, sp, m, asm, time.perf_counter() - t0, True)
+    return None

@@ -1,0 +1,100 @@
+"""The search's last step: a candidate polished in float64 by L-BFGS on a sharper surrogate.
+
+The refinement (`search`) runs Adam in float32 for a fixed number of steps on `distance.soft_chamfer`
+at τ = 0.01 over 128 samples against the target at 100 points, its margin penalty keeping every
+dyad's reach margin above 0.02: cheap enough for hundreds of candidates a round, but neither
+converged nor sharp (at distances of 0.01–0.1, τ = 0.01 is no small smoothing). `polish` takes
+one candidate further: scipy's L-BFGS-B (`ITERS` iterations at each τ of `TAUS`, the first
+a continuation step for the second) on the same surrogate in float64 over `POLISH_T` samples
+against the target at `distance.N_POINTS` (the distance's own resolution), with the margin
+penalty `WEIGHT` · Σ max(0, `FLOOR` − S)² summed over the samples: a dyad may come closer to its
+dead centre (a letter's corner is often one) yet is pushed back hard from it. The value and
+gradient are one compiled program (`program`, stored like the search's, `cache.compiled`); the
+optimizer runs on the host, so the result is the same in every process of a group.
+
+The polished candidate is checked like any other (`search.score`: traced exactly, certified over
+its whole interval, matched). If it does not assemble over its interval — L-BFGS may end a hair
+across a dead centre — the points back along the segment from the start, at `BACK` of the way,
+are tried in turn and the first that assembles is the result (`search` keeps whichever of the
+polished and the original is nearer the target).
+"""
+
+from __future__ import annotations
+
+import functools
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from ..cache import compiled
+from . import distance as _dist
+from .target import Target, arclength_resample
+from .topology import CRANK
+from .tracer import trace
+
+POLISH_T = 256
+TAUS = (0.01, 0.003)
+ITERS = 400
+FLOOR = 0.002
+WEIGHT = 1000.0
+BACK = (1.0, 0.9, 0.75, 0.5, 0.25)
+
+
+def _loss(x, parents, active, traced, target, closed, u, tau):
+    nj = CRANK + 1 + parents.shape[0]
+    pose = x[:2 * nj].reshape(nj, 2)
+    start, span = x[2 * nj], jnp.where(closed > 0, 2 * np.pi, x[2 * nj + 1])
+    pos, marg = trace(parents, active, pose, start + span * u)
+    fit = _dist.soft_chamfer(pos[:, traced], target, closed, tau=tau)
+    pen = jnp.sum(jax.nn.relu(FLOOR - marg) ** 2)
+    shorter = (1 - closed) * (jax.nn.relu(span - 2 * np.pi) ** 2 + jax.nn.relu(0.05 - span) ** 2)
+    return fit + WEIGHT * pen + 100.0 * shorter
+
+
+def _value_and_grad(x, parents, active, traced, target, closed, u, tau):
+    return jax.value_and_grad(_loss)(x, parents, active, traced, target, closed, u, tau)
+
+
+@functools.lru_cache(maxsize=8)
+def program(n_dyads: int, n_points: int = _dist.N_POINTS):
+    """The compiled value and gradient (float64) of the polishing loss for `n_dyads` dyads
+    (a padded topology, `topology.as_arrays`) and a target of `n_points` points: a callable on
+    (x, parents, active, traced, target, closed, u, tau), x the pose flattened, then start and span."""
+    f64 = np.float64
+    nj = CRANK + 1 + n_dyads
+    with jax.enable_x64(True):
+        avals = (jax.ShapeDtypeStruct((2 * nj + 2,), f64), jax.ShapeDtypeStruct((n_dyads, 2), np.int32),
+                 jax.ShapeDtypeStruct((n_dyads,), bool), jax.ShapeDtypeStruct((), np.int32),
+                 jax.ShapeDtypeStruct((n_points, 2), f64), jax.ShapeDtypeStruct((), f64),
+                 jax.ShapeDtypeStruct((POLISH_T,), f64), jax.ShapeDtypeStruct((), f64))
+        return compiled("synthesis-polish", _value_and_grad, avals)
+
+
+def polish(parents: np.ndarray, active: np.ndarray, traced: int, pose: np.ndarray, start: float, span: float,
+           target: Target, *, n_points: int = _dist.N_POINTS) -> tuple[np.ndarray, float, float]:
+    """(pose, start, span) of one candidate (a row of `topology.as_arrays`, its pose padded like it)
+    after L-BFGS at each τ of `TAUS` (module doc); the caller scores it and walks back (`BACK`)."""
+    from scipy.optimize import minimize
+
+    closed = target.closed
+    prog = program(parents.shape[0], n_points)
+    nj = pose.shape[0]
+    with jax.enable_x64(True):
+        tgt = jnp.asarray(_dist.normalise(arclength_resample(target.points, n_points, closed))[0], jnp.float64)
+        u = jnp.asarray(np.arange(POLISH_T) / (POLISH_T if closed else POLISH_T - 1), jnp.float64)
+        par, act = jnp.asarray(parents, jnp.int32), jnp.asarray(active, bool)
+        tr, flag = jnp.asarray(traced, jnp.int32), jnp.asarray(float(closed), jnp.float64)
+        x = np.concatenate([np.asarray(pose, float).ravel(), [start, span]])
+        for tau in TAUS:
+            t = jnp.asarray(tau, jnp.float64)
+
+            def f(x, t=t):
+                v, g = prog(jnp.asarray(x, jnp.float64), par, act, tr, tgt, flag, u, t)
+                v, g = float(v), np.asarray(g, float)
+                if not (np.isfinite(v) and np.all(np.isfinite(g))):
+                    return np.inf, np.zeros_like(x)
+                return v, g
+
+            x = minimize(f, x, jac=True, method="L-BFGS-B", options={"maxiter": ITERS}).x
+    return x[:2 * nj].reshape(nj, 2), float(x[2 * nj]), (2 * np.pi if closed else float(x[2 * nj + 1]))
