@@ -87,7 +87,8 @@ def test_rounds_are_exact():
     from jaxlink.synthesis.api import synthesize
 
     lines: list[str] = []
-    one = synthesize(_arc(), log=lines.append, **dict(_SEARCH, refine=8))
+    # a short search polishes only when asked (`finish`)
+    one = synthesize(_arc(), log=lines.append, **dict(_SEARCH, refine=8, finish=2))
     assert [x.split(":")[0] for x in lines if x.startswith("round")] == ["round 1", "round 2 (polish)"]  # past 0.1 s
     assert lines[1].startswith("polished ") and lines[2].startswith("round 2")  # the first polish after round 1
     assert one.designs and np.isfinite(one.best.distance)

@@ -416,7 +416,7 @@ def search(target: Target, topos: list[Topology], *, time_limit: float, seed: in
            rounds: int | None = None, samples: int = 8192, screen_keep: int = 128, refine: int = 8,
            steps: int = 300, n_trace: int = 1000, n_points: int = _dist.N_POINTS, per_topology: int = 2,
            lr: float = 0.01, jitter: float = 0.02, quick: bool | None = None, t0: float | None = None,
-           finish: int = 4, log=None) -> list[Candidate]:
+           finish: int | None = None, log=None) -> list[Candidate]:
     """Rounds of screen → rank → refine → score until `time_limit` seconds (at least one round).
     `quick` (`programs`; default: when `time_limit` ≤ 15 s) trades run time for compile time.
     After each full round, and whenever the time left is too short for another full round but not
@@ -425,19 +425,21 @@ def search(target: Target, topos: list[Topology], *, time_limit: float, seed: in
     the time limit ignored (it still chooses `quick`): the same result on any machine, any number
     of devices or processes. Several processes (`jax.distributed`): each computes its share of
     every batch, all hold the same results, process 0's clock decides the rounds (`spread`).
-    `finish`: after every round that round's best candidate, and after the last round up to `finish`
-    more (`_to_polish`), are polished in float64 (`polish`), each if a polish as long as the last one
-    fits in the time left (with `rounds`: always). Each polished candidate is scored like the others
-    and added beside its original.
+    `finish` (default 4, 0 when `quick`: a short search has no time to compile the polish): after
+    every round that round's best candidate, and after the last round up to `finish` more
+    (`_to_polish`), are polished in float64 (`polish`), each if a polish as long as the last one
+    (before the first: as the round's refinement) fits in the time left (with `rounds`: always).
+    Each polished candidate is scored like the others and added beside its original.
     Returns every scored candidate that assembles, best first."""
     if rounds is not None and (isinstance(rounds, bool) or not isinstance(rounds, (int, np.integer)) or rounds < 1):
         raise ValueError(f"rounds = {rounds!r}: a whole number of rounds, at least 1")
     t0 = time.perf_counter() if t0 is None else t0
     closed = target.closed
     arr = as_arrays(topos)
+    quick = time_limit <= 15.0 if quick is None else quick
+    finish = (0 if quick else 4) if finish is None else finish
     prog = programs(len(topos), arr.parents.shape[1], closed, samples=samples, screen_keep=screen_keep,
-                    refine=refine, steps=steps,
-                    quick=time_limit <= 15.0 if quick is None else quick, polish=finish > 0)
+                    refine=refine, steps=steps, quick=quick, polish=finish > 0)
     tpts = _dist.normalise(arclength_resample(target.points, TARGET_N, closed))[0]
     tdesc = _desc(target.points, closed)
     trank = jnp.asarray(_dist.normalise(arclength_resample(target.points, RANK_T, closed))[0], _DT)
@@ -513,7 +515,8 @@ def search(target: Target, topos: list[Topology], *, time_limit: float, seed: in
             full_dur, polish_dur = dur, now - t_ref  # the compiling is done before the first round
         if finish > 0:  # this round's best, polished in float64, if one as long as the last fits
             mine = _to_polish(found[n_before:], origins, 1, min((c.match.distance for c in found), default=np.inf))
-            if mine and (rounds is not None or _spread.agreed(int(now - t0 + (t_polish or 0.0) <= time_limit))):
+            guess = polish_dur if t_polish is None else t_polish  # before the first: the round's refinement
+            if mine and (rounds is not None or _spread.agreed(int(now - t0 + guess <= time_limit))):
                 polish_one(mine[0])
         now = round_start = time.perf_counter()
         if rounds is not None:
