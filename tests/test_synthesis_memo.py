@@ -12,6 +12,7 @@ import functools
 
 import jax
 import numpy as np
+import pytest
 
 from jaxlink.synthesis import search
 from jaxlink.synthesis.topology import as_arrays, topologies
@@ -145,3 +146,66 @@ def test_stored_programs_cold_warm_and_off_give_the_same_bits_and_a_wrong_key_is
         assert not _same(_programs(True, True), {k: off[k] for k in off if k.startswith("screen")})
     finally:
         jax.config.update("jax_compilation_cache_dir", before)
+
+
+def _twice(x):
+    """A stored program's function for the key test below (module level: `cache.compiled` needs it)."""
+    return 2 * x + 1
+
+
+@pytest.mark.parametrize("part", ["versions", "backend", "x64"])
+def test_a_stored_program_is_traced_again_under_another_jax_backend_or_x64_and_a_blind_key_is_caught(
+        part, tmp_path, monkeypatch):
+    """The key of `cache.compiled` holds the JAX and jaxlib versions, the backend and the x64 mode:
+    a program stored under one is not handed out under another (it is traced and stored again),
+    while a second request under the same ones loads it (nothing stored). The same check with a
+    key blind to that part (its value replaced by a constant) finds no new trace: it fails."""
+    import jaxlink.cache as cache
+
+    real = cache._compiled_key
+    x64 = bool(jax.config.read("jax_enable_x64"))
+
+    def other():  # the part changed (x64: really off; the argument's dtype stays float32)
+        if part == "versions":
+            monkeypatch.setattr(jax, "__version__", "0.0.0-another")
+        elif part == "backend":
+            monkeypatch.setattr(jax, "default_backend", lambda: "another-backend")
+        else:
+            jax.config.update("jax_enable_x64", False)
+
+    def blind(name, fun, static, spec):
+        import jaxlib
+
+        key = real(name, fun, static, spec)
+        if part == "versions":
+            return key.replace(repr(jax.__version__), "'V'").replace(repr(jaxlib.__version__), "'V'")
+        if part == "backend":
+            return key.replace(repr(jax.default_backend()), "'B'")
+        return key.rsplit(",", 1)[0] + ", 'X')"
+
+    def stores_after_change(key_fn) -> int:
+        folder = tmp_path / key_fn.__name__ / part
+        folder.mkdir(parents=True)
+        monkeypatch.setattr(cache, "_compiled_key", key_fn)
+        aval = (jax.ShapeDtypeStruct((4,), np.float32),)
+        x = np.arange(4, dtype=np.float32)
+        before = jax.config.jax_compilation_cache_dir
+        stores: list = []
+        real_store = cache._store
+        try:
+            jax.config.update("jax_compilation_cache_dir", str(folder))
+            cache.compiled("test-key", _twice, aval)(x)  # stored
+            monkeypatch.setattr(cache, "_store", lambda *a: (stores.append(a), real_store(*a)))
+            cache.compiled("test-key", _twice, aval)(x)  # the same key: loaded
+            assert stores == []
+            other()
+            got = cache.compiled("test-key", _twice, aval)(x)
+            np.testing.assert_array_equal(np.asarray(got), 2 * x + 1)
+            return len(stores)
+        finally:
+            jax.config.update("jax_enable_x64", x64)
+            jax.config.update("jax_compilation_cache_dir", before)
+            monkeypatch.undo()
+
+    assert stores_after_change(real) == 1  # traced and stored again under the changed part
+    assert stores_after_change(blind) == 0  # a key blind to it hands out the old program: caught
