@@ -166,6 +166,16 @@ def test_float64_polish_recovers_a_planted_four_bar(closed):
     assert out.match.distance < min(_floor(tgt.points, closed), m.distance / 5), (m.distance, out.match.distance)
     again = score(FOUR_BAR, out.pose, out.start, out.span, tgt, n_trace=1000, n_points=D.N_POINTS)[0]
     assert again.distance == out.match.distance
+    # JAX's x64 off (a Python user's default): the polish still computes in float64, the same bits
+    import jax
+
+    jax.config.update("jax_enable_x64", False)
+    try:
+        off = _polished(Candidate(FOUR_BAR, pose, start, span, m, asm, 0.0), arr.parents[0], arr.active[0],
+                        int(arr.traced[0]), tgt, 1000, D.N_POINTS, 0.0)
+    finally:
+        jax.config.update("jax_enable_x64", True)
+    assert off is not None and np.array_equal(off.pose, out.pose) and (off.start, off.span) == (out.start, out.span)
 
 
 def test_planted_open_arc_by_subinterval():
@@ -280,6 +290,9 @@ def test_topology_objects_are_searched():
     for bad in (3, 0, -1, 4.5, True):
         with pytest.raises(MechanismError, match="max_links"):
             synthesize(target, max_links=bad, time_limit=1)
+    for bad in (-1, 1.5, True, "4"):
+        with pytest.raises(MechanismError, match="finish"):
+            synthesize(target, finish=bad, time_limit=1)
     with pytest.raises(MechanismError, match="unknown topology"):
         synthesize(target, topologies=["no-such-bar"], time_limit=1)
     big = T.Topology("seventeen", tuple([(T.CRANK, 1)] * 17), 20)

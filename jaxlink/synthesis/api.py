@@ -110,6 +110,10 @@ def synthesize(target: Any, *, closed: bool | None = None, time_limit: float = 6
     if isinstance(max_links, bool) or not isinstance(max_links, (int, np.integer)) or max_links < 4:
         raise MechanismError(f"max_links = {max_links!r}: a whole number of links, at least 4 (the four-bar, "
                              "the frame counted)")
+    fin = search_options.get("finish")
+    if fin is not None and (isinstance(fin, bool) or not isinstance(fin, (int, np.integer)) or fin < 0):
+        raise MechanismError(f"finish = {fin!r}: the number of candidates polished at the end must be a whole "
+                             "number, at least 0 (0: no polish)")
     t0 = time.perf_counter()
     if isinstance(target, Target):
         tgt = target if closed is None else target._replace(closed=bool(closed))

@@ -85,19 +85,19 @@ class Programs(NamedTuple):
     screen: Callable
     rank: Callable
     refine: Callable
-    polish: Callable | None = None
 
 
 def programs(n_topos: int, n_dyads: int, closed: bool, *, samples: int, screen_keep: int, refine: int,
              steps: int, quick: bool = False, where: _spread.Layout | None = None,
-             polish: bool = False) -> Programs:
+             polish_points: int = 0) -> Programs:
     """Compile the screen, the rank and the refinement for these shapes, all three at once (XLA
     compiles in parallel threads; on a cold start compiling is most of a short search's time).
     The rank compiles at XLA's lowest optimisation level (about half the compile time, its run
     time about the same); the refinement too when `quick` (it then runs about twice as long: for
     short searches), and the screen when `quick` and `closed` (an open target's screen, 64
-    sub-arcs a candidate, would run longer than its compiling saves). `polish`: the float64
-    polish's program too (`polish.program`, one for this process, compiled beside the others).
+    sub-arcs a candidate, would run longer than its compiling saves). `polish_points` > 0: the
+    float64 polish's program for a target of that many points is compiled beside them, into its
+    memo (`polish.program`, which `polish.polish` then finds ready).
     Each program computes one block of its batch (`spread.blocks`, at most `SCREEN_BLOCK`,
     `RANK_BLOCK`, `REFINE_BLOCK` rows), the same block whatever the devices and processes (`where`,
     default `spread.layout()`), and is called on whole batches (`spread.Blocked`)."""
@@ -112,15 +112,14 @@ def programs(n_topos: int, n_dyads: int, closed: bool, *, samples: int, screen_k
         raise ValueError(f"{where.devices} devices asked for, {len(jax.local_devices())} here")
     block = [_spread.blocks(n, cap)[1] for n, cap in zip(sizes, caps)]
     tasks = [(job, b, d) for job, b in zip(jobs, block) for d in range(where.devices)]
-    with ThreadPoolExecutor(len(tasks) + polish) as ex:
-        pol = ex.submit(_polish_program, n_dyads) if polish else None
+    with ThreadPoolExecutor(len(tasks) + (polish_points > 0)) as ex:
+        pol = ex.submit(_polish_program, n_dyads, polish_points) if polish_points > 0 else None
         compiled = list(ex.map(lambda t: _compiled(t[0][0], t[1], *t[0][1:], x64, t[2]), tasks))
-        pol_prog = pol.result() if pol is not None else None
+        if pol is not None:
+            pol.result()
     per = [compiled[i * where.devices:(i + 1) * where.devices] for i in range(len(jobs))]
     rows, keyed = ((1, 2, 3), (0, 1, 2, 3, 4), (0, 1, 2, 3, 4)), (0, None, None)
-    screen, rank, refine_ = (_spread.Blocked(c, r, k, where, n, b)
-                             for c, r, k, n, b in zip(per, rows, keyed, sizes, block))
-    return Programs(screen, rank, refine_, pol_prog)
+    return Programs(*(_spread.Blocked(c, r, k, where, n, b) for c, r, k, n, b in zip(per, rows, keyed, sizes, block)))
 
 
 @functools.lru_cache(maxsize=32)
@@ -433,13 +432,15 @@ def search(target: Target, topos: list[Topology], *, time_limit: float, seed: in
     Returns every scored candidate that assembles, best first."""
     if rounds is not None and (isinstance(rounds, bool) or not isinstance(rounds, (int, np.integer)) or rounds < 1):
         raise ValueError(f"rounds = {rounds!r}: a whole number of rounds, at least 1")
+    if finish is not None and (isinstance(finish, bool) or not isinstance(finish, (int, np.integer)) or finish < 0):
+        raise ValueError(f"finish = {finish!r}: a whole number of candidates to polish, at least 0")
     t0 = time.perf_counter() if t0 is None else t0
     closed = target.closed
     arr = as_arrays(topos)
     quick = time_limit <= 15.0 if quick is None else quick
     finish = (0 if quick else 4) if finish is None else finish
     prog = programs(len(topos), arr.parents.shape[1], closed, samples=samples, screen_keep=screen_keep,
-                    refine=refine, steps=steps, quick=quick, polish=finish > 0)
+                    refine=refine, steps=steps, quick=quick, polish_points=n_points if finish > 0 else 0)
     tpts = _dist.normalise(arclength_resample(target.points, TARGET_N, closed))[0]
     tdesc = _desc(target.points, closed)
     trank = jnp.asarray(_dist.normalise(arclength_resample(target.points, RANK_T, closed))[0], _DT)
