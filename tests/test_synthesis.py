@@ -216,6 +216,28 @@ def test_fails_between_samples_is_rejected():
     assert not score(FOUR_BAR, pose, 0.0, 2 * np.pi, tgt, n_trace=n, n_points=100)[1].ok
 
 
+def test_certify_side_by_side_is_one_bracket_at_a_time_bit_for_bit():
+    """`certify` runs the golden-section searches of all brackets side by side; the reference
+    `_certify_one` runs them one at a time (the shipped code before): the same margin, place and
+    dyad to the last bit, on random assemblable poses of every topology and random intervals,
+    including ones that fail between samples (the planted test above)."""
+    from jaxlink.synthesis.assembly import _certify_one
+
+    rng = np.random.default_rng(3)
+    n = failing = 0
+    for topo in T.topologies(8):
+        for _ in range(60):
+            pose = rng.uniform(-1, 1, (T.CRANK + 1 + len(topo.dyads), 2))
+            st, sp = rng.uniform(0, 6), rng.uniform(0.5, 6.3)
+            if trace_exact(topo, pose, np.linspace(st, st + sp, 40))[1].min() <= 0:
+                continue
+            a, b = certify(topo, pose, st, sp), _certify_one(topo, pose, st, sp)
+            assert a == b, (topo.name, a, b)
+            n += 1
+            failing += not a.ok
+    assert n >= 100 and failing >= 1
+
+
 @pytest.mark.parametrize("d, closed", [("M 0 0 L 10 0 C 10 5 5 10 0 10 Z", True), ("M 0 0 q 5 5 10 0 h 5", False)])
 def test_svg_target(tmp_path, d, closed):
     f = tmp_path / "t.svg"
