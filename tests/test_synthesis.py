@@ -248,14 +248,16 @@ def test_svg_target(tmp_path, d, closed):
         assert np.allclose(t.points[-1], [15, 0]) and np.allclose(t.points[16], [5, 2.5])  # q's midpoint
 
 
-@pytest.mark.parametrize("name", ["stephenson-rocker-crank", "watt-coupler-rocker+crank-pivot"])
+@pytest.mark.parametrize("name", ["stephenson-rocker-crank", "watt-coupler-rocker+crank-pivot",
+                                  "watt-coupler-rocker+crank-pivot+crank-pivot"])
 def test_six_bar_sketch_replays_the_tracer(tmp_path, name):
-    """A Stephenson six-bar (6 dyads, plates on the crank, coupler, rocker and dyad), and an eight-bar
-    whose last link shares the crank's frame pivot (three links at one pin), written as a sketch:
-    `jaxlink kinematics` traces the tracer's path (no search: the written-file check alone)."""
+    """A Stephenson six-bar (6 dyads, plates on the crank, coupler, rocker and dyad), an eight-bar
+    whose last link shares the crank's frame pivot (three links at one pin) and a ten-bar grown from
+    it to the same pivot again (four links there), written as a sketch: `jaxlink kinematics` traces
+    the tracer's path (no search: the written-file check alone)."""
     from jaxlink.synthesis.mechanism import placed_pose, to_sketch
 
-    topo = next(t for t in T.topologies() if t.name == name)
+    topo = next(t for t in T.topologies(10) if t.name == name)
     rng = np.random.default_rng(1)
     for _ in range(5000):
         pose = rng.uniform(-1, 1, (T.CRANK + 1 + len(topo.dyads), 2))
@@ -322,3 +324,21 @@ def test_topology_objects_are_searched():
         synthesize(target, topologies=[big], time_limit=1)
     with pytest.raises(MechanismError, match="two topologies named"):
         synthesize(target, topologies=[mine, T.grow(mine, 4, 5)], time_limit=1)
+
+
+def test_builtin_topologies_by_links():
+    """The built-ins by `max_links`: the four-bar; the six six-bars; the nine eight-bars (16 at 8,
+    unchanged by the ten-bars); the 27 ten-bars at 10, each an eight-bar grown by one more dyad from
+    its traced point to F0, F1 or C: 10 links, 12 joints, every name distinct, each body's joints
+    counted once (a dyad on two joints of one body a point of it, else two binary links)."""
+    counts = {m: len(T.topologies(m)) for m in (4, 6, 8, 10)}
+    assert counts == {4: 1, 6: 7, 8: 16, 10: 43}
+    ten = T.topologies(10)[16:]
+    eight = {t.name: t for t in T.topologies(8)}
+    assert len({t.name for t in T.topologies(10)}) == 43
+    for t in ten:
+        base = eight[t.name.rsplit("+", 1)[0]]
+        n = len(base.dyads)
+        assert (t.n_links, t.n_joints, len(t.dyads)) == (10, 12, n + 2)
+        assert t.dyads[:n] == base.dyads and t.dyads[n][0] == base.traced
+        assert t.dyads[n + 1] == (base.traced, T.CRANK + 1 + n) and t.traced == T.CRANK + 1 + n + 1

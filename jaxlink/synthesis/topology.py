@@ -118,10 +118,16 @@ EIGHT_AT = {"crank-pivot": 0, "rocker-pivot": 1, "crank-pin": CRANK}
 def _eight_bar(six: Topology, at: str) -> Topology:
     """The six-bar and one more dyad D' between its traced point E (a point of its last link) and the
     joint `at` (`EIGHT_AT`: the frame pivot of the crank or of the rocker, or the crank pin), traced
-    at a point of the new link E–D': eight links."""
+    at a point of the new link E–D': eight links. Grown from an eight-bar the same way: a ten-bar."""
     nj = CRANK + 1 + len(six.dyads)
     t = grow(six, six.traced, EIGHT_AT[at], name=f"{six.name}+{at}", trace=False)
     return grow(t, six.traced, nj)
+
+
+def _grown(t: Topology) -> list[Topology]:
+    """`_eight_bar` of `t` at each joint of `EIGHT_AT` not already on its traced link."""
+    on_traced = {j for b in bodies(t) if t.traced in b for j in b}
+    return [_eight_bar(t, at) for at, j in EIGHT_AT.items() if j not in on_traced]
 
 
 def topologies(max_links: int = 8) -> list[Topology]:
@@ -130,14 +136,15 @@ def topologies(max_links: int = 8) -> list[Topology]:
     coupler and crank, coupler and rocker, rocker and frame, crank and frame; Stephenson (not
     adjacent) between coupler and frame, rocker and crank; the eight-bars grown from three of
     the six-bars (`EIGHT_FROM`) by a dyad from the traced link to a frame pivot or the crank pin
-    (`_eight_bar`), where that joint is not already on the traced link."""
+    (`_eight_bar`), where that joint is not already on the traced link; the ten-bars (12 joints)
+    grown from every eight-bar the same way (`max_links` ≥ 10)."""
     out = [_four_bar()]
     six = [_six_bar(*s) for s in SIX_BARS]
     out += six
-    for t in six:
-        if t.name in EIGHT_FROM:
-            on_traced = {j for b in bodies(t) if t.traced in b for j in b}
-            out += [_eight_bar(t, at) for at, j in EIGHT_AT.items() if j not in on_traced]
+    eight = [e for t in six if t.name in EIGHT_FROM for e in _grown(t)]
+    out += eight
+    if max_links >= 10:
+        out += [g for e in eight for g in _grown(e)]
     return [t for t in out if t.n_links <= max_links]
 
 
