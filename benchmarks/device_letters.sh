@@ -9,6 +9,7 @@
 # into an ignored folder that travels, e.g. .whl/linkabc/ (carry ".whl"), or set LINKABC.
 # Missing packages travel as wheels in .whl/ (see device_run.sh).
 # XLA_PYTHON_CLIENT_PREALLOCATE=false: the processes share the device's memory. TOTAL=0: no tests.
+# MAXLINKS=10: the ten-bars too (default 8).
 # Measured on an H200 (2026-11-26): shared 5 ways a full round took about 3.5 s (16-19 rounds a
 # letter in 60 s), shared 13 ways 15-28 s (2-3 rounds): sharing is not one letter on one GPU. The
 # GPU goal's measurement in a session's 15 minutes: ONLY=ABCDEFGHIJKLM PROCS=2 WARM=1 TOTAL=0
@@ -30,7 +31,7 @@ python3 -c "import jax; print('jax', jax.__version__, jax.devices())" 2>&1 | tee
 # at the letters' compile level), so that the processes load them from the cache instead of each
 # compiling them in its first letter's time
 if [ "${WARM:-0}" != 0 ]; then
-  python3 - "$LINKABC" "$LIMIT" <<'PY' 2>&1 | tee -a "$OUT/letters.log"
+  python3 - "$LINKABC" "$LIMIT" "${MAXLINKS:-8}" <<'PY' 2>&1 | tee -a "$OUT/letters.log"
 import sys, time
 import numpy as np, jax
 jax.config.update("jax_enable_x64", True)
@@ -39,7 +40,7 @@ jl.enable_compilation_cache()
 letters, limit = np.load(sys.argv[1]), float(sys.argv[2])
 t0 = time.perf_counter()
 for ch in "CO":  # C open, O closed
-    jl.synthesize(letters[ord(ch) - 65], time_limit=limit, rounds=1)
+    jl.synthesize(letters[ord(ch) - 65], time_limit=limit, rounds=1, max_links=int(sys.argv[3]))
 print(f"warm-up (compiling the programs, one round of C and O): {time.perf_counter() - t0:.1f} s", flush=True)
 PY
 fi
@@ -50,7 +51,7 @@ for ((g = 0; g < GROUPS_N; g++)); do
   only=""
   for ((i = g; i < ${#ALL}; i += GROUPS_N)); do only+=${ALL:i:1}; done
   timeout -s INT -k 15 "${LETTERS_TIMEOUT:-420}" python3 benchmarks/synthesis_letters.py --letters "$LINKABC" \
-    --only "$only" --time-limit "$LIMIT" --log $([ "${WARM:-0}" != 0 ] && echo --cache) --out "$TMP/g$g.json" >"$TMP/g$g.log" 2>&1 &
+    --only "$only" --time-limit "$LIMIT" --max-links "${MAXLINKS:-8}" --log $([ "${WARM:-0}" != 0 ] && echo --cache) --out "$TMP/g$g.json" >"$TMP/g$g.log" 2>&1 &
   pids+=($!)
 done
 # the device's load while they run
