@@ -30,9 +30,14 @@ def main() -> int:
     ap.add_argument("--rounds", type=int, default=4)
     ap.add_argument("--links", default="6,8", help="the max_links compared (default 6,8)")
     args = ap.parse_args()
+    try:
+        compared = [int(x) for x in args.links.split(",")]
+    except ValueError:
+        ap.error(f"--links {args.links!r}: whole numbers of links separated by commas, e.g. 8,10")
+    if any(k < 4 for k in compared):
+        ap.error(f"--links {args.links!r}: each at least 4 (the four-bar, the frame counted)")
     letters = np.load(args.letters)
     print(f"{'letter':<7}{'max_links':>10}{'distance':>10}  {'topology':<40}{'time_s':>8}")
-    compared = [int(x) for x in args.links.split(",")]
     means: dict[int, list[float]] = {k: [] for k in compared}
     for ch in args.only:
         for links in compared:

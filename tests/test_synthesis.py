@@ -12,6 +12,7 @@ from scipy.interpolate import interp1d
 from scipy.spatial.distance import cdist
 
 from jaxlink.cli import main as cli_main
+from jaxlink.synthesis import assembly as A
 from jaxlink.synthesis import distance as D
 from jaxlink.synthesis import topology as T
 from jaxlink.synthesis.api import synthesize
@@ -216,13 +217,45 @@ def test_fails_between_samples_is_rejected():
     assert not score(FOUR_BAR, pose, 0.0, 2 * np.pi, tgt, n_trace=n, n_points=100)[1].ok
 
 
+def _certify_one(topo: T.Topology, pose: np.ndarray, start: float, span: float) -> A.Assembly:
+    """`certify` with one golden-section search at a time (the shipped code before the brackets went
+    side by side): the reference of the test below."""
+    th = start + span * np.linspace(0.0, 1.0, A.DENSE + 1)
+    m = trace_exact(topo, pose, th)[1]
+    best = (float(m.min()), float(th[np.unravel_index(m.argmin(), m.shape)[0]]),
+            int(np.unravel_index(m.argmin(), m.shape)[1]))
+    h = th[1] - th[0]
+    for k in range(m.shape[1]):
+        mk = m[:, k]
+        inner = np.flatnonzero((mk[1:-1] <= mk[:-2]) & (mk[1:-1] <= mk[2:])) + 1
+        for i in inner[np.argsort(mk[inner])][:A.REFINE]:
+            lo, hi = th[i] - h, th[i] + h
+
+            def f(x, k=k):
+                return trace_exact(topo, pose, np.array([x]))[1][0, k]
+
+            x1, x2 = hi - A._GOLD * (hi - lo), lo + A._GOLD * (hi - lo)
+            f1, f2 = f(x1), f(x2)
+            while hi - lo > 1e-12:
+                if f1 <= f2:
+                    hi, x2, f2 = x2, x1, f1
+                    x1 = hi - A._GOLD * (hi - lo)
+                    f1 = f(x1)
+                else:
+                    lo, x1, f1 = x1, x2, f2
+                    x2 = lo + A._GOLD * (hi - lo)
+                    f2 = f(x2)
+            for x, v in ((x1, f1), (x2, f2)):
+                if v < best[0]:
+                    best = (float(v), float(x), k)
+    return A.Assembly(best[0], best[1], best[2], bool(best[0] > A.MIN_MARGIN))
+
+
 def test_certify_side_by_side_is_one_bracket_at_a_time_bit_for_bit():
     """`certify` runs the golden-section searches of all brackets side by side; the reference
     `_certify_one` runs them one at a time (the shipped code before): the same margin, place and
     dyad to the last bit, on random assemblable poses of every topology and random intervals,
     including ones that fail between samples (the planted test above)."""
-    from jaxlink.synthesis.assembly import _certify_one
-
     rng = np.random.default_rng(3)
     n = failing = 0
     for topo in T.topologies(8):

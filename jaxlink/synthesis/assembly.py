@@ -42,8 +42,8 @@ def certify(topo: Topology, pose: np.ndarray, start: float, span: float) -> Asse
     The golden-section searches of all brackets (every dyad's `REFINE` smallest local minima) run
     side by side, one trace of the linkage at all their points per step; each bracket takes the
     steps it would alone (it stops once narrower than 1e-12 rad) and the smallest margin found is
-    the first in the order dyad, bracket, point (`_certify_one`, the search one bracket at a time,
-    gives the same answer bit for bit: `tests/test_synthesis.py`)."""
+    the first in the order dyad, bracket, point (the search one bracket at a time, the reference
+    in `tests/test_synthesis.py`, gives the same answer bit for bit)."""
     if not topo.dyads:  # pragma: no cover - every topology has a dyad
         return Assembly(np.inf, start, -1, True)
     th = start + span * np.linspace(0.0, 1.0, DENSE + 1)
@@ -88,35 +88,3 @@ def certify(topo: Topology, pose: np.ndarray, start: float, span: float) -> Asse
         best = (float(vs[j]), float(xs[j]), int(kk[j // 2]))
     return Assembly(best[0], best[1], best[2], bool(best[0] > MIN_MARGIN))
 
-
-def _certify_one(topo: Topology, pose: np.ndarray, start: float, span: float) -> Assembly:
-    """`certify` with one golden-section search at a time (the reference the tests compare it with)."""
-    th = start + span * np.linspace(0.0, 1.0, DENSE + 1)
-    m = trace_exact(topo, pose, th)[1]
-    best = (float(m.min()), float(th[np.unravel_index(m.argmin(), m.shape)[0]]),
-            int(np.unravel_index(m.argmin(), m.shape)[1]))
-    h = th[1] - th[0]
-    for k in range(m.shape[1]):
-        mk = m[:, k]
-        inner = np.flatnonzero((mk[1:-1] <= mk[:-2]) & (mk[1:-1] <= mk[2:])) + 1
-        for i in inner[np.argsort(mk[inner])][:REFINE]:
-            lo, hi = th[i] - h, th[i] + h
-
-            def f(x, k=k):
-                return trace_exact(topo, pose, np.array([x]))[1][0, k]
-
-            x1, x2 = hi - _GOLD * (hi - lo), lo + _GOLD * (hi - lo)
-            f1, f2 = f(x1), f(x2)
-            while hi - lo > 1e-12:
-                if f1 <= f2:
-                    hi, x2, f2 = x2, x1, f1
-                    x1 = hi - _GOLD * (hi - lo)
-                    f1 = f(x1)
-                else:
-                    lo, x1, f1 = x1, x2, f2
-                    x2 = lo + _GOLD * (hi - lo)
-                    f2 = f(x2)
-            for x, v in ((x1, f1), (x2, f2)):
-                if v < best[0]:
-                    best = (float(v), float(x), k)
-    return Assembly(best[0], best[1], best[2], bool(best[0] > MIN_MARGIN))
