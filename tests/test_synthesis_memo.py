@@ -4,7 +4,9 @@ afresh for the same key, and a second request of a key returns that same program
 is written once (`_same_as_fresh`) and run on the real memo and on one keyed without `closed` (a
 deliberately wrong key): the screen's program is the one whose inputs have the same shapes for an
 open and a closed target, so a key blind to `closed` would hand an open target the closed one's
-descriptors — and the check must say so."""
+descriptors — and the check must say so. The same for `sliders`: a slider-crank's arrays through
+a program keyed without it get the revolute program, which reads the slider's encoded parent as
+a joint."""
 
 from __future__ import annotations
 
@@ -21,22 +23,24 @@ B = 32  # a four-bar's screen on 32 random poses: small programs
 N_DYADS = 2  # the four-bar with its coupler point: two dyads (`topology`)
 
 
-def _inputs():
-    arr = as_arrays(topologies(4))  # the four-bar
-    assert arr.parents.shape[1] == N_DYADS
+def _inputs(slider: bool = False):
+    arr = as_arrays(topologies(4, sliders=True)[1:] if slider else topologies(4))  # the slider-crank, the four-bar
+    assert arr.parents.shape[1] == N_DYADS and arr.parents.shape[0] == 1
     rep = [np.repeat(a[:1], B, 0) for a in (arr.parents, arr.active, arr.traced)]
     return (jax.random.PRNGKey(3), *rep, np.linspace(0.5, 1.5, search.DESC_N).astype(np.float32))
 
 
-def _same_as_fresh(memo) -> bool:
+def _same_as_fresh(memo, slider: bool = False) -> bool:
     """Request the closed target's screen, then the open one's through `memo`; compare the open
-    one's output with a program compiled afresh for it (`_compiled` without its cache)."""
+    one's output with a program compiled afresh for it (`_compiled` without its cache). `slider`:
+    the revolute open screen first, then the slider-crank's."""
     x64 = bool(jax.config.read("jax_enable_x64"))
-    args = _inputs()
-    memo("screen", B, N_DYADS, True, 0, True, x64)
-    got = memo("screen", B, N_DYADS, False, 0, True, x64)(*args)
-    again = memo("screen", B, N_DYADS, False, 0, True, x64)(*args)
-    fresh = search._compiled.__wrapped__("screen", B, N_DYADS, False, 0, True, x64)(*args)
+    args = _inputs(slider)
+    closed = not slider
+    memo("screen", B, N_DYADS, closed, 0, True, False, x64)
+    got = memo("screen", B, N_DYADS, False, 0, True, slider, x64)(*args)
+    again = memo("screen", B, N_DYADS, False, 0, True, slider, x64)(*args)
+    fresh = search._compiled.__wrapped__("screen", B, N_DYADS, False, 0, True, slider, x64)(*args)
     same = [np.array_equal(np.asarray(a), np.asarray(b), equal_nan=True) and np.shape(a) == np.shape(b)
             for a, b in zip(got + again, fresh + fresh)]
     return all(same)
@@ -47,15 +51,21 @@ def test_memoized_program_equals_a_fresh_compile_and_a_wrong_key_is_caught():
     assert _same_as_fresh(search._compiled)
     info = search._compiled.cache_info()
     assert info.hits >= 1 and info.currsize == 2  # the repeated request came from the memo
+    assert _same_as_fresh(search._compiled, slider=True)
 
     @functools.lru_cache(maxsize=16)
-    def blind(which, b, n_dyads, closed, steps, quick, x64):
-        return search._compiled.__wrapped__(which, b, n_dyads, True, steps, quick, x64)
+    def blind(which, b, n_dyads, closed, steps, quick, sliders, x64):
+        return search._compiled.__wrapped__(which, b, n_dyads, True if closed is None else closed, steps, quick,
+                                            False if sliders is None else sliders, x64)
 
-    def blind_memo(which, b, n_dyads, closed, steps, quick, x64):  # the key without `closed`
-        return blind(which, b, n_dyads, None, steps, quick, x64)
+    def blind_memo(which, b, n_dyads, closed, steps, quick, sliders, x64):  # the key without `closed`
+        return blind(which, b, n_dyads, None, steps, quick, sliders, x64)
+
+    def blind_sliders(which, b, n_dyads, closed, steps, quick, sliders, x64):  # the key without `sliders`
+        return blind(which, b, n_dyads, closed, steps, quick, None, x64)
 
     assert not _same_as_fresh(blind_memo)
+    assert not _same_as_fresh(blind_sliders, slider=True)
 
 
 def _programs(static_closed: bool, screens_only: bool = False, only: str | None = None,
@@ -78,12 +88,13 @@ def _programs(static_closed: bool, screens_only: bool = False, only: str | None 
         return jax.ShapeDtypeStruct(np.shape(x), np.asarray(x).dtype)
 
     desc = np.linspace(0.5, 1.5, search.DESC_N).astype(f32)
-    calls = {f"screen-{'closed' if c else 'open'}": (search._screen_of, (jax.random.PRNGKey(3), *topo, desc), (c,))
-             for c in (static_closed, False)}
-    calls["rank"] = (search._rank, (*topo, poses, arcs, rng.uniform(-1, 1, (search.RANK_T, 2)).astype(f32), f32(1),
-                                    rng.uniform(0, 1, search.RANK_T).astype(f32)), ())
+    calls = {f"screen-{'closed' if c else 'open'}": (search._screen_of, (jax.random.PRNGKey(3), *topo, desc),
+                                                     (c, False)) for c in (static_closed, False)}
+    calls["rank"] = (search._rank_of, (*topo, poses, arcs, rng.uniform(-1, 1, (search.RANK_T, 2)).astype(f32), f32(1),
+                                       rng.uniform(0, 1, search.RANK_T).astype(f32)), (False,))
     calls["refine"] = (search._refine_of, (*topo, poses, arcs, rng.uniform(-1, 1, (search.TARGET_N, 2)).astype(f32),
-                                           f32(0.01), f32(1), rng.uniform(0, 1, search.REFINE_T).astype(f32)), (5,))
+                                           f32(0.01), f32(1), rng.uniform(0, 1, search.REFINE_T).astype(f32)),
+                       (5, False))
     from jaxlink.synthesis import polish
 
     x = np.concatenate([poses[0].ravel(), arcs[0]]).astype(np.float64)

@@ -12,7 +12,8 @@ def register(sub) -> None:
         "synthesize", help="find a linkage (topology and dimensions) whose point traces a target path",
         description=(
             "Path synthesis: one-degree-of-freedom revolute linkages grown by dyads (the four-bar, the Watt and "
-            "Stephenson six-bars, eight-bars) whose traced point follows TARGET (a .csv of x, y, a .npy (N, 2) "
+            "Stephenson six-bars, eight-bars; with --sliders also their variants with sliders on frame guides, "
+            "the slider-crank first) whose traced point follows TARGET (a .csv of x, y, a .npy (N, 2) "
             "array or an .svg path) up to translation, rotation and scale, scored by the symmetric chamfer "
             "distance of the "
             "normalised curves (docs/methods/synthesis.md). Writes the best mechanism as a sketch file that "
@@ -35,8 +36,13 @@ def register(sub) -> None:
                    help="most links, the frame counted (default 8: the eight-bars too; 6: the four-bar and "
                         "six-bars, a round about half as long; 10: the 27 ten-bars too, 12 joints, a round "
                         "about 2.7 times as long)")
+    p.add_argument("--sliders", action="store_true",
+                   help="also search the variants with sliders: a dyad between a moving joint and a frame pivot "
+                        "used by nothing else becomes a slider on a frame guide (the four-bar's rocker a "
+                        "slider: the slider-crank); 18 more topologies up to 8 links, 39 up to 10")
     p.add_argument("--topologies", default=None, metavar="NAMES",
-                   help="comma-separated topology names to search (default: all up to --max-links)")
+                   help="comma-separated topology names to search (default: all up to --max-links; the "
+                        "slider topologies by name without --sliders too)")
     p.add_argument("--samples", type=int, default=8192, metavar="N",
                    help="random candidates per topology and round (default 8192)")
     p.add_argument("--points", type=int, default=200, metavar="N",
@@ -74,6 +80,7 @@ def cmd_synthesize(args) -> int:
     names = [n.strip() for n in args.topologies.split(",") if n.strip()] if args.topologies else None
     res = synthesize(tgt, time_limit=args.time_limit, seed=args.seed, rounds=args.rounds, max_links=args.max_links,
                      topologies=names, n_points=args.points, count=args.count, samples=args.samples,
+                     sliders=args.sliders,
                      log=(lambda s: print(s, file=sys.stderr)) if printer else None)
     if not printer:
         return 0 if res.designs else 1

@@ -36,6 +36,7 @@ def to_json(res) -> dict:
             "joint_positions": d.sketch.tables()["sketch"]["joints"],
             "links_joints": d.sketch.tables()["sketch"]["links"],
             "frame": d.sketch.tables()["sketch"]["frame"],
+            "sliders": {j: v["along"] for j, v in d.sketch.tables()["sketch"].get("sliders", {}).items()},
         } for i, d in enumerate(res.designs, 1)],
     }
 
@@ -63,6 +64,11 @@ def plot(path, res) -> None:
     for names in sk["links"].values():
         pts = np.array([js[n] for n in names] + ([js[names[0]]] if len(names) > 2 else []))
         ax.plot(pts[:, 0], pts[:, 1], color="C1", lw=1.2)
+    size = float(np.max(np.ptp(np.concatenate([t, d.curve, np.array(list(js.values()))]), axis=0)))
+    for n, v in sk.get("sliders", {}).items():  # a slider's frame guide, dashed, through its joint
+        u = np.asarray(v["along"], float) / np.hypot(*v["along"])
+        g = np.asarray(js[n]) + np.outer([-0.6 * size, 0.6 * size], u)
+        ax.plot(g[:, 0], g[:, 1], color="k", lw=0.8, ls="--")
     for n, (x, y) in js.items():
         frame = n in sk["frame"]
         ax.plot([x], [y], marker="^" if frame else "o", color="k" if frame else "C1", ms=6 if frame else 4)

@@ -87,7 +87,8 @@ def _design(c: Candidate, target: Target, n_trace: int, name: str) -> Design:
 
 
 def synthesize(target: Any, *, closed: bool | None = None, time_limit: float = 60.0, seed: int = 0,
-               rounds: int | None = None, max_links: int = 8, topologies: list[str | Topology] | None = None,
+               rounds: int | None = None, max_links: int = 8, sliders: bool = False,
+               topologies: list[str | Topology] | None = None,
                n_points: int = _dist.N_POINTS, count: int = 1000, samples: int = 8192, name: str = "synthesized",
                log: Callable[[str], None] | None = None, **search_options) -> Synthesis:
     """Find linkages whose traced point follows `target` (a path to a .csv/.npy/.svg file, an
@@ -95,8 +96,9 @@ def synthesize(target: Any, *, closed: bool | None = None, time_limit: float = 6
     `closed`: match a closed loop over a whole crank turn, or an open path over a sub-interval
     (default: from the target, `jaxlink.synthesis.target`). `topologies`: the topologies to search, each
     the name of a built-in one (`jaxlink.synthesis.topology.topologies`) or a `Topology` (e.g. one
-    grown by `topology.grow`, at most `topology.MAX_DYADS` dyads, every name distinct); default the
-    built-ins up to `max_links`.
+    grown by `topology.grow` or `topology.slide`, at most `topology.MAX_DYADS` dyads, every name
+    distinct); default the built-ins up to `max_links`, with their slider variants when `sliders`
+    (`topology.with_sliders`: the slider-crank, …).
     Returns the best design of each topology, best first (`Synthesis.best`); `seed` makes it
     repeatable for a given number of rounds: `rounds` = N runs exactly N rounds (the polishing
     rounds counted, `search.search`) whatever the time, `time_limit` then only choosing the
@@ -121,9 +123,9 @@ def synthesize(target: Any, *, closed: bool | None = None, time_limit: float = 6
         tgt = load_target(target, closed=closed)
     else:
         tgt = make_target(target, closed=closed)
-    topos = builtin_topologies(max_links)
+    topos = builtin_topologies(max_links, sliders=bool(sliders))
     if topologies is not None:
-        known = {t.name: t for t in builtin_topologies(99)}
+        known = {t.name: t for t in builtin_topologies(99, sliders=True)}
         bad = [n for n in topologies if not isinstance(n, Topology) and n not in known]
         if bad:
             raise MechanismError(f"unknown topology {bad[0]!r}; the topologies are {', '.join(known)}")

@@ -41,7 +41,9 @@ def crank_angle(placed: np.ndarray) -> float:
 
 def to_sketch(topo: Topology, placed: np.ndarray, *, name: str = "synthesized", unit: str = "mm",
               description: str = "") -> Sketch:
-    """The sketch of a topology in a placed pose (joint positions in `unit`), angles in degrees."""
+    """The sketch of a topology in a placed pose (joint positions in `unit`), angles in degrees; a
+    slider dyad's joint slides on the frame's line through it towards its guide's anchor (the
+    anchor itself no joint of the file)."""
     names = joint_names(topo)
     sk = Sketch(name, length_unit=unit if unit in LENGTH_UNITS else "mm", angle_unit="deg",
                 description=description)
@@ -53,4 +55,8 @@ def to_sketch(topo: Topology, placed: np.ndarray, *, name: str = "synthesized", 
             sk.joint(n, x, y)
     for k, b in enumerate(bodies(topo)):
         sk.link("crank" if k == 0 else f"link{k}", *(names[j] for j in b))
+    for k in topo.sliders:
+        j, anchor = CRANK + 1 + k, topo.dyads[k][1]
+        g = placed[j] - placed[anchor]
+        sk.slider(names[j], on="frame", along=(float(g[0]), float(g[1])))
     return sk.crank("crank", name="theta").points(names[topo.traced])

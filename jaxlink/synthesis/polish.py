@@ -41,26 +41,27 @@ WEIGHT = 1000.0
 BACK = (1.0, 0.9, 0.75, 0.5, 0.25)
 
 
-def _loss(x, parents, active, traced, target, closed, u, tau):
+def _loss(x, parents, active, traced, target, closed, u, tau, sliders=False):
     nj = CRANK + 1 + parents.shape[0]
     pose = x[:2 * nj].reshape(nj, 2)
     start, span = x[2 * nj], jnp.where(closed > 0, 2 * np.pi, x[2 * nj + 1])
-    pos, marg = trace(parents, active, pose, start + span * u)
+    pos, marg = trace(parents, active, pose, start + span * u, sliders)
     fit = _dist.soft_chamfer(pos[:, traced], target, closed, tau=tau)
     pen = jnp.sum(jax.nn.relu(FLOOR - marg) ** 2)
     shorter = (1 - closed) * (jax.nn.relu(span - 2 * np.pi) ** 2 + jax.nn.relu(0.05 - span) ** 2)
     return fit + WEIGHT * pen + 100.0 * shorter
 
 
-def _value_and_grad(x, parents, active, traced, target, closed, u, tau):
-    return jax.value_and_grad(_loss)(x, parents, active, traced, target, closed, u, tau)
+def _value_and_grad(x, parents, active, traced, target, closed, u, tau, sliders=False):
+    return jax.value_and_grad(_loss)(x, parents, active, traced, target, closed, u, tau, sliders)
 
 
 @functools.lru_cache(maxsize=8)
-def program(n_dyads: int, n_points: int = _dist.N_POINTS):
+def program(n_dyads: int, n_points: int = _dist.N_POINTS, sliders: bool = False):
     """The compiled value and gradient (float64) of the polishing loss for `n_dyads` dyads
     (a padded topology, `topology.as_arrays`) and a target of `n_points` points: a callable on
-    (x, parents, active, traced, target, closed, u, tau), x the pose flattened, then start and span."""
+    (x, parents, active, traced, target, closed, u, tau), x the pose flattened, then start and span.
+    `sliders`: the parents may hold slider dyads (`tracer.trace`)."""
     f64 = np.float64
     nj = CRANK + 1 + n_dyads
     with jax.enable_x64(True):
@@ -68,17 +69,17 @@ def program(n_dyads: int, n_points: int = _dist.N_POINTS):
                  jax.ShapeDtypeStruct((n_dyads,), bool), jax.ShapeDtypeStruct((), np.int32),
                  jax.ShapeDtypeStruct((n_points, 2), f64), jax.ShapeDtypeStruct((), f64),
                  jax.ShapeDtypeStruct((POLISH_T,), f64), jax.ShapeDtypeStruct((), f64))
-        return compiled("synthesis-polish", _value_and_grad, avals)
+        return compiled("synthesis-polish", _value_and_grad, avals, (sliders,))
 
 
 def polish(parents: np.ndarray, active: np.ndarray, traced: int, pose: np.ndarray, start: float, span: float,
-           target: Target, *, n_points: int = _dist.N_POINTS) -> tuple[np.ndarray, float, float]:
+           target: Target, *, n_points: int = _dist.N_POINTS, sliders: bool = False) -> tuple[np.ndarray, float, float]:
     """(pose, start, span) of one candidate (a row of `topology.as_arrays`, its pose padded like it)
     after L-BFGS at each τ of `TAUS` (module doc); the caller scores it and walks back (`BACK`)."""
     from scipy.optimize import minimize
 
     closed = target.closed
-    prog = program(parents.shape[0], n_points)
+    prog = program(parents.shape[0], n_points, sliders)
     nj = pose.shape[0]
     with jax.enable_x64(True):
         tgt = jnp.asarray(_dist.normalise(arclength_resample(target.points, n_points, closed))[0], jnp.float64)

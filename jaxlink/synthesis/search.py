@@ -89,7 +89,7 @@ class Programs(NamedTuple):
 
 def programs(n_topos: int, n_dyads: int, closed: bool, *, samples: int, screen_keep: int, refine: int,
              steps: int, quick: bool = False, where: _spread.Layout | None = None,
-             polish_points: int = 0) -> Programs:
+             polish_points: int = 0, sliders: bool = False) -> Programs:
     """Compile the screen, the rank and the refinement for these shapes, all three at once (XLA
     compiles in parallel threads; on a cold start compiling is most of a short search's time).
     The rank compiles at XLA's lowest optimisation level (about half the compile time, its run
@@ -97,15 +97,16 @@ def programs(n_topos: int, n_dyads: int, closed: bool, *, samples: int, screen_k
     short searches), and the screen when `quick` and `closed` (an open target's screen, 64
     sub-arcs a candidate, would run longer than its compiling saves). `polish_points` > 0: the
     float64 polish's program for a target of that many points is compiled beside them, into its
-    memo (`polish.program`, which `polish.polish` then finds ready).
+    memo (`polish.program`, which `polish.polish` then finds ready). `sliders`: the topologies may
+    hold slider dyads (`tracer.trace`; other programs, the RRR ones unchanged without it).
     Each program computes one block of its batch (`spread.blocks`, at most `SCREEN_BLOCK`,
     `RANK_BLOCK`, `REFINE_BLOCK` rows), the same block whatever the devices and processes (`where`,
     default `spread.layout()`), and is called on whole batches (`spread.Blocked`)."""
     keep = min(screen_keep, samples * len(_subarcs(closed)))
     sizes = (samples, keep * n_topos, min(refine, keep) * n_topos)
     caps = (SCREEN_BLOCK, RANK_BLOCK, REFINE_BLOCK_QUICK if quick else REFINE_BLOCK)
-    jobs = [("screen", n_dyads, closed, 0, quick and closed), ("rank", n_dyads, False, 0, True),
-            ("refine", n_dyads, False, steps, quick)]
+    jobs = [("screen", n_dyads, closed, 0, quick and closed, sliders), ("rank", n_dyads, False, 0, True, sliders),
+            ("refine", n_dyads, False, steps, quick, sliders)]
     x64 = bool(jax.config.read("jax_enable_x64"))  # the traced program's default dtypes depend on it
     where = _spread.layout() if where is None else where
     if where.devices > len(jax.local_devices()):
@@ -113,7 +114,7 @@ def programs(n_topos: int, n_dyads: int, closed: bool, *, samples: int, screen_k
     block = [_spread.blocks(n, cap)[1] for n, cap in zip(sizes, caps)]
     tasks = [(job, b, d) for job, b in zip(jobs, block) for d in range(where.devices)]
     with ThreadPoolExecutor(len(tasks) + (polish_points > 0)) as ex:
-        pol = ex.submit(_polish_program, n_dyads, polish_points) if polish_points > 0 else None
+        pol = ex.submit(_polish_program, n_dyads, polish_points, sliders) if polish_points > 0 else None
         compiled = list(ex.map(lambda t: _compiled(t[0][0], t[1], *t[0][1:], x64, t[2]), tasks))
         if pol is not None:
             pol.result()
@@ -123,7 +124,8 @@ def programs(n_topos: int, n_dyads: int, closed: bool, *, samples: int, screen_k
 
 
 @functools.lru_cache(maxsize=32)
-def _compiled(which: str, b: int, n_dyads: int, closed: bool, steps: int, quick: bool, x64: bool, device: int = 0):
+def _compiled(which: str, b: int, n_dyads: int, closed: bool, steps: int, quick: bool, sliders: bool, x64: bool,
+              device: int = 0):
     """One program of `programs` for a block of `b` rows on this process's `device`-th device (kept
     for the process, keyed by every static input and the x64 mode; the dynamic data are arguments
     of the program: a second search of the same shapes compiles nothing; the rank's and the
@@ -140,23 +142,28 @@ def _compiled(which: str, b: int, n_dyads: int, closed: bool, steps: int, quick:
     topo = arg((b, n_dyads, 2), i32), arg((b, n_dyads), bool), arg((b,), i32)
     if which == "screen":
         return compiled("synthesis-screen", _screen_of, (arg((2,), np.uint32), *topo, arg((DESC_N,))),
-                        (closed,), options)
+                        (closed, sliders), options)
     poses, arcs = arg((b, nj, 2)), arg((b, 2))
     if which == "rank":
-        return compiled("synthesis-rank", _rank, (*topo, poses, arcs, arg((RANK_T, 2)), arg(()), arg((RANK_T,))),
-                        (), options)
+        return compiled("synthesis-rank", _rank_of, (*topo, poses, arcs, arg((RANK_T, 2)), arg(()), arg((RANK_T,))),
+                        (sliders,), options)
     return compiled("synthesis-refine", _refine_of, (*topo, poses, arcs, arg((TARGET_N, 2)), arg(()), arg(()),
-                                                     arg((REFINE_T,))), (steps,), options)
+                                                     arg((REFINE_T,))), (steps, sliders), options)
 
 
-def _screen_of(key, parents, active, traced, target_desc, closed):
-    """`_screen` with its static option last (a stored program's signature: `cache.compiled`)."""
-    return _screen(key, parents, active, traced, target_desc, closed=closed)
+def _screen_of(key, parents, active, traced, target_desc, closed, sliders):
+    """`_screen` with its static options last (a stored program's signature: `cache.compiled`)."""
+    return _screen(key, parents, active, traced, target_desc, closed=closed, sliders=sliders)
 
 
-def _refine_of(parents, active, traced, poses, arcs, target, lr, closed, u, steps):
-    """`_refine` with its static option last (`cache.compiled`)."""
-    return _refine(parents, active, traced, poses, arcs, target, lr, closed, u, steps=steps)
+def _rank_of(parents, active, traced, poses, arcs, target, closed, u, sliders):
+    """`_rank` with its static option last (`cache.compiled`)."""
+    return _rank(parents, active, traced, poses, arcs, target, closed, u, sliders=sliders)
+
+
+def _refine_of(parents, active, traced, poses, arcs, target, lr, closed, u, steps, sliders):
+    """`_refine` with its static options last (`cache.compiled`)."""
+    return _refine(parents, active, traced, poses, arcs, target, lr, closed, u, steps=steps, sliders=sliders)
 
 
 class Candidate(NamedTuple):
@@ -228,15 +235,15 @@ def _half_samples(curve, ok, reach: int):
     return jnp.concatenate([c2] * reps + [c2[:1]]), jnp.concatenate([o2] * reps + [o2[:1]])
 
 
-@functools.partial(jax.jit, static_argnames=("closed",))
-def _screen(key, parents, active, traced, target_desc, *, closed: bool):
+@functools.partial(jax.jit, static_argnames=("closed", "sliders"))
+def _screen(key, parents, active, traced, target_desc, *, closed: bool, sliders: bool = False):
     """Descriptor distances (B, S) of random poses (B, J, 2) over the sub-arcs; inf where a dyad does
     not close at a sample of the sub-arc. Each sub-arc's points are a static strided slice of the
     curve at half samples (`_subarc_slices`: no gathers)."""
     b = parents.shape[0]
     poses = jax.random.uniform(key, (b, CRANK + 1 + parents.shape[1], 2), _DT, -1.0, 1.0)
     th = jnp.asarray(2 * np.pi * np.arange(SCREEN_T + 1) / SCREEN_T, _DT)
-    pos, marg = jax.vmap(trace, in_axes=(0, 0, 0, None))(parents, active, poses, th)
+    pos, marg = jax.vmap(functools.partial(trace, sliders=sliders), in_axes=(0, 0, 0, None))(parents, active, poses, th)
     curves = pos[jnp.arange(b), :, traced]                    # (B, T+1, 2), the last = the first
     ok = jnp.min(marg, axis=-1) > 0                            # (B, T+1)
     slices = _subarc_slices(closed)
@@ -267,13 +274,13 @@ def _u(n: int, closed: bool) -> np.ndarray:
     return (np.arange(n) / (n if closed else n - 1)).astype(np.float32)
 
 
-@jax.jit
-def _rank(parents, active, traced, poses, arcs, target, closed, u):
+@functools.partial(jax.jit, static_argnames=("sliders",))
+def _rank(parents, active, traced, poses, arcs, target, closed, u, *, sliders: bool = False):
     """(chamfer at the best of `_ROT` rotations, that rotation) of each candidate over its sub-arc.
     `closed` a 0/1 array (one program for open and closed targets), `u` from `_u`."""
 
     def one(par, act, tr, pose, arc):
-        pos, marg = trace(par, act, pose, arc[0] + arc[1] * u)
+        pos, marg = trace(par, act, pose, arc[0] + arc[1] * u, sliders)
         c = pos[:, tr]
         w = _dist.arclength_weights(c, closed)
         c = _normalised(c, w)
@@ -289,18 +296,18 @@ def _rank(parents, active, traced, poses, arcs, target, closed, u):
     return jax.vmap(one)(parents, active, traced, poses, arcs)
 
 
-def _loss(params, par, act, tr, target, closed, u):
+def _loss(params, par, act, tr, target, closed, u, sliders):
     pose, arc = params
     start, span = arc[0], jnp.where(closed > 0, jnp.asarray(2 * np.pi, arc.dtype), arc[1])
-    pos, marg = trace(par, act, pose, start + span * u)
+    pos, marg = trace(par, act, pose, start + span * u, sliders)
     fit = _dist.soft_chamfer(pos[:, tr], target, closed, tau=0.01)
     pen = jnp.mean(jnp.sum(jax.nn.relu(MARGIN_FLOOR - marg) ** 2, axis=-1))
     shorter = (1 - closed) * (jax.nn.relu(span - 2 * np.pi) ** 2 + jax.nn.relu(0.05 - span) ** 2)
     return fit + 100.0 * pen + 100.0 * shorter
 
 
-@functools.partial(jax.jit, static_argnames=("steps",))
-def _refine(parents, active, traced, poses, arcs, target, lr, closed, u, *, steps: int):
+@functools.partial(jax.jit, static_argnames=("steps", "sliders"))
+def _refine(parents, active, traced, poses, arcs, target, lr, closed, u, *, steps: int, sliders: bool = False):
     # the step size falls from lr to lr / 10 along a half cosine: long strides first, a fine fit at the end
     opt = optax.adam(lambda k: lr * (0.55 + 0.45 * jnp.cos(np.pi * jnp.minimum(k, steps) / steps)))
 
@@ -311,7 +318,7 @@ def _refine(parents, active, traced, poses, arcs, target, lr, closed, u, *, step
 
         def step(carry, _):
             params, state = carry
-            v, grads = g(params, par, act, tr, target, closed, u)
+            v, grads = g(params, par, act, tr, target, closed, u, sliders)
             grads = jax.tree_util.tree_map(lambda x: jnp.where(jnp.isfinite(x), x, 0.0), grads)
             upd, state = opt.update(grads, state, params)
             return (optax.apply_updates(params, upd), state), v
@@ -439,8 +446,10 @@ def search(target: Target, topos: list[Topology], *, time_limit: float, seed: in
     arr = as_arrays(topos)
     quick = time_limit <= 15.0 if quick is None else quick
     finish = (0 if quick else 4) if finish is None else finish
+    sliders = any(t.sliders for t in topos)
     prog = programs(len(topos), arr.parents.shape[1], closed, samples=samples, screen_keep=screen_keep,
-                    refine=refine, steps=steps, quick=quick, polish_points=n_points if finish > 0 else 0)
+                    refine=refine, steps=steps, quick=quick, polish_points=n_points if finish > 0 else 0,
+                    sliders=sliders)
     tpts = _dist.normalise(arclength_resample(target.points, TARGET_N, closed))[0]
     tdesc = _desc(target.points, closed)
     trank = jnp.asarray(_dist.normalise(arclength_resample(target.points, RANK_T, closed))[0], _DT)
@@ -466,7 +475,8 @@ def search(target: Target, topos: list[Topology], *, time_limit: float, seed: in
         t1 = time.perf_counter()
         origins.add(id(c))
         ti = topos.index(c.topology)
-        new = _polished(c, arr.parents[ti], arr.active[ti], int(arr.traced[ti]), target, n_trace, n_points, t0)
+        new = _polished(c, arr.parents[ti], arr.active[ti], int(arr.traced[ti]), target, n_trace, n_points, t0,
+                        sliders)
         if new is not None:
             found.append(new)
         t_polish = time.perf_counter() - t1  # the estimate of the next one
@@ -567,10 +577,11 @@ def _to_polish(found: list[Candidate], origins: set[int], n: int, best: float | 
 
 
 def _polished(c: Candidate, parents, active, traced: int, target: Target, n_trace: int, n_points: int,
-              t0: float) -> Candidate | None:
+              t0: float, sliders: bool = False) -> Candidate | None:
     """`c` polished (`polish.polish`) and scored; if it does not assemble, the first point back
     towards `c` (`polish.BACK`) that does; None if none does."""
-    pose, start, span = _polish(parents, active, traced, c.pose, c.start, c.span, target, n_points=n_points)
+    pose, start, span = _polish(parents, active, traced, c.pose, c.start, c.span, target, n_points=n_points,
+                                sliders=sliders)
     for f in BACK:
         p = c.pose + f * (pose - c.pose)
         st, sp = c.start + f * (start - c.start), c.span + f * (span - c.span)

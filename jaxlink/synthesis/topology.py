@@ -9,6 +9,12 @@ Stephenson six-bars and, growing further, eight-bars are all such lists (`grow`)
 is any moving joint. A dyad may end at a joint other links already use (a frame pivot, the crank
 pin): that pin then joins three links.
 
+A dyad may instead be a **slider** (RRP, `slide`): its joint is attached to its first parent by a
+link and moves on a line fixed to the frame, the line through its second parent — a frame joint no
+other dyad uses, only the guide's anchor — and the joint's own position in the pose. The four-bar's
+rocker so becomes the slider-crank's slider; `topologies(sliders=True)` adds every built-in's
+variants with one or more of its eligible dyads (`slidable`) sliding.
+
 The topologies of one search are padded to the same number of dyads so that all of them share one
 batched program (`as_arrays`): padding dyads are inactive.
 """
@@ -25,28 +31,36 @@ CRANK = 3
 MAX_DYADS = 16
 MAX_JOINTS = CRANK + 1 + MAX_DYADS
 FRAME_BODY = -1
+#: added to a slider dyad's second parent in `as_arrays` (more than any joint index): the kind travels
+#: with the parents, one array for every program
+SLIDER = 32
 
 
 class Topology(NamedTuple):
     """A dyadic linkage. `dyads[k] = (p1, p2)`: joint `CRANK + 1 + k` is attached to joints p1 and
-    p2; `traced`: the joint whose path is matched."""
+    p2; `traced`: the joint whose path is matched; `sliders`: the dyads (indices k) whose joint is
+    attached to p1 only and slides on the frame's line through the frame joint p2 and its own pose
+    position (`slide`)."""
 
     name: str
     dyads: tuple[tuple[int, int], ...]
     traced: int
+    sliders: tuple[int, ...] = ()
 
     @property
     def n_joints(self) -> int:
-        """Joints of the linkage (the frame joints it uses included)."""
+        """Joints of the linkage (the frame joints it uses included, a guide's anchor not)."""
         return len(self.used_frame()) + 1 + len(self.dyads)
 
     @property
     def n_links(self) -> int:
-        """Links, the frame included."""
-        return 1 + len(bodies(self))
+        """Links, the frame and each slider's block included."""
+        return 1 + len(bodies(self)) + len(self.sliders)
 
     def used_frame(self) -> list[int]:
-        return sorted({0} | {p for d in self.dyads for p in d if p < N_FRAME})
+        """The frame joints that are joints of the linkage (F0 and every pivot of a dyad's link)."""
+        return sorted({0} | {p for k, d in enumerate(self.dyads) for i, p in enumerate(d)
+                             if p < N_FRAME and not (i == 1 and k in self.sliders)})
 
 
 def grow(topo: Topology, p1: int, p2: int, *, name: str | None = None, trace: bool = True) -> Topology:
@@ -56,7 +70,42 @@ def grow(topo: Topology, p1: int, p2: int, *, name: str | None = None, trace: bo
         raise ValueError(f"a dyad attaches to two different earlier joints, got {p1}, {p2}")
     if p1 < N_FRAME and p2 < N_FRAME:
         raise ValueError("a dyad on two frame joints does not move")
-    return Topology(name or topo.name, topo.dyads + ((p1, p2),), j if trace else topo.traced)
+    return Topology(name or topo.name, topo.dyads + ((p1, p2),), j if trace else topo.traced, topo.sliders)
+
+
+def slidable(topo: Topology) -> list[int]:
+    """The dyads that may become sliders (`slide`): not sliders yet, on one frame joint and a joint of
+    another body (their frame link a rocker), the frame joint used by no other dyad."""
+    out = []
+    for k, (p1, p2) in enumerate(topo.dyads):
+        if k in topo.sliders or (p1 < N_FRAME) == (p2 < N_FRAME):
+            continue
+        f = p1 if p1 < N_FRAME else p2
+        other = p2 if f == p1 else p1
+        if f == 0 or any(f in d for i, d in enumerate(topo.dyads) if i != k):
+            continue
+        if any(f in b and other in b for b in bodies(Topology(topo.name, topo.dyads[:k], topo.traced,
+                                                              tuple(i for i in topo.sliders if i < k)))):
+            continue  # a point of a body already holding both: no rocker to replace
+        out.append(k)
+    return out
+
+
+def slide(topo: Topology, k: int, *, name: str | None = None) -> Topology:
+    """The topology with dyad `k` a slider (`slidable`): its joint J, attached to the dyad's moving
+    parent by a link, moves on the frame's line through the dyad's frame joint (the guide's anchor)
+    and J's pose position; the frame joint is stored second. Named `NAME+slider-J<j>` by default
+    (the four-bar's: `slider-crank`)."""
+    if k not in slidable(topo):
+        raise ValueError(f"{topo.name}: dyad {k} cannot become a slider (`slidable`: {slidable(topo)})")
+    p1, p2 = topo.dyads[k]
+    if p1 < N_FRAME:
+        p1, p2 = p2, p1
+    dyads = topo.dyads[:k] + ((p1, p2),) + topo.dyads[k + 1:]
+    j = CRANK + 1 + k
+    if name is None:
+        name = "slider-crank" if topo.name == "four-bar" else f"{topo.name}+slider-J{j}"
+    return Topology(name, dyads, topo.traced, tuple(sorted(topo.sliders + (k,))))
 
 
 def bodies(topo: Topology) -> list[tuple[int, ...]]:
@@ -66,6 +115,9 @@ def bodies(topo: Topology) -> list[tuple[int, ...]]:
     frame = set(range(N_FRAME))
     for k, (p1, p2) in enumerate(topo.dyads):
         j = CRANK + 1 + k
+        if k in topo.sliders:
+            out.append([p1, j])  # the link to the slider; the slider's block is no body of joints
+            continue
         home = [b for b in out if p1 in b and p2 in b]
         if home:
             home[0].append(j)
@@ -130,14 +182,30 @@ def _grown(t: Topology) -> list[Topology]:
     return [_eight_bar(t, at) for at, j in EIGHT_AT.items() if j not in on_traced]
 
 
-def topologies(max_links: int = 8) -> list[Topology]:
+def with_sliders(topo: Topology) -> list[Topology]:
+    """`topo`'s variants with one or more of its `slidable` dyads sliders, fewest sliders first."""
+    from itertools import combinations
+
+    ks = slidable(topo)
+    out = []
+    for n in range(1, len(ks) + 1):
+        for sub in combinations(ks, n):
+            t = topo
+            for k in sub:
+                t = slide(t, k, name=None if n == 1 and t is topo else f"{t.name}+slider-J{CRANK + 1 + k}")
+            out.append(t)
+    return out
+
+
+def topologies(max_links: int = 8, *, sliders: bool = False) -> list[Topology]:
     """The built-in topologies up to `max_links` links (the frame included): the four-bar with a
     coupler point; the six-bars — Watt (the two ternary links adjacent) with the dyad between
     coupler and crank, coupler and rocker, rocker and frame, crank and frame; Stephenson (not
     adjacent) between coupler and frame, rocker and crank; the eight-bars grown from three of
     the six-bars (`EIGHT_FROM`) by a dyad from the traced link to a frame pivot or the crank pin
     (`_eight_bar`), where that joint is not already on the traced link; the ten-bars (12 joints)
-    grown from every eight-bar the same way (`max_links` ≥ 10)."""
+    grown from every eight-bar the same way (`max_links` ≥ 10). `sliders`: after those, each one's
+    variants with sliders (`with_sliders`: the slider-crank, …), in the same order."""
     out = [_four_bar()]
     six = [_six_bar(*s) for s in SIX_BARS]
     out += six
@@ -145,6 +213,8 @@ def topologies(max_links: int = 8) -> list[Topology]:
     out += eight
     if max_links >= 10:
         out += [g for e in eight for g in _grown(e)]
+    if sliders:
+        out += [v for t in out for v in with_sliders(t)]
     return [t for t in out if t.n_links <= max_links]
 
 
@@ -157,7 +227,8 @@ class TopologyArrays(NamedTuple):
 
 
 def as_arrays(topos: list[Topology]) -> TopologyArrays:
-    """Stack topologies, padding each to the most dyads among them (inactive, attached to C and F1)."""
+    """Stack topologies, padding each to the most dyads among them (inactive, attached to C and F1);
+    a slider dyad's second parent + `SLIDER` (`tracer.trace` with `sliders`)."""
     nd = max(len(t.dyads) for t in topos)
     par = np.zeros((len(topos), nd, 2), np.int32)
     act = np.zeros((len(topos), nd), bool)
@@ -166,6 +237,6 @@ def as_arrays(topos: list[Topology]) -> TopologyArrays:
             raise ValueError(f"{t.name}: more than {MAX_DYADS} dyads")
         par[i, :, 0], par[i, :, 1] = CRANK, 1
         for k, (p1, p2) in enumerate(t.dyads):
-            par[i, k] = (p1, p2)
+            par[i, k] = (p1, p2 + SLIDER * (k in t.sliders))
             act[i, k] = True
     return TopologyArrays(par, act, np.array([t.traced for t in topos], np.int32))

@@ -13,15 +13,24 @@ F0 + r (cos(α + θ), sin(α + θ)), α its angle in the pose, and each dyad's j
 with the dyad's **reach margin** S = ((l₁ + l₂)² − d²)(d² − (l₁ − l₂)²) / (4 l₁² l₂²), the sine²
 of the angle between its two links (the project's RRR margin, `jaxlink.solvers.dyads`): the dyad
 closes iff S ≥ 0, and it stays on its branch between two inputs iff S > 0 between them.
+
+A **slider** dyad (`topology.slide`: RRP, the joint on the frame's line through the anchor
+A = P₂ and its pose position J⁰, direction u = (J⁰ − A)/|J⁰ − A|) puts its joint at
+
+.. math::  J = A + \left(u \cdot q + \sigma \sqrt{l_1^2 - e^2}\right) u,\quad q = P_1 - A,\
+           e = u \times q,
+
+with σ = sign(u · (J⁰ − P₁⁰)), l₁ = |J⁰ − P₁⁰|, and its margin S = 1 − e²/l₁² (the cosine² of the
+angle between the link and the line; 0 where the link stands square to the line, the slider's
+dead centre).
 """
 
 from __future__ import annotations
 
-import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .topology import CRANK, Topology
+from .topology import CRANK, SLIDER, Topology
 
 
 def _margin(l1, l2, d2):
@@ -32,10 +41,27 @@ def _norm(v):
     return jnp.sqrt(jnp.sum(v * v, axis=-1) + 1e-30)
 
 
-def trace(parents, active, pose, thetas):
+def _slid(a1, anchor, jp, l1, sigma):
+    """A slider dyad's joint (…, 2) and margin (…) with its link's end at `a1` (…, 2), the guide
+    through `anchor` and `jp` (its pose position), the link `l1`, the branch `sigma` (module doc). Where
+    it does not close (S < 0) the joint is at the foot of the perpendicular from `a1`."""
+    g = jp - anchor
+    u = g / _norm(g)
+    q = a1 - anchor
+    along = q[..., 0] * u[0] + q[..., 1] * u[1]
+    e = q[..., 0] * u[1] - q[..., 1] * u[0]
+    s = 1.0 - (e * e) / (l1 * l1)
+    ok = s > 0
+    t = along + sigma * l1 * jnp.sqrt(jnp.where(ok, s, 1.0)) * ok
+    return anchor + t[..., None] * u, s
+
+
+def trace(parents, active, pose, thetas, sliders: bool = False):
     """Positions (T, J, 2) and margins (T, D) (1 where inactive) of one
     candidate over the input offsets `thetas` (T,). A dyad that does not close puts its joint on
-    the line P₁P₂ (h = 0): finite, its margin negative. Pure; `vmap` over candidates."""
+    the line P₁P₂ (h = 0): finite, its margin negative. `sliders` (static): the parents may hold
+    slider dyads (`topology.as_arrays`: the second parent + `SLIDER`), each traced by both rules and
+    the slider's kept; without it every dyad is RRR. Pure; `vmap` over candidates."""
     f0 = pose[0]
     c0 = pose[CRANK] - f0
     r = _norm(c0)
@@ -48,6 +74,9 @@ def trace(parents, active, pose, thetas):
     for k in range(parents.shape[0]):
         j = CRANK + 1 + k
         p1, p2 = parents[k, 0], parents[k, 1]
+        if sliders:
+            slider = p2 >= SLIDER
+            p2 = jnp.where(slider, p2 - SLIDER, p2)
         w0 = pose[p2] - pose[p1]
         v0 = pose[j] - pose[p1]
         l1 = _norm(v0)
@@ -63,6 +92,12 @@ def trace(parents, active, pose, thetas):
         a = (l1 * l1 - l2 * l2 + d2) / (2.0 * d)
         perp = jnp.stack([-w[:, 1], w[:, 0]], axis=-1)
         jpos = a1 + (a / d)[:, None] * w + (sigma * h / d)[:, None] * perp
+        if sliders:
+            g = pose[j] - pose[p2]
+            g_sigma = jnp.where(g @ (pose[j] - pose[p1]) >= 0, 1.0, -1.0)  # u · (J⁰ − P₁⁰), |g| > 0
+            spos, ss = _slid(a1, pose[p2], pose[j], l1, g_sigma)
+            jpos = jnp.where(slider, spos, jpos)
+            s = jnp.where(slider, ss, s)
         pos = pos.at[:, j].set(jnp.where(active[k], jpos, pos[:, j]))
         margins.append(jnp.where(active[k], s, 1.0))
     return pos, jnp.stack(margins, axis=-1)
@@ -81,6 +116,19 @@ def trace_exact(topo: Topology, pose: np.ndarray, thetas: np.ndarray) -> tuple[n
     margins = np.empty((thetas.shape[0], len(topo.dyads)))
     for k, (p1, p2) in enumerate(topo.dyads):
         j = CRANK + 1 + k
+        if k in topo.sliders:
+            g = pose[j] - pose[p2]
+            u = g / np.hypot(*g)
+            l1 = np.hypot(*(pose[j] - pose[p1]))
+            sigma = 1.0 if g @ (pose[j] - pose[p1]) >= 0 else -1.0
+            q = pos[:, p1] - pose[p2]
+            e = q[:, 0] * u[1] - q[:, 1] * u[0]
+            s = 1.0 - (e * e) / (l1 * l1)
+            margins[:, k] = s
+            # elementwise, not `q @ u`: a matrix product's rounding may depend on how many rows there are
+            t = q[:, 0] * u[0] + q[:, 1] * u[1] + sigma * l1 * np.sqrt(np.maximum(s, 0.0))
+            pos[:, j] = pose[p2] + t[:, None] * u
+            continue
         w0, v0 = pose[p2] - pose[p1], pose[j] - pose[p1]
         l1, l2 = np.hypot(*v0), np.hypot(*(pose[j] - pose[p2]))
         sigma = 1.0 if w0[0] * v0[1] - w0[1] * v0[0] >= 0 else -1.0
@@ -97,15 +145,18 @@ def trace_exact(topo: Topology, pose: np.ndarray, thetas: np.ndarray) -> tuple[n
 
 
 def lengths(topo: Topology, pose: np.ndarray) -> dict[str, float]:
-    """The dimensions a pose fixes: the crank and each dyad's two links."""
+    """The dimensions a pose fixes: the crank and each dyad's two links (a slider dyad's one link, and
+    `e{j}`: its guide's offset, the distance of the crank's pivot F0 from the line)."""
     pose = np.asarray(pose, float)
     out = {"crank": float(np.hypot(*(pose[CRANK] - pose[0])))}
     for k, (p1, p2) in enumerate(topo.dyads):
         j = CRANK + 1 + k
         out[f"l{j}_{p1}"] = float(np.hypot(*(pose[j] - pose[p1])))
-        out[f"l{j}_{p2}"] = float(np.hypot(*(pose[j] - pose[p2])))
+        if k in topo.sliders:
+            g = pose[j] - pose[p2]
+            q = pose[0] - pose[p2]
+            out[f"e{j}"] = float(abs(q[0] * g[1] - q[1] * g[0]) / np.hypot(*g))
+        else:
+            out[f"l{j}_{p2}"] = float(np.hypot(*(pose[j] - pose[p2])))
     return out
 
-
-#: jitted batched trace: (parents (B, D, 2), active (B, D), poses (B, J, 2), thetas (B, T))
-trace_batch = jax.jit(jax.vmap(trace))
