@@ -20,7 +20,9 @@ def register(sub) -> None:
             "`jaxlink kinematics` replays, every topology's best, a JSON of the ranked designs and a plot."
         ),
     )
-    p.add_argument("target", metavar="TARGET", help="the target path: .csv, .npy or .svg")
+    p.add_argument("target", metavar="TARGET",
+                   help="the target path: .csv, .npy or .svg; a CSV column theta_deg (or theta_rad) makes it timed: "
+                        "each point reached at its crank angle, matched by the ordered distance")
     g = p.add_mutually_exclusive_group()
     g.add_argument("--closed", dest="closed", action="store_const", const=True, default=None,
                    help="a closed loop, matched by a whole crank turn")
@@ -91,7 +93,11 @@ def cmd_synthesize(args) -> int:
     for f in write_all(args.out, res, plot_it=not args.no_plot):
         print(f"wrote {f}")
     b = res.best
-    span = (f"--start {b.start_deg!r} --step {360 / b.n_inputs!r} --count {b.n_inputs}" if res.target.closed
+    span = (f"--start {b.start_deg!r} --step {360 / b.n_inputs!r} --count {b.n_inputs}"
+            if res.target.closed and not res.target.timed
             else f"--start {b.start_deg!r} --stop {b.stop_deg!r} --count {b.n_inputs}")
+    if res.target.timed:
+        print(f"timed       the target's points are matched at the crank angles `inputs_deg` of {args.out}/"
+              "synthesis.json")
     print(f"replay      jaxlink kinematics {args.out}/synthesized.toml {span} --outputs position")
     return 0

@@ -11,8 +11,10 @@ import numpy as np
 
 def table(res) -> str:
     """One line per design: topology, joints, links, distance, crank interval, time found."""
-    lines = [f"target      {res.target.source}: {len(res.target.points)} points, "
-             f"{'closed' if res.target.closed else 'open'}" + (f", in {res.target.unit}" if res.target.unit else ""),
+    t = res.target
+    kind = (f"timed over {abs(np.degrees(t.inputs[-1] - t.inputs[0])):.6g}° (distance: the ordered one)" if t.timed
+            else "closed" if t.closed else "open")
+    lines = [f"target      {t.source}: {len(t.points)} points, {kind}" + (f", in {t.unit}" if t.unit else ""),
              f"{'rank':>4}  {'topology':<26}{'joints':>7}{'links':>6}{'distance':>11}"
              f"{'start_deg':>11}{'stop_deg':>11}{'found_s':>9}  pareto"]
     for i, d in enumerate(res.designs, 1):
@@ -26,7 +28,8 @@ def to_json(res) -> dict:
     """The JSON of the ranked designs (docs/reference/cli.md, `jaxlink synthesize`)."""
     t = res.target
     return {
-        "target": {"source": t.source, "points": len(t.points), "closed": t.closed, "unit": t.unit},
+        "target": {"source": t.source, "points": len(t.points), "closed": t.closed, "unit": t.unit,
+                   "timed": t.timed},
         "wall_s": res.wall_s,
         "designs": [{
             "rank": i, "topology": d.topology, "joints": d.joints, "links": d.links,
@@ -37,6 +40,7 @@ def to_json(res) -> dict:
             "links_joints": d.sketch.tables()["sketch"]["links"],
             "frame": d.sketch.tables()["sketch"]["frame"],
             "sliders": {j: v["along"] for j, v in d.sketch.tables()["sketch"].get("sliders", {}).items()},
+            "inputs_deg": None if d.inputs_deg is None else [float(x) for x in d.inputs_deg],
         } for i, d in enumerate(res.designs, 1)],
     }
 
@@ -56,10 +60,16 @@ def plot(path, res) -> None:
     t = res.target.points
     sk = d.sketch.tables()["sketch"]
     fig, ax = plt.subplots(figsize=(6.4, 6.0))
-    tt = np.concatenate([t, t[:1]]) if res.target.closed else t
+    tt = np.concatenate([t, t[:1]]) if res.target.closed and not res.target.timed else t
     ax.plot(tt[:, 0], tt[:, 1], color="0.6", lw=4, alpha=0.6, label="target")
-    c = np.concatenate([d.curve, d.curve[:1]]) if res.target.closed else d.curve
+    c = np.concatenate([d.curve, d.curve[:1]]) if res.target.closed and not res.target.timed else d.curve
     ax.plot(c[:, 0], c[:, 1], color="C0", lw=1.5, label=f"traced ({d.topology})")
+    if d.at_inputs is not None:  # a timed target: each point and where the design is at its input
+        ax.plot(t[:, 0], t[:, 1], ls="", marker="o", ms=3, color="0.3", label="target at its inputs")
+        ax.plot(d.at_inputs[:, 0], d.at_inputs[:, 1], ls="", marker="x", ms=4, color="C3",
+                label="traced at the same inputs")
+        for a, b in zip(t, d.at_inputs):
+            ax.plot([a[0], b[0]], [a[1], b[1]], color="C3", lw=0.6)
     js = sk["joints"]
     for names in sk["links"].values():
         pts = np.array([js[n] for n in names] + ([js[names[0]]] if len(names) > 2 else []))

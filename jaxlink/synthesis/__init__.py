@@ -1,6 +1,6 @@
 """Path synthesis: a linkage — its topology and its dimensions — whose point follows a target path.
 
-- `target`: the target curve read from CSV, NPY or SVG; arclength resampling;
+- `target`: the target curve read from CSV, NPY or SVG (timed: each point at an input angle); arclength resampling;
 - `distance`: the field's distance (symmetric chamfer of the normalised curves at the best
   rotation), the placement, the ordered distance, the smooth surrogate;
 - `topology`: one-DOF revolute linkages grown by dyads (four-bar, Watt and Stephenson six-bars, eight-bars);
@@ -19,3 +19,4 @@ from .distance import Match as Match
 from .distance import match as match
 from .target import Target as Target
 from .target import load_target as load_target
+from .target import make_target as make_target

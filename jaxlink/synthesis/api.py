@@ -35,7 +35,11 @@ class Design(NamedTuple):
     - `lengths`: the crank's and every dyad link's length (target unit);
     - `sketch`: the mechanism (`jaxlink.Sketch`), `curve`: the traced path (n_inputs, 2);
     - `found_s`: seconds from the start of the search to this answer; `pareto`: no other answer
-      has both fewer or as many joints and a smaller distance.
+      has both fewer or as many joints and a smaller distance;
+    - `inputs_deg`: a timed target's crank angles (the file's input, degrees) at which its points are
+      matched, (N,); `distance` is then the ordered distance (`distance.match_ordered`) of the
+      traced point there to the target's points, and `curve` the path over the interval; else None;
+    - `at_inputs`: a timed target's traced points at `inputs_deg` (N, 2), else None.
     """
 
     topology: str
@@ -54,6 +58,8 @@ class Design(NamedTuple):
     curve: np.ndarray
     found_s: float
     pareto: bool
+    inputs_deg: np.ndarray | None = None
+    at_inputs: np.ndarray | None = None
 
 
 class Synthesis(NamedTuple):
@@ -73,8 +79,8 @@ def _design(c: Candidate, target: Target, n_trace: int, name: str) -> Design:
     placed = placed_pose(c.topology, c.pose, c.start, m)
     a0 = crank_angle(placed)
     start = math.degrees(a0)
-    span = 2 * math.pi if target.closed else c.span
-    th = interval_offsets(c.start, c.span, n_trace, target.closed)
+    span = 2 * math.pi if target.closed and not target.timed else c.span
+    th = interval_offsets(c.start, c.span, n_trace, target.closed and not target.timed)
     from .tracer import trace_exact
 
     curve = _dist.place(trace_exact(c.topology, c.pose, th)[0][:, c.topology.traced], m)
@@ -83,7 +89,20 @@ def _design(c: Candidate, target: Target, n_trace: int, name: str) -> Design:
     return Design(c.topology.name, c.topology.n_joints, c.topology.n_links, float(m.distance), start,
                   start + math.degrees(span), n_trace, float(m.scale), math.degrees(m.rotation),
                   (float(m.translation[0]), float(m.translation[1])), float(c.assembly.margin),
-                  {k: v * m.scale for k, v in lengths(c.topology, c.pose).items()}, sk, curve, c.found_s, False)
+                  {k: v * m.scale for k, v in lengths(c.topology, c.pose).items()}, sk, curve, c.found_s, False,
+                  *_timed_points(c, target, m, start))
+
+
+def _timed_points(c: Candidate, target: Target, m: _dist.Match, start_deg: float):
+    """(inputs_deg, at_inputs) of a timed target's design, (None, None) otherwise."""
+    if target.inputs is None:
+        return None, None
+    from .tracer import trace_exact
+
+    t = np.asarray(target.inputs, float)
+    dt = t - t[0]
+    at = _dist.place(trace_exact(c.topology, c.pose, c.start + dt)[0][:, c.topology.traced], m)
+    return start_deg + np.degrees(dt), at
 
 
 def synthesize(target: Any, *, closed: bool | None = None, time_limit: float = 60.0, seed: int = 0,

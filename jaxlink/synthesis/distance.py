@@ -26,7 +26,8 @@ to the target is D at φ = 0.
 **The ordered distance** (`ordered_distance`, for a timed target: points at given input angles):
 the same normalisation without resampling (point i of the curve against point i of the target),
 the rotation in closed form (2-D Kabsch, φ = atan2(Σ â×b̂, Σ â·b̂), the least-squares rotation),
-and the RMS of |R â_i − b̂_i|.
+and the RMS of |R â_i − b̂_i|. `match_ordered` adds the placement (the same k, t as above): the
+distance of a timed target's match.
 
 **The surrogate** (`soft_chamfer`, JAX, differentiable): the curve's samples weighted by their
 share of arclength (trapezoid), normalised with those weights, and each nearest-neighbour minimum
@@ -137,6 +138,16 @@ def match(curve: np.ndarray, target: np.ndarray, *, closed: bool, n: int = N_POI
     return Match(d, phi, k, t)
 
 
+def match_ordered(curve: np.ndarray, target: np.ndarray) -> Match:
+    """The ordered distance of `curve` point i to `target` point i (module doc) and the placement of
+    the curve onto the target: a timed target's match."""
+    d, phi = ordered_distance(curve, target)
+    _, abar, sa = normalise(curve)
+    _, bbar, sb = normalise(target)
+    k = sb / sa
+    return Match(d, float(np.mod(phi, 2 * np.pi)), k, bbar - k * _rot(phi) @ abar)
+
+
 def place(points: np.ndarray, m: Match) -> np.ndarray:
     """Points (…, 2) in the mechanism's coordinates placed onto the target: k R(φ) x + t."""
     return m.scale * np.asarray(points, float) @ _rot(m.rotation).T + m.translation
@@ -165,6 +176,19 @@ def arclength_weights(curve, closed, eps: float = 1e-9):
     seg = seg.at[-1].multiply(jnp.asarray(closed, seg.dtype))
     w = 0.5 * (seg + jnp.roll(seg, 1))
     return w / jnp.sum(w)
+
+
+def ordered_sq(curve, target, w, eps: float = 1e-12):
+    """The square of the ordered distance (`ordered_distance`) between `curve` (T, 2) and the
+    target (T, 2), both weighted by `w` (T,), Σ w = 1 (0: a padding point): the target normalised
+    with those weights beforehand, the curve here, the rotation the least-squares one in closed form,
+    min_φ Σ w |R ĉ − b̂|² = 2 − 2 |Σ w (ĉ·b̂, ĉ×b̂)|. Smooth (`eps` under the root); JAX, pure."""
+    mean = jnp.sum(w[:, None] * curve, axis=0)
+    c = curve - mean
+    c = c / jnp.sqrt(jnp.sum(w * jnp.sum(c * c, axis=1)) + 1e-30)
+    dot = jnp.sum(w * (c[:, 0] * target[:, 0] + c[:, 1] * target[:, 1]))
+    cross = jnp.sum(w * (c[:, 0] * target[:, 1] - c[:, 1] * target[:, 0]))
+    return 2.0 - 2.0 * jnp.sqrt(dot * dot + cross * cross + eps)
 
 
 def soft_chamfer(curve, target, closed, tau: float = 0.01, eps: float = 1e-6):

@@ -72,6 +72,37 @@ def program(n_dyads: int, n_points: int = _dist.N_POINTS, sliders: bool = False)
         return compiled("synthesis-polish", _value_and_grad, avals, (sliders,))
 
 
+def _loss_timed(x, parents, active, traced, target, w, u, tau, sliders=False):
+    """A timed target's polishing loss: the square of the ordered distance at its points (`u`, the
+    fractions of its span; `w` 1/N each) and the margin penalty there and at `POLISH_T` inputs across
+    the interval; the span (x's last) is the target's, fixed (`tau` unused: the same signature)."""
+    nj = CRANK + 1 + parents.shape[0]
+    pose = x[:2 * nj].reshape(nj, 2)
+    start, span = x[2 * nj], jax.lax.stop_gradient(x[2 * nj + 1])
+    um = jnp.linspace(0.0, 1.0, POLISH_T, dtype=x.dtype)
+    pos, marg = trace(parents, active, pose, start + span * jnp.concatenate([u, um]), sliders)
+    fit = _dist.ordered_sq(pos[:u.shape[0], traced], target, w, eps=1e-30)
+    return fit + WEIGHT * jnp.sum(jax.nn.relu(FLOOR - marg) ** 2)
+
+
+def _value_and_grad_timed(x, parents, active, traced, target, w, u, tau, sliders=False):
+    return jax.value_and_grad(_loss_timed)(x, parents, active, traced, target, w, u, tau, sliders)
+
+
+@functools.lru_cache(maxsize=8)
+def program_timed(n_dyads: int, n_points: int, sliders: bool = False):
+    """`program` for a timed target of `n_points` points: a callable on (x, parents, active, traced,
+    target (normalised), w, u, tau)."""
+    f64 = np.float64
+    nj = CRANK + 1 + n_dyads
+    with jax.enable_x64(True):
+        avals = (jax.ShapeDtypeStruct((2 * nj + 2,), f64), jax.ShapeDtypeStruct((n_dyads, 2), np.int32),
+                 jax.ShapeDtypeStruct((n_dyads,), bool), jax.ShapeDtypeStruct((), np.int32),
+                 jax.ShapeDtypeStruct((n_points, 2), f64), jax.ShapeDtypeStruct((n_points,), f64),
+                 jax.ShapeDtypeStruct((n_points,), f64), jax.ShapeDtypeStruct((), f64))
+        return compiled("synthesis-polish-timed", _value_and_grad_timed, avals, (sliders,))
+
+
 def polish(parents: np.ndarray, active: np.ndarray, traced: int, pose: np.ndarray, start: float, span: float,
            target: Target, *, n_points: int = _dist.N_POINTS, sliders: bool = False) -> tuple[np.ndarray, float, float]:
     """(pose, start, span) of one candidate (a row of `topology.as_arrays`, its pose padded like it)
@@ -79,23 +110,35 @@ def polish(parents: np.ndarray, active: np.ndarray, traced: int, pose: np.ndarra
     from scipy.optimize import minimize
 
     closed = target.closed
-    prog = program(parents.shape[0], n_points, sliders)
+    timed = target.timed
     nj = pose.shape[0]
     with jax.enable_x64(True):
-        tgt = jnp.asarray(_dist.normalise(arclength_resample(target.points, n_points, closed))[0], jnp.float64)
-        u = jnp.asarray(np.arange(POLISH_T) / (POLISH_T if closed else POLISH_T - 1), jnp.float64)
         par, act = jnp.asarray(parents, jnp.int32), jnp.asarray(active, bool)
-        tr, flag = jnp.asarray(traced, jnp.int32), jnp.asarray(float(closed), jnp.float64)
+        tr = jnp.asarray(traced, jnp.int32)
+        if timed:  # every point, its own input; the span exact
+            prog = program_timed(parents.shape[0], len(target.points), sliders)
+            t_in = np.asarray(target.inputs, float)
+            span = float(t_in[-1] - t_in[0])
+            c = target.points - target.points.mean(0)
+            tgt = jnp.asarray(c / np.sqrt(np.mean(np.sum(c * c, axis=1))), jnp.float64)
+            args = (jnp.full(len(t_in), 1.0 / len(t_in)), jnp.asarray((t_in - t_in[0]) / span, jnp.float64))
+        else:
+            prog = program(parents.shape[0], n_points, sliders)
+            tgt = jnp.asarray(_dist.normalise(arclength_resample(target.points, n_points, closed))[0], jnp.float64)
+            u = jnp.asarray(np.arange(POLISH_T) / (POLISH_T if closed else POLISH_T - 1), jnp.float64)
+            args = (jnp.asarray(float(closed), jnp.float64), u)
         x = np.concatenate([np.asarray(pose, float).ravel(), [start, span]])
-        for tau in TAUS:
+        for tau in TAUS[-1:] if timed else TAUS:  # the ordered distance is smooth: no continuation
             t = jnp.asarray(tau, jnp.float64)
 
             def f(x, t=t):
-                v, g = prog(jnp.asarray(x, jnp.float64), par, act, tr, tgt, flag, u, t)
+                v, g = prog(jnp.asarray(x, jnp.float64), par, act, tr, tgt, *args, t)
                 v, g = float(v), np.asarray(g, float)
                 if not (np.isfinite(v) and np.all(np.isfinite(g))):
                     return np.inf, np.zeros_like(x)
                 return v, g
 
             x = minimize(f, x, jac=True, method="L-BFGS-B", options={"maxiter": ITERS}).x
+    if timed:
+        return x[:2 * nj].reshape(nj, 2), float(x[2 * nj]), span
     return x[:2 * nj].reshape(nj, 2), float(x[2 * nj]), (2 * np.pi if closed else float(x[2 * nj + 1]))

@@ -51,6 +51,7 @@ from .assembly import Assembly, certify
 from .polish import BACK
 from .polish import polish as _polish
 from .polish import program as _polish_program
+from .polish import program_timed as _polish_program_timed
 from .sortnet import sort_first
 from .target import Target, arclength_resample
 from .topology import CRANK, Topology, as_arrays
@@ -63,6 +64,12 @@ REFINE_T = 128
 TARGET_N = 100
 MARGIN_FLOOR = 0.02
 _STARTS = 16
+#: a timed target's points in the screen (subsampled or padded to it, `timed_samples`); the refinement
+#: takes `REFINE_T`
+TIMED_SCREEN_T = 32
+#: the input fractions of the interval where a timed candidate's margins are also kept up (the
+#: refinement's penalty: its samples are the target's points, maybe few)
+_TIMED_MARGIN_T = 64
 _SPANS = (0.25, 0.5, 0.75, 1.0)
 _ROT = 32
 _DT = jnp.float32
@@ -83,13 +90,13 @@ class Programs(NamedTuple):
     """The three compiled programs of a search (`programs`): callables on the dynamic arguments."""
 
     screen: Callable
-    rank: Callable
+    rank: Callable | None  # None for a timed target (no rank)
     refine: Callable
 
 
 def programs(n_topos: int, n_dyads: int, closed: bool, *, samples: int, screen_keep: int, refine: int,
              steps: int, quick: bool = False, where: _spread.Layout | None = None,
-             polish_points: int = 0, sliders: bool = False) -> Programs:
+             polish_points: int = 0, sliders: bool = False, timed: bool = False) -> Programs:
     """Compile the screen, the rank and the refinement for these shapes, all three at once (XLA
     compiles in parallel threads; on a cold start compiling is most of a short search's time).
     The rank compiles at XLA's lowest optimisation level (about half the compile time, its run
@@ -101,12 +108,19 @@ def programs(n_topos: int, n_dyads: int, closed: bool, *, samples: int, screen_k
     hold slider dyads (`tracer.trace`; other programs, the RRR ones unchanged without it).
     Each program computes one block of its batch (`spread.blocks`, at most `SCREEN_BLOCK`,
     `RANK_BLOCK`, `REFINE_BLOCK` rows), the same block whatever the devices and processes (`where`,
-    default `spread.layout()`), and is called on whole batches (`spread.Blocked`)."""
+    default `spread.layout()`), and is called on whole batches (`spread.Blocked`).
+    `timed`: a timed target's two programs (`_screen_timed`, `_refine_timed`; no rank: `rank` None)
+    and its polish (`polish.program_timed` for `polish_points` points)."""
     keep = min(screen_keep, samples * len(_subarcs(closed)))
-    sizes = (samples, keep * n_topos, min(refine, keep) * n_topos)
-    caps = (SCREEN_BLOCK, RANK_BLOCK, REFINE_BLOCK_QUICK if quick else REFINE_BLOCK)
+    sizes: tuple[int, ...] = (samples, keep * n_topos, min(refine, keep) * n_topos)
+    caps: tuple[int, ...] = (SCREEN_BLOCK, RANK_BLOCK, REFINE_BLOCK_QUICK if quick else REFINE_BLOCK)
     jobs = [("screen", n_dyads, closed, 0, quick and closed, sliders), ("rank", n_dyads, False, 0, True, sliders),
             ("refine", n_dyads, False, steps, quick, sliders)]
+    if timed:
+        sizes = (samples, min(refine, samples * _STARTS) * n_topos)
+        caps = (SCREEN_BLOCK, REFINE_BLOCK_QUICK if quick else REFINE_BLOCK)
+        jobs = [("screen-timed", n_dyads, False, 0, quick, sliders), ("refine-timed", n_dyads, False, steps, quick,
+                                                                       sliders)]
     x64 = bool(jax.config.read("jax_enable_x64"))  # the traced program's default dtypes depend on it
     where = _spread.layout() if where is None else where
     if where.devices > len(jax.local_devices()):
@@ -114,13 +128,18 @@ def programs(n_topos: int, n_dyads: int, closed: bool, *, samples: int, screen_k
     block = [_spread.blocks(n, cap)[1] for n, cap in zip(sizes, caps)]
     tasks = [(job, b, d) for job, b in zip(jobs, block) for d in range(where.devices)]
     with ThreadPoolExecutor(len(tasks) + (polish_points > 0)) as ex:
-        pol = ex.submit(_polish_program, n_dyads, polish_points, sliders) if polish_points > 0 else None
+        pol = (None if polish_points <= 0 else ex.submit(_polish_program_timed, n_dyads, polish_points, sliders)
+               if timed else ex.submit(_polish_program, n_dyads, polish_points, sliders))
         compiled = list(ex.map(lambda t: _compiled(t[0][0], t[1], *t[0][1:], x64, t[2]), tasks))
         if pol is not None:
             pol.result()
     per = [compiled[i * where.devices:(i + 1) * where.devices] for i in range(len(jobs))]
-    rows, keyed = ((1, 2, 3), (0, 1, 2, 3, 4), (0, 1, 2, 3, 4)), (0, None, None)
-    return Programs(*(_spread.Blocked(c, r, k, where, n, b) for c, r, k, n, b in zip(per, rows, keyed, sizes, block)))
+    rows: tuple[tuple[int, ...], ...] = ((1, 2, 3), (0, 1, 2, 3, 4), (0, 1, 2, 3, 4))
+    keyed: tuple[int | None, ...] = (0, None, None)
+    if timed:
+        rows, keyed = ((1, 2, 3), (0, 1, 2, 3, 4)), (0, None)
+    out = [_spread.Blocked(c, r, k, where, n, b) for c, r, k, n, b in zip(per, rows, keyed, sizes, block)]
+    return Programs(out[0], None, out[1]) if timed else Programs(*out)
 
 
 @functools.lru_cache(maxsize=32)
@@ -143,7 +162,15 @@ def _compiled(which: str, b: int, n_dyads: int, closed: bool, steps: int, quick:
     if which == "screen":
         return compiled("synthesis-screen", _screen_of, (arg((2,), np.uint32), *topo, arg((DESC_N,))),
                         (closed, sliders), options)
+    if which == "screen-timed":
+        return compiled("synthesis-screen-timed", _screen_timed_of,
+                        (arg((2,), np.uint32), *topo, arg((TIMED_SCREEN_T, 2)), arg((TIMED_SCREEN_T,)),
+                         arg((TIMED_SCREEN_T,)), arg(())), (sliders,), options)
     poses, arcs = arg((b, nj, 2)), arg((b, 2))
+    if which == "refine-timed":
+        return compiled("synthesis-refine-timed", _refine_timed_of,
+                        (*topo, poses, arcs, arg((REFINE_T, 2)), arg((REFINE_T,)), arg(()), arg((REFINE_T,))),
+                        (steps, sliders), options)
     if which == "rank":
         return compiled("synthesis-rank", _rank_of, (*topo, poses, arcs, arg((RANK_T, 2)), arg(()), arg((RANK_T,))),
                         (sliders,), options)
@@ -159,6 +186,16 @@ def _screen_of(key, parents, active, traced, target_desc, closed, sliders):
 def _rank_of(parents, active, traced, poses, arcs, target, closed, u, sliders):
     """`_rank` with its static option last (`cache.compiled`)."""
     return _rank(parents, active, traced, poses, arcs, target, closed, u, sliders=sliders)
+
+
+def _screen_timed_of(key, parents, active, traced, target, w, u, span, sliders):
+    """`_screen_timed` with its static option last (`cache.compiled`)."""
+    return _screen_timed(key, parents, active, traced, target, w, u, span, sliders=sliders)
+
+
+def _refine_timed_of(parents, active, traced, poses, arcs, target, w, lr, u, steps, sliders):
+    """`_refine_timed` with its static options last (`cache.compiled`)."""
+    return _refine_timed(parents, active, traced, poses, arcs, target, w, lr, u, steps=steps, sliders=sliders)
 
 
 def _refine_of(parents, active, traced, poses, arcs, target, lr, closed, u, steps, sliders):
@@ -329,6 +366,82 @@ def _refine(parents, active, traced, poses, arcs, target, lr, closed, u, *, step
     return jax.vmap(one)(parents, active, traced, poses, arcs)
 
 
+def timed_samples(target: Target, n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
+    """A timed target as `n` samples: (points (n, 2) normalised with the weights, weights (n,) summing
+    to 1 — 0 on padding —, input fractions u (n,) of the span, the span S = t_last − t_0, signed):
+    the point i at the input offset start + S u_i. More than `n` points: `n` of them evenly by index
+    (the first and last kept); fewer: all, then padding (u = 0, weight 0)."""
+    t = np.asarray(target.inputs, float)
+    pts = np.asarray(target.points, float)
+    idx = np.arange(len(t)) if len(t) <= n else np.unique(np.rint(np.linspace(0, len(t) - 1, n)).astype(int))
+    m = len(idx)
+    span = float(t[-1] - t[0])
+    w = np.zeros(n)
+    w[:m] = 1.0 / m
+    u = np.zeros(n)
+    u[:m] = (t[idx] - t[0]) / span
+    p = np.zeros((n, 2))
+    c = pts[idx] - pts[idx].mean(0)
+    p[:m] = c / np.sqrt(np.mean(np.sum(c * c, axis=1)))
+    return p, w, u, span
+
+
+@functools.partial(jax.jit, static_argnames=("sliders",))
+def _screen_timed(key, parents, active, traced, target, w, u, span, *, sliders: bool = False):
+    """A timed target's screen: random poses (B, J, 2), each traced from `_STARTS` starts over a turn
+    at the target's inputs (start + span u), and the square of the ordered distance at each start
+    (`distance.ordered_sq`: the target's own measure, no descriptor) (B, `_STARTS`); inf where a
+    dyad does not close at a sample."""
+    b = parents.shape[0]
+    poses = jax.random.uniform(key, (b, CRANK + 1 + parents.shape[1], 2), _DT, -1.0, 1.0)
+    starts = jnp.asarray(2 * np.pi * np.arange(_STARTS) / _STARTS, _DT)
+    th = (starts[:, None] + span * u[None, :]).reshape(-1)
+
+    def one(par, act, tr, pose):
+        pos, marg = trace(par, act, pose, th, sliders)
+        c = pos[:, tr].reshape(_STARTS, -1, 2)
+        ok = jnp.all((jnp.min(marg, axis=-1) > 0).reshape(_STARTS, -1) | (w[None, :] == 0), axis=1)
+        d = jax.vmap(lambda cc: _dist.ordered_sq(cc, target, w))(c)
+        return jnp.where(ok, d, jnp.inf)
+
+    return poses, jax.vmap(one)(parents, active, traced, poses)
+
+
+def _loss_timed(params, par, act, tr, target, w, u, sliders):
+    pose, arc = params
+    span = jax.lax.stop_gradient(arc[1])  # the target's: fixed
+    um = jnp.asarray(np.linspace(0.0, 1.0, _TIMED_MARGIN_T), u.dtype)
+    pos, marg = trace(par, act, pose, arc[0] + span * jnp.concatenate([u, um]), sliders)
+    fit = _dist.ordered_sq(pos[:u.shape[0], tr], target, w)
+    pen = jnp.mean(jnp.sum(jax.nn.relu(MARGIN_FLOOR - marg) ** 2, axis=-1))
+    return fit + 100.0 * pen
+
+
+@functools.partial(jax.jit, static_argnames=("steps", "sliders"))
+def _refine_timed(parents, active, traced, poses, arcs, target, w, lr, u, *, steps: int, sliders: bool = False):
+    """`_refine` for a timed target: Adam on the pose and the interval's start (its span the
+    target's) against the square of the ordered distance at the target's inputs (`timed_samples`),
+    plus the margin penalty at those and at `_TIMED_MARGIN_T` inputs across the interval."""
+    opt = optax.adam(lambda k: lr * (0.55 + 0.45 * jnp.cos(np.pi * jnp.minimum(k, steps) / steps)))
+
+    def one(par, act, tr, pose, arc):
+        params = (pose, arc)
+        state = opt.init(params)
+        g = jax.value_and_grad(_loss_timed)
+
+        def step(carry, _):
+            params, state = carry
+            v, grads = g(params, par, act, tr, target, w, u, sliders)
+            grads = jax.tree_util.tree_map(lambda x: jnp.where(jnp.isfinite(x), x, 0.0), grads)
+            upd, state = opt.update(grads, state, params)
+            return (optax.apply_updates(params, upd), state), v
+
+        (params, _), vals = jax.lax.scan(step, (params, state), None, length=steps)
+        return params[0], params[1], vals[-1]
+
+    return jax.vmap(one)(parents, active, traced, poses, arcs)
+
+
 def _rotate(poses, phi):
     c, s = np.cos(phi)[:, None], np.sin(phi)[:, None]
     x, y = poses[..., 0], poses[..., 1]
@@ -345,7 +458,18 @@ def interval_offsets(start: float, span: float, n: int, closed: bool) -> np.ndar
 
 def score(topo: Topology, pose: np.ndarray, start: float, span: float, target: Target, *,
           n_trace: int, n_points: int) -> tuple[_dist.Match, Assembly]:
-    """The exact distance and the assembly check of one candidate (float64)."""
+    """The exact distance and the assembly check of one candidate (float64). A timed target: the
+    ordered distance (`distance.match_ordered`) of the traced point at start + (t_i − t_0) to point
+    i, the check over that interval (a closed target: the whole turn)."""
+    if target.timed:
+        t = np.asarray(target.inputs, float)
+        pos, marg = trace_exact(topo, pose, start + (t - t[0]))
+        span = float(t[-1] - t[0])
+        lo = start if span >= 0 else start + span
+        asm = certify(topo, pose, lo, 2 * np.pi if target.closed else abs(span))
+        if not np.all(marg > 0):
+            return _dist.Match(np.inf, 0.0, 1.0, np.zeros(2)), asm
+        return _dist.match_ordered(pos[:, topo.traced], target.points), asm
     th = interval_offsets(start, span, n_trace, target.closed)
     pos, marg = trace_exact(topo, pose, th)
     asm = certify(topo, pose, start, 2 * np.pi if target.closed else span)
@@ -390,6 +514,33 @@ def _full_slots(prog, key, arr, samples, screen_keep, refine, tdesc, trank, flag
         slots = np.flatnonzero(stix == ti)[refine - refine // 2:]
         for k, slot in enumerate(slots):
             poses0[slot], arcs0[slot] = _jittered(el[k % len(el)], jitter * (k > 0), closed, rng)
+            rank_ok[slot] = True
+    return stix, poses0, arcs0, rank_ok
+
+
+def _full_slots_timed(prog, key, arr, refine, screen_target, elites, jitter, rng):
+    """A timed target's full round's slots: the screen's best `refine` (pose, start) per topology
+    (its span the target's), the last half of each topology's slots its best refined so far, jittered."""
+    n_topos = arr.parents.shape[0]
+    tt, tw, tu, span = screen_target
+    picks = []
+    for ti in range(n_topos):
+        sub = jax.random.fold_in(key, ti)
+        par, act, trc = (np.repeat(x[ti:ti + 1], prog.screen.n, 0) for x in (arr.parents, arr.active, arr.traced))
+        poses, d = prog.screen(sub, par, act, trc, tt, tw, tu, np.float32(span))
+        d = np.asarray(d)
+        flat = np.argsort(d, axis=None)[:refine]
+        ci, si = np.unravel_index(flat, d.shape)
+        picks.append((np.asarray(poses)[ci], si, np.isfinite(d[ci, si]), np.full(len(ci), ti)))
+    poses0 = np.concatenate([p[0] for p in picks]).astype(np.float32)
+    arcs0 = np.stack([2 * np.pi * np.concatenate([p[1] for p in picks]) / _STARTS,
+                      np.full(len(poses0), span)], axis=1).astype(np.float32)
+    rank_ok = np.concatenate([p[2] for p in picks])
+    stix = np.concatenate([p[3] for p in picks])
+    for ti, el in elites.items():
+        slots = np.flatnonzero(stix == ti)[refine - refine // 2:]
+        for k, slot in enumerate(slots):
+            poses0[slot], arcs0[slot] = _jittered(el[k % len(el)], jitter * (k > 0), True, rng)
             rank_ok[slot] = True
     return stix, poses0, arcs0, rank_ok
 
@@ -443,17 +594,24 @@ def search(target: Target, topos: list[Topology], *, time_limit: float, seed: in
         raise ValueError(f"finish = {finish!r}: a whole number of candidates to polish, at least 0")
     t0 = time.perf_counter() if t0 is None else t0
     closed = target.closed
+    timed = target.timed
     arr = as_arrays(topos)
     quick = time_limit <= 15.0 if quick is None else quick
     finish = (0 if quick else 4) if finish is None else finish
     sliders = any(t.sliders for t in topos)
+    polish_points = (len(target.points) if timed else n_points) if finish > 0 else 0
     prog = programs(len(topos), arr.parents.shape[1], closed, samples=samples, screen_keep=screen_keep,
-                    refine=refine, steps=steps, quick=quick, polish_points=n_points if finish > 0 else 0,
-                    sliders=sliders)
-    tpts = _dist.normalise(arclength_resample(target.points, TARGET_N, closed))[0]
-    tdesc = _desc(target.points, closed)
-    trank = jnp.asarray(_dist.normalise(arclength_resample(target.points, RANK_T, closed))[0], _DT)
-    ttarget = jnp.asarray(tpts, _DT)
+                    refine=refine, steps=steps, quick=quick, polish_points=polish_points,
+                    sliders=sliders, timed=timed)
+    if timed:  # the screen's and the refinement's samples of the target; `jitter` leaves the span alone
+        ts = timed_samples(target, TIMED_SCREEN_T)
+        screen_target = (*(np.asarray(x, np.float32) for x in ts[:3]), ts[3])
+        rt, rw, ru, _ = (np.asarray(x, np.float32) for x in timed_samples(target, REFINE_T))
+    else:
+        tpts = _dist.normalise(arclength_resample(target.points, TARGET_N, closed))[0]
+        tdesc = _desc(target.points, closed)
+        trank = jnp.asarray(_dist.normalise(arclength_resample(target.points, RANK_T, closed))[0], _DT)
+        ttarget = jnp.asarray(tpts, _DT)
     arcs_all = _subarcs(closed)
     flag = np.float32(closed)
     key = jax.random.PRNGKey(seed)
@@ -463,7 +621,8 @@ def search(target: Target, topos: list[Topology], *, time_limit: float, seed: in
     rng = np.random.default_rng(seed)
     elites: dict[int, list] = {}       # per topology: the best two refined (pose, arc) so far
     elite_vals: dict[int, list] = {}
-    nsl = min(refine, min(screen_keep, samples * len(arcs_all)))  # refinement slots per topology
+    nsl = (min(refine, samples * _STARTS) if timed else
+           min(refine, min(screen_keep, samples * len(arcs_all))))  # refinement slots per topology
     stix = np.repeat(np.arange(len(topos)), nsl)  # the topology of each slot (a full round)
     polish = False
     t_polish = None  # the seconds one float64 polish took (the time kept free for the last ones)
@@ -488,15 +647,22 @@ def search(target: Target, topos: list[Topology], *, time_limit: float, seed: in
         rnd += 1
         n_before = len(found)
         if polish:
-            stix, poses0, arcs0 = _polish_slots(elites, elite_vals, len(stix), jitter, closed, rng)
+            stix, poses0, arcs0 = _polish_slots(elites, elite_vals, len(stix), jitter, closed or timed, rng)
             rank_ok = np.ones(len(stix), bool)
+        elif timed:
+            stix, poses0, arcs0, rank_ok = _full_slots_timed(prog, key, arr, nsl, screen_target, elites, jitter, rng)
+            key = jax.random.fold_in(key, rnd)
         else:
             stix, poses0, arcs0, rank_ok = _full_slots(prog, key, arr, samples, screen_keep, refine, tdesc,
                                                        trank, flag, arcs_all, closed, elites, jitter, rng)
             key = jax.random.fold_in(key, rnd)
         t_ref = time.perf_counter()
-        p, a, v = prog.refine(arr.parents[stix], arr.active[stix], arr.traced[stix], poses0,
-                              arcs0, ttarget, np.float32(lr), flag, _u(REFINE_T, closed))
+        if timed:
+            p, a, v = prog.refine(arr.parents[stix], arr.active[stix], arr.traced[stix], poses0, arcs0, rt, rw,
+                                  np.float32(lr), ru)
+        else:
+            p, a, v = prog.refine(arr.parents[stix], arr.active[stix], arr.traced[stix], poses0,
+                                  arcs0, ttarget, np.float32(lr), flag, _u(REFINE_T, closed))
         p, a, v = np.asarray(p, float), np.asarray(a, float), np.asarray(v)
         for ti in range(len(topos)):
             idx = np.flatnonzero((stix == ti) & np.isfinite(v) & rank_ok)
@@ -510,7 +676,9 @@ def search(target: Target, topos: list[Topology], *, time_limit: float, seed: in
             idx = np.flatnonzero(stix == ti)
             idx = idx[np.isfinite(v[idx]) & rank_ok[idx]]
             for i in idx[np.argsort(v[idx])][:per_topology]:
-                start, span = float(a[i, 0]), (2 * np.pi if closed else float(a[i, 1]))
+                start = float(a[i, 0])
+                span = (float(target.inputs[-1] - target.inputs[0]) if target.inputs is not None
+                        else 2 * np.pi if closed else float(a[i, 1]))
                 m, asm = score(topos[ti], p[i], start, span, target, n_trace=n_trace, n_points=n_points)
                 if np.isfinite(m.distance) and asm.ok:
                     found.append(Candidate(topos[ti], p[i], start, span, m, asm, time.perf_counter() - t0))

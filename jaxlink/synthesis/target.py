@@ -2,8 +2,11 @@
 length unit, open or closed.
 
 - **CSV**: two columns x, y (a header is optional; its names may carry the unit, `x_mm,y_mm`;
-  the unit, when named, is reported); more columns: the first two named `x*`, `y*`.
-- **NPY**: an (N, 2) array.
+  the unit, when named, is reported); more columns: the first two named `x*`, `y*`. A column
+  named `theta_deg` or `theta_rad` (also `input_…`, `crank_…`, `phi_…`) makes the target
+  **timed**: each point is to be reached at that input angle (relative: the first point's angle is
+  the search's to choose, the differences are kept).
+- **NPY**: an (N, 2) array; (N, 3): x, y and the input angle in radians (timed).
 - **SVG**: the `d` attribute of the first `<path>`: `M`/`m`, `L`/`l`, `H`/`h`, `V`/`v`, `C`/`c`,
   `S`/`s`, `Q`/`q`, `T`/`t`, `Z`/`z` (arcs are refused), in the SVG's user units, y as written
   (SVG's y points down: the curve is mirrored against the drawing; `flip_y` turns it back);
@@ -12,6 +15,11 @@ length unit, open or closed.
 `closed` by default when the gap from the last point back to the first is at most 1 % of the size
 (the diagonal of the bounding box) or at most 1.5 × the median step between points (a loop
 sampled without repeating its first point).
+
+A timed target's inputs go one way (increasing: the crank turns positively; decreasing: the other
+way) and span less than a turn; its points are kept as given (a repeated point at two inputs is a
+dwell). Its match is the ordered distance (`distance.match_ordered`); `closed` there only says
+whether the whole turn is checked for assembly.
 """
 
 from __future__ import annotations
@@ -37,13 +45,20 @@ class Target(NamedTuple):
     - `points`: (N, 2) float64, in `unit` (the file's length unit);
     - `closed`: whether the path is a closed loop (matched by a whole crank turn);
     - `unit`: the length unit named by the file ("" when it names none);
-    - `source`: where it came from.
+    - `source`: where it came from;
+    - `inputs`: a timed target's input angle of each point (N,), rad (only the differences count),
+      else None.
     """
 
     points: np.ndarray
     closed: bool
     unit: str
     source: str
+    inputs: np.ndarray | None = None
+
+    @property
+    def timed(self) -> bool:
+        return self.inputs is not None
 
 
 def is_closed(points: np.ndarray) -> bool:
@@ -56,13 +71,17 @@ def is_closed(points: np.ndarray) -> bool:
     return bool(gap <= CLOSE_FRACTION * size or gap <= 1.5 * step)
 
 
-def make_target(points, *, closed: bool | None = None, unit: str = "", source: str = "<array>") -> Target:
-    """A `Target` from an (N, 2) array; a closed curve loses a repeated last point."""
+def make_target(points, *, closed: bool | None = None, unit: str = "", source: str = "<array>",
+                inputs=None) -> Target:
+    """A `Target` from an (N, 2) array; a closed curve loses a repeated last point. `inputs`: (N,)
+    the input angle (rad) of each point, a timed target (module doc)."""
     pts = np.asarray(points, dtype=float)
     if pts.ndim != 2 or pts.shape[1] != 2 or pts.shape[0] < 3:
         raise MechanismError(f"{source}: a target needs an (N, 2) array of N >= 3 points, got shape {pts.shape}")
     if not np.all(np.isfinite(pts)):
         raise MechanismError(f"{source}: the target's points must be finite")
+    if inputs is not None:
+        return _timed(pts, np.asarray(inputs, dtype=float), closed, unit, source)
     keep = np.concatenate([[True], np.linalg.norm(np.diff(pts, axis=0), axis=1) > 0])
     pts = pts[keep]  # repeated points carry no length
     if pts.shape[0] < 3:
@@ -73,6 +92,24 @@ def make_target(points, *, closed: bool | None = None, unit: str = "", source: s
     return Target(pts, c, unit, source)
 
 
+def _timed(pts: np.ndarray, t: np.ndarray, closed: bool | None, unit: str, source: str) -> Target:
+    if t.shape != (pts.shape[0],):
+        raise MechanismError(f"{source}: a timed target needs one input angle per point, got {t.shape} for "
+                             f"{pts.shape[0]} points")
+    if not np.all(np.isfinite(t)):
+        raise MechanismError(f"{source}: the target's input angles must be finite")
+    dt = np.diff(t)
+    if not (np.all(dt > 0) or np.all(dt < 0)):
+        raise MechanismError(f"{source}: a timed target's input angles must go one way (all increasing or all "
+                             "decreasing), every point at its own angle")
+    span = abs(float(t[-1] - t[0]))
+    if span >= 2 * np.pi:
+        raise MechanismError(f"{source}: a timed target's input angles span {math.degrees(span):.6g}°: at most "
+                             "one turn (less than 360°) from the first point to the last")
+    c = is_closed(pts) if closed is None else bool(closed)
+    return Target(pts, c, unit, source, t.copy())
+
+
 def load_target(path: str | Path, *, closed: bool | None = None, flip_y: bool = False) -> Target:
     """Read a target from a `.csv`, `.npy` or `.svg` file (see the module doc)."""
     p = Path(path)
@@ -80,10 +117,13 @@ def load_target(path: str | Path, *, closed: bool | None = None, flip_y: bool = 
         raise MechanismError(f"{p}: no such target file")
     ext = p.suffix.lower()
     unit = ""
+    inputs = None
     if ext == ".npy":
         pts = np.load(p, allow_pickle=False)
+        if pts.ndim == 2 and pts.shape[1] == 3:
+            pts, inputs = pts[:, :2], pts[:, 2]
     elif ext == ".csv" or ext == ".txt":
-        pts, unit = _read_csv(p)
+        pts, unit, inputs = _read_csv(p)
     elif ext == ".svg":
         pts = _read_svg(p)
     else:
@@ -91,10 +131,14 @@ def load_target(path: str | Path, *, closed: bool | None = None, flip_y: bool = 
     pts = np.asarray(pts, float)
     if flip_y:
         pts = pts * np.array([1.0, -1.0])
-    return make_target(pts, closed=closed, unit=unit, source=str(p))
+    return make_target(pts, closed=closed, unit=unit, source=str(p), inputs=inputs)
 
 
-def _read_csv(p: Path) -> tuple[np.ndarray, str]:
+#: a timed target's input column: its name and its unit
+_INPUT_COLUMN = re.compile(r"(theta|input|crank|phi)\w*?[_ \[(]+(deg|rad)[\])]*", re.IGNORECASE)
+
+
+def _read_csv(p: Path) -> tuple[np.ndarray, str, np.ndarray | None]:
     rows = [r for r in csv.reader(p.read_text().splitlines()) if r and any(c.strip() for c in r)]
     if not rows:
         raise MechanismError(f"{p}: empty target file")
@@ -111,11 +155,21 @@ def _read_csv(p: Path) -> tuple[np.ndarray, str]:
             ix, iy = xs[0], ys[0]
         m = re.fullmatch(r"x[_ \[(]*([A-Za-z]+)[\])]*", header[ix].strip(), re.IGNORECASE)
         unit = m.group(1) if m else ""
+    it = [(i, mm.group(2).lower()) for i, h in enumerate(header or [])
+          if (mm := _INPUT_COLUMN.fullmatch(h.strip())) is not None]
     try:
         pts = np.array([[float(r[ix]), float(r[iy])] for r in rows])
     except (ValueError, IndexError) as e:
         raise MechanismError(f"{p}: a target CSV has two numeric columns x, y ({e})") from None
-    return pts, unit
+    if not it:
+        return pts, unit, None
+    i, u = it[0]
+    try:
+        t = np.array([float(r[i]) for r in rows])
+    except (ValueError, IndexError) as e:
+        name = (header or [""] * (i + 1))[i]
+        raise MechanismError(f"{p}: column {name!r} (the input angle of each point) must be numeric ({e})") from None
+    return pts, unit, np.radians(t) if u == "deg" else t
 
 
 _NUM = r"[-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?"
