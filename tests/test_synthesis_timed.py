@@ -172,3 +172,16 @@ def test_timed_candidate_failing_between_samples_is_rejected():
     tgt = make_target(pts, inputs=offsets, closed=False)
     m, asm = score(FOUR_BAR, pose, -np.pi, offsets[-1], tgt, n_trace=n, n_points=100)
     assert m.distance < 1e-12 and not asm.ok and asm.margin < 0
+
+
+def test_a_kinematics_table_is_a_timed_target(tmp_path):
+    """`jaxlink kinematics --csv` writes `input_deg` and each point's `NAME_x_mm`, `NAME_y_mm`: read as a
+    timed target, in mm, the first point's path at the table's crank angles."""
+    f = tmp_path / "feed.csv"
+    assert cli_main(["kinematics", "sewing-feed", "--start", "10", "--step", "5", "--count", "72", "--outputs",
+                     "position", "--units", "file", "--csv", str(f)]) == 0
+    rows = list(csv.DictReader(f.open()))
+    t = load_target(f)
+    assert t.timed and t.unit == "mm" and t.closed and len(t.points) == 72
+    assert np.array_equal(t.points, [[float(r["Z_x_mm"]), float(r["Z_y_mm"])] for r in rows])
+    assert np.allclose(np.degrees(t.inputs), 10 + 5 * np.arange(72), rtol=0, atol=1e-12)

@@ -2,7 +2,8 @@
 length unit, open or closed.
 
 - **CSV**: two columns x, y (a header is optional; its names may carry the unit, `x_mm,y_mm`;
-  the unit, when named, is reported); more columns: the first two named `x*`, `y*`. A column
+  the unit, when named, is reported); more columns: the first two named `x*`, `y*`, else the first
+  point's `NAME_x_UNIT`, `NAME_y_UNIT` (a `jaxlink kinematics --csv` table is a target). A column
   named `theta_deg` or `theta_rad` (also `input_…`, `crank_…`, `phi_…`) makes the target
   **timed**: each point is to be reached at that input angle (relative: the first point's angle is
   the search's to choose, the differences are kept).
@@ -151,9 +152,15 @@ def _read_csv(p: Path) -> tuple[np.ndarray, str, np.ndarray | None]:
     if header is not None:
         xs = [i for i, h in enumerate(header) if h.lower().startswith("x")]
         ys = [i for i, h in enumerate(header) if h.lower().startswith("y")]
+        low = [h.lower() for h in header]
+        # a point's columns as `jaxlink kinematics --csv` writes them: NAME_x_UNIT, NAME_y_UNIT
+        pairs = [(i, low.index(h[:m.start()] + "_y" + h[m.end():])) for i, h in enumerate(low)
+                 if (m := re.search(r"_x(?=_[a-z]+$|$)", h)) and h[:m.start()] + "_y" + h[m.end():] in low]
         if xs and ys:
             ix, iy = xs[0], ys[0]
-        m = re.fullmatch(r"x[_ \[(]*([A-Za-z]+)[\])]*", header[ix].strip(), re.IGNORECASE)
+        elif pairs:
+            ix, iy = pairs[0]
+        m = re.fullmatch(r"(?:\w+_)?x[_ \[(]*([A-Za-z]+)[\])]*", header[ix].strip(), re.IGNORECASE)
         unit = m.group(1) if m else ""
     it = [(i, mm.group(2).lower()) for i, h in enumerate(header or [])
           if (mm := _INPUT_COLUMN.fullmatch(h.strip())) is not None]
