@@ -185,3 +185,45 @@ def test_a_kinematics_table_is_a_timed_target(tmp_path):
     assert t.timed and t.unit == "mm" and t.closed and len(t.points) == 72
     assert np.array_equal(t.points, [[float(r["Z_x_mm"]), float(r["Z_y_mm"])] for r in rows])
     assert np.allclose(np.degrees(t.inputs), 10 + 5 * np.arange(72), rtol=0, atol=1e-12)
+
+
+def test_rigid_points_and_the_sewing_feed_as_a_planted_target():
+    """A dyad on two joints of one body is a point of it (`topology.rigid`), carried with the body:
+    no reach margin (a point on the line of its link, as the seed's feed dog Z on its carrier F-H, is
+    as good as any). The sewing feed's own six-bar written as a `stephenson-rocker-crank` pose from
+    the scene's solved angles at 0° traces the scene's Z at 72 crank angles (ordered distance 1e-13,
+    the points to 1e-12 mm) and assembles over the turn; the JAX tracer agrees with NumPy's."""
+    import jaxlink as jl
+    from jaxlink.synthesis.tracer import trace
+
+    for t in T.topologies(10, sliders=True):
+        assert sum(T.rigid(t)) == sum(len(b) - 2 for b in T.bodies(t))
+    mech = jl.load("sewing-feed")
+    phis = np.radians(5.0 * np.arange(72))
+    with jax.enable_x64(True):
+        sol = jl.solve(mech, jnp.asarray(phis))
+        z = 1e3 * np.asarray(sol.points)[:, mech.point_names.index("Z")]
+        q = dict(zip(mech.unknown_names, np.asarray(sol.q)[0]))
+    P = dict(zip(mech.parameter_names, 1e3 * np.asarray(mech.parameters)))  # lengths in mm (angles unused)
+    g = np.radians(100.0)
+
+    def e(a):
+        return np.array([math.cos(a), math.sin(a)])
+
+    b = P["l2"] * e(0.0)
+    d = b + P["l3"] * e(q["phi3"])
+    f = d + P["l4"] * e(q["phi4"])
+    h = f + P["l6"] * e(q["phi6"])
+    pose = np.array([[0, 0], d + P["l44"] * e(q["phi4"]), [0, 0], b, d, b + [0, 5.0], f,
+                     -P["l22"] * e(g), h, f + (P["l6"] + P["l66"]) * e(q["phi6"])])
+    topo = next(t for t in T.topologies() if t.name == "stephenson-rocker-crank")
+    assert T.rigid(topo) == [False, True, True, True, False, True]  # Z (dyad 5) on the line F-H
+    pos, marg = trace_exact(topo, pose, phis)
+    assert np.max(np.abs(pos[:, topo.traced] - z)) < 1e-12 * 100
+    tgt = make_target(z, inputs=phis, closed=True, unit="mm")
+    m, asm = score(topo, pose, 0.0, phis[-1], tgt, n_trace=72, n_points=200)
+    assert m.distance < 1e-13 and asm.ok
+    arr = T.as_arrays([topo])
+    with jax.enable_x64(True):
+        jp, jm = trace(jnp.asarray(arr.parents[0]), jnp.asarray(arr.active[0]), jnp.asarray(pose), jnp.asarray(phis))
+    assert np.max(np.abs(np.asarray(jp) - pos)) < 1e-11 and np.array_equal(np.asarray(jm) == 1.0, marg == 1.0)

@@ -34,6 +34,8 @@ FRAME_BODY = -1
 #: added to a slider dyad's second parent in `as_arrays` (more than any joint index): the kind travels
 #: with the parents, one array for every program
 SLIDER = 32
+#: added to the second parent of a dyad that is a point of a rigid body (`rigid`) in `as_arrays`
+RIGID = 64
 
 
 class Topology(NamedTuple):
@@ -127,6 +129,29 @@ def bodies(topo: Topology) -> list[tuple[int, ...]]:
             out.append([p1, j])
             out.append([p2, j])
     return [tuple(b) for b in out]
+
+
+def rigid(topo: Topology) -> list[bool]:
+    """Per dyad: whether it is a point of a rigid body (its two parents on one body, `bodies`): its
+    triangle never changes, so its reach margin is a constant of the design, not a limit of the
+    motion — a point on the line of a link (margin 0: the feed dog on its carrier's line) is as
+    good as any (`tracer`)."""
+    out: list[list[int]] = [[0, CRANK]]
+    flags = []
+    for k, (p1, p2) in enumerate(topo.dyads):
+        j = CRANK + 1 + k
+        if k in topo.sliders:
+            out.append([p1, j])
+            flags.append(False)
+            continue
+        home = [b for b in out if p1 in b and p2 in b]
+        flags.append(bool(home))
+        if home:
+            home[0].append(j)
+        else:
+            out.append([p1, j])
+            out.append([p2, j])
+    return flags
 
 
 def _four_bar() -> Topology:
@@ -228,7 +253,8 @@ class TopologyArrays(NamedTuple):
 
 def as_arrays(topos: list[Topology]) -> TopologyArrays:
     """Stack topologies, padding each to the most dyads among them (inactive, attached to C and F1);
-    a slider dyad's second parent + `SLIDER` (`tracer.trace` with `sliders`)."""
+    a slider dyad's second parent + `SLIDER` (`tracer.trace` with `sliders`), a rigid body's point's
+    + `RIGID` (`rigid`)."""
     nd = max(len(t.dyads) for t in topos)
     par = np.zeros((len(topos), nd, 2), np.int32)
     act = np.zeros((len(topos), nd), bool)
@@ -236,7 +262,8 @@ def as_arrays(topos: list[Topology]) -> TopologyArrays:
         if len(t.dyads) > MAX_DYADS:
             raise ValueError(f"{t.name}: more than {MAX_DYADS} dyads")
         par[i, :, 0], par[i, :, 1] = CRANK, 1
+        fixed = rigid(t)
         for k, (p1, p2) in enumerate(t.dyads):
-            par[i, k] = (p1, p2 + SLIDER * (k in t.sliders))
+            par[i, k] = (p1, p2 + SLIDER * (k in t.sliders) + RIGID * fixed[k])
             act[i, k] = True
     return TopologyArrays(par, act, np.array([t.traced for t in topos], np.int32))

@@ -12,7 +12,11 @@ F0 + r (cos(α + θ), sin(α + θ)), α its angle in the pose, and each dyad's j
 
 with the dyad's **reach margin** S = ((l₁ + l₂)² − d²)(d² − (l₁ − l₂)²) / (4 l₁² l₂²), the sine²
 of the angle between its two links (the project's RRR margin, `jaxlink.solvers.dyads`): the dyad
-closes iff S ≥ 0, and it stays on its branch between two inputs iff S > 0 between them.
+closes iff S ≥ 0, and it stays on its branch between two inputs iff S > 0 between them. A dyad
+that is a point of a rigid body (`topology.rigid`: its parents on one body, d constant) has no
+such limit: it is carried with the body, J = P₁ + α w + β w⊥ with α = (w⁰·v⁰)/|w⁰|²,
+β = (w⁰ × v⁰)/|w⁰|² from the pose (v⁰ = J⁰ − P₁⁰; smooth everywhere, a point on the line through
+its parents included), and its margin is reported as 1 (its S is a constant of the design).
 
 A **slider** dyad (`topology.slide`: RRP, the joint on the frame's line through the anchor
 A = P₂ and its pose position J⁰, direction u = (J⁰ − A)/|J⁰ − A|) puts its joint at
@@ -30,7 +34,7 @@ from __future__ import annotations
 import jax.numpy as jnp
 import numpy as np
 
-from .topology import CRANK, SLIDER, Topology
+from .topology import CRANK, RIGID, SLIDER, Topology, rigid
 
 
 def _margin(l1, l2, d2):
@@ -74,6 +78,8 @@ def trace(parents, active, pose, thetas, sliders: bool = False):
     for k in range(parents.shape[0]):
         j = CRANK + 1 + k
         p1, p2 = parents[k, 0], parents[k, 1]
+        fixed = p2 >= RIGID
+        p2 = jnp.where(fixed, p2 - RIGID, p2)
         if sliders:
             slider = p2 >= SLIDER
             p2 = jnp.where(slider, p2 - SLIDER, p2)
@@ -88,10 +94,14 @@ def trace(parents, active, pose, thetas, sliders: bool = False):
         d = jnp.sqrt(d2)
         s = _margin(l1, l2, d2)
         ok = s > 0
-        h = l1 * l2 * jnp.sqrt(jnp.where(ok, s, 1.0)) * ok / d
+        h = l1 * l2 * jnp.sqrt(jnp.where(ok, s, 1.0)) * ok / d  # a rigid point's S < 0 only by rounding: h = 0
         a = (l1 * l1 - l2 * l2 + d2) / (2.0 * d)
         perp = jnp.stack([-w[:, 1], w[:, 0]], axis=-1)
         jpos = a1 + (a / d)[:, None] * w + (sigma * h / d)[:, None] * perp
+        ww = jnp.sum(w0 * w0) + 1e-30
+        alpha = (w0[0] * v0[0] + w0[1] * v0[1]) / ww
+        beta = (w0[0] * v0[1] - w0[1] * v0[0]) / ww
+        jpos = jnp.where(fixed, a1 + alpha * w + beta * perp, jpos)
         if sliders:
             g = pose[j] - pose[p2]
             g_sigma = jnp.where(g @ (pose[j] - pose[p1]) >= 0, 1.0, -1.0)  # u · (J⁰ − P₁⁰), |g| > 0
@@ -99,7 +109,7 @@ def trace(parents, active, pose, thetas, sliders: bool = False):
             jpos = jnp.where(slider, spos, jpos)
             s = jnp.where(slider, ss, s)
         pos = pos.at[:, j].set(jnp.where(active[k], jpos, pos[:, j]))
-        margins.append(jnp.where(active[k], s, 1.0))
+        margins.append(jnp.where(active[k] & ~fixed, s, 1.0))
     return pos, jnp.stack(margins, axis=-1)
 
 
@@ -114,6 +124,7 @@ def trace_exact(topo: Topology, pose: np.ndarray, thetas: np.ndarray) -> tuple[n
     ang = np.arctan2(c0[1], c0[0]) + thetas
     pos[:, CRANK] = pose[0] + r * np.stack([np.cos(ang), np.sin(ang)], axis=-1)
     margins = np.empty((thetas.shape[0], len(topo.dyads)))
+    fixed = rigid(topo)
     for k, (p1, p2) in enumerate(topo.dyads):
         j = CRANK + 1 + k
         if k in topo.sliders:
@@ -135,11 +146,18 @@ def trace_exact(topo: Topology, pose: np.ndarray, thetas: np.ndarray) -> tuple[n
         w = pos[:, p2] - pos[:, p1]
         d2 = np.sum(w * w, axis=-1)
         d = np.sqrt(d2)
+        perp = np.stack([-w[:, 1], w[:, 0]], axis=-1)
+        if fixed[k]:  # carried with its body (module doc)
+            ww = w0[0] * w0[0] + w0[1] * w0[1]
+            alpha = (w0[0] * v0[0] + w0[1] * v0[1]) / ww
+            beta = (w0[0] * v0[1] - w0[1] * v0[0]) / ww
+            margins[:, k] = 1.0
+            pos[:, j] = pos[:, p1] + alpha * w + beta * perp
+            continue
         s = _margin(l1, l2, d2)
         margins[:, k] = s
         h = l1 * l2 * np.sqrt(np.maximum(s, 0.0)) / d
         a = (l1 * l1 - l2 * l2 + d2) / (2.0 * d)
-        perp = np.stack([-w[:, 1], w[:, 0]], axis=-1)
         pos[:, j] = pos[:, p1] + (a / d)[:, None] * w + (sigma * h / d)[:, None] * perp
     return pos, margins
 
