@@ -227,3 +227,11 @@ def test_rigid_points_and_the_sewing_feed_as_a_planted_target():
     with jax.enable_x64(True):
         jp, jm = trace(jnp.asarray(arr.parents[0]), jnp.asarray(arr.active[0]), jnp.asarray(pose), jnp.asarray(phis))
     assert np.max(np.abs(np.asarray(jp) - pos)) < 1e-11 and np.array_equal(np.asarray(jm) == 1.0, marg == 1.0)
+    # the float64 polish (`polish`, its tight tolerances) brings every joint 1 % of the size off back
+    from jaxlink.synthesis.polish import polish
+
+    off = pose + np.random.default_rng(0).normal(scale=0.12, size=pose.shape)
+    assert score(topo, off, 0.0, phis[-1], tgt, n_trace=72, n_points=200)[0].distance > 0.01
+    pp, st, sp = polish(arr.parents[0], arr.active[0], int(arr.traced[0]), off, 0.0, phis[-1], tgt)
+    m, asm = score(topo, pp, st, sp, tgt, n_trace=72, n_points=200)
+    assert m.distance < 1e-4 and asm.ok
