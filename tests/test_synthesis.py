@@ -192,10 +192,10 @@ def test_planted_open_arc_by_subinterval():
     assert best.distance <= 1.5 * _floor(tgt.points, False)
 
 
-def test_fails_between_samples_is_rejected():
-    # F0 = 0, F1 = (−1, 0), crank 0.3 along +x at θ = 0: |B0 − C| = 1.3 is largest at θ = 0; links of
-    # 1.3 − ε together cannot reach there. Sampled at θ = ±h/2 the dyad closes.
-    n = 64
+def _failing_between_samples(n: int = 64) -> np.ndarray:
+    """A four-bar pose whose rocker dyad cannot close at θ = 0 yet closes at every input h/2 + k h
+    (h = 2π/n): F0 = 0, F1 = (−1, 0), crank 0.3 along +x at θ = 0: |B0 − C| = 1.3 is largest at
+    θ = 0; links of 1.3 − ε together cannot reach there. Sampled at θ = ±h/2 the dyad closes."""
     h = 2 * np.pi / n
     dmax, dsample = 1.3, math.sqrt(1.0 + 0.09 + 0.6 * math.cos(h / 2))
     reach = 0.5 * (dmax + dsample)          # between the sampled and the true largest distance
@@ -210,6 +210,13 @@ def test_fails_between_samples_is_rejected():
     hh = math.sqrt(l1 ** 2 - a ** 2)
     pose[4] = c + a / d * w + hh / d * np.array([-w[1], w[0]])
     pose[5] = c + 0.5 * (pose[4] - c) + [0.0, 0.2]
+    return pose
+
+
+def test_fails_between_samples_is_rejected():
+    n = 64
+    h = 2 * np.pi / n
+    pose = _failing_between_samples(n)
     offsets = h * np.arange(n)                     # inputs h/2 + k h: both sides of θ = 0, never on it
     assert trace_exact(FOUR_BAR, pose, offsets)[1].min() > 0
     asm = certify(FOUR_BAR, pose, 0.0, 2 * np.pi)
@@ -283,6 +290,18 @@ def test_svg_target(tmp_path, d, closed):
         assert np.allclose(t.points[-1], [15, 0]) and np.allclose(t.points[16], [5, 2.5])  # q's midpoint
 
 
+def _assemblable(topo: T.Topology, seed: int = 1) -> np.ndarray:
+    """A random pose of `topo` whose every dyad keeps a margin above 0.05 at 73 inputs over a turn
+    and that assembles over the whole turn (`certify`)."""
+    rng = np.random.default_rng(seed)
+    for _ in range(5000):
+        pose = rng.uniform(-1, 1, (T.CRANK + 1 + len(topo.dyads), 2))
+        if trace_exact(topo, pose, np.linspace(0, 2 * np.pi, 73))[1].min() > 0.05 and certify(
+                topo, pose, 0.0, 2 * np.pi).ok:
+            return pose
+    pytest.fail(f"no assemblable {topo.name} drawn")  # pragma: no cover
+
+
 @pytest.mark.parametrize("name", ["stephenson-rocker-crank", "watt-coupler-rocker+crank-pivot",
                                   "watt-coupler-rocker+crank-pivot+crank-pivot"])
 def test_six_bar_sketch_replays_the_tracer(tmp_path, name):
@@ -293,14 +312,7 @@ def test_six_bar_sketch_replays_the_tracer(tmp_path, name):
     from jaxlink.synthesis.mechanism import placed_pose, to_sketch
 
     topo = next(t for t in T.topologies(10) if t.name == name)
-    rng = np.random.default_rng(1)
-    for _ in range(5000):
-        pose = rng.uniform(-1, 1, (T.CRANK + 1 + len(topo.dyads), 2))
-        if trace_exact(topo, pose, np.linspace(0, 2 * np.pi, 73))[1].min() > 0.05 and certify(
-                topo, pose, 0.0, 2 * np.pi).ok:
-            break
-    else:  # pragma: no cover
-        pytest.fail(f"no assemblable {name} drawn")
+    pose = _assemblable(topo)
     m = D.Match(0.0, 0.4, 25.0, np.array([3.0, -2.0]))
     placed = placed_pose(topo, pose, 0.0, m)
     f = tmp_path / "six.toml"

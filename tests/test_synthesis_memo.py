@@ -101,6 +101,19 @@ def _programs(static_closed: bool, screens_only: bool = False, only: str | None 
     calls["polish"] = (polish._value_and_grad, (x, topo[0][0], topo[1][0], topo[2][0],
                                                 rng.uniform(-1, 1, (polish.POLISH_T, 2)), np.float64(1),
                                                 np.linspace(0, 1, polish.POLISH_T), np.float64(0.003)), ())
+    # a timed target's programs (`search._screen_timed`, `_refine_timed`, `polish.program_timed`)
+    nt = search.TIMED_SCREEN_T
+    w = np.full(nt, 1.0 / nt, f32)
+    rt = search.REFINE_T
+    calls["screen_timed"] = (search._screen_timed_of,
+                             (jax.random.PRNGKey(4), *topo, rng.uniform(-1, 1, (nt, 2)).astype(f32), w,
+                              np.linspace(0, 1, nt).astype(f32), f32(2.0)), (False,))
+    calls["refine_timed"] = (search._refine_timed_of,
+                             (*topo, poses, arcs, rng.uniform(-1, 1, (rt, 2)).astype(f32), np.full(rt, 1 / rt, f32),
+                              f32(0.01), np.linspace(0, 1, rt).astype(f32)), (5, False))
+    calls["polish_timed"] = (polish._value_and_grad_timed, (x, topo[0][0], topo[1][0], topo[2][0],
+                                                            rng.uniform(-1, 1, (9, 2)), np.full(9, 1 / 9),
+                                                            np.linspace(0, 1, 9), np.float64(0.003)), (False,))
     out = {}
     for name, (fun, args, static) in calls.items():
         if (screens_only and not name.startswith("screen")) or (only and name != only):
@@ -134,7 +147,7 @@ def test_stored_programs_cold_warm_and_off_give_the_same_bits_and_a_wrong_key_is
         jax.config.update("jax_compilation_cache_dir", str(tmp_path / "good"))
         cold = _programs(True)
         stored = sorted(p.name for p in (tmp_path / "good").glob("*" + cache.TRACE_SUFFIX))
-        assert len(stored) == 5  # the screen twice (open, closed), the rank, the refinement, the polish
+        assert len(stored) == 8  # the screen twice (open, closed), the rank, the refinement, the polish; timed: 3
         stores = []
         monkeypatch.setattr(cache, "_store", lambda *a: stores.append(a))
         warm = _programs(True)

@@ -129,15 +129,10 @@ def _replay(tmp_path, topo, pose, m):
 def test_slider_sketch_replays_the_tracer(tmp_path, name):
     """A slider topology written as a sketch (each slider on its frame guide, `along` its direction,
     the guide's anchor no joint): `jaxlink kinematics` traces the tracer's path."""
+    from test_synthesis import _assemblable
+
     topo = next(t for t in T.topologies(8, sliders=True) if t.name == name)
-    rng = np.random.default_rng(1)
-    for _ in range(5000):
-        pose = rng.uniform(-1, 1, (T.CRANK + 1 + len(topo.dyads), 2))
-        if trace_exact(topo, pose, np.linspace(0, 2 * np.pi, 73))[1].min() > 0.05 and certify(
-                topo, pose, 0.0, 2 * np.pi).ok:
-            break
-    else:  # pragma: no cover
-        pytest.fail(f"no assemblable {name} drawn")
+    pose = _assemblable(topo)
     m = D.Match(0.0, 0.4, 25.0, np.array([3.0, -2.0]))
     text = to_sketch(topo, placed_pose(topo, pose, 0.0, m), unit="mm").toml()
     assert text.count("on = \"frame\"") == len(topo.sliders)
@@ -191,6 +186,10 @@ def test_sliders_option_adds_the_slider_topologies(tmp_path, monkeypatch):
     f.write_text("x_mm,y_mm\n0,0\n1,0\n1,1\n0,1\n")
     for args in (["--sliders", "--max-links", "6"], ["--max-links", "6"], ["--topologies", "slider-crank"]):
         assert cli_main(["synthesize", str(f), *args]) == 1
+    from jaxlink.errors import MechanismError
+
+    with pytest.raises(MechanismError, match="sliders"):
+        api.synthesize(np.array([[0, 0], [1, 0], [1, 1.0]]), sliders="yes")
     assert seen[0] == [t.name for t in T.topologies(6, sliders=True)] and len(seen[0]) == 16
     assert seen[1] == [t.name for t in T.topologies(6)] and seen[2] == ["slider-crank"]
 

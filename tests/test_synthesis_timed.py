@@ -53,6 +53,9 @@ def test_timed_csv_and_npy(tmp_path):
     f.write_text("theta_deg,x,y\n0,0,0\nten,1,0\n20,1,1\n")
     with pytest.raises(MechanismError, match="theta_deg"):
         load_target(f)
+    _write(f, ["theta_deg", "x", "y"], [[0, 2, 3], [10, 2, 3], [20, 2, 3]])
+    with pytest.raises(MechanismError, match="all one point"):
+        load_target(f)
 
 
 def test_ordered_distance_against_a_minimisation_over_the_rotation():
@@ -151,20 +154,11 @@ def test_timed_search_keeps_the_timing():
 def test_timed_candidate_failing_between_samples_is_rejected():
     """A four-bar whose dyad cannot close at θ = 0, timed at inputs h/2 + k h on both sides of it
     (every sample closing): `score` reports the ordered distance and the failed check."""
+    from test_synthesis import _failing_between_samples
+
     n = 64
     h = 2 * np.pi / n
-    dmax, dsample = 1.3, math.sqrt(1.0 + 0.09 + 0.6 * math.cos(h / 2))
-    reach = 0.5 * (dmax + dsample)
-    l1 = 0.6
-    pose = np.zeros((6, 2))
-    pose[1], pose[3] = (-1.0, 0.0), (0.3 * math.cos(h / 2), 0.3 * math.sin(h / 2))
-    c = pose[3]
-    w = pose[1] - c
-    d = np.hypot(*w)
-    l2 = reach - l1
-    a = (l1 ** 2 - l2 ** 2 + d ** 2) / (2 * d)
-    pose[4] = c + a / d * w + math.sqrt(l1 ** 2 - a ** 2) / d * np.array([-w[1], w[0]])
-    pose[5] = c + 0.5 * (pose[4] - c) + [0.0, 0.2]
+    pose = _failing_between_samples(n)
     offsets = h * np.arange(n - 1)   # up to one step short of a turn: both sides of θ = 0 (at 2π − h/2)
     shifted = offsets - np.pi        # the interval −π … π − h: θ = 0 inside
     pts = trace_exact(FOUR_BAR, pose, shifted)[0][:, FOUR_BAR.traced]

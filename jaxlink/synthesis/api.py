@@ -131,6 +131,8 @@ def synthesize(target: Any, *, closed: bool | None = None, time_limit: float = 6
     if isinstance(max_links, bool) or not isinstance(max_links, (int, np.integer)) or max_links < 4:
         raise MechanismError(f"max_links = {max_links!r}: a whole number of links, at least 4 (the four-bar, "
                              "the frame counted)")
+    if not isinstance(sliders, (bool, np.bool_)):
+        raise MechanismError(f"sliders = {sliders!r}: True (also the slider variants) or False")
     fin = search_options.get("finish")
     if fin is not None and (isinstance(fin, bool) or not isinstance(fin, (int, np.integer)) or fin < 0):
         raise MechanismError(f"finish = {fin!r}: the number of candidates polished at the end must be a whole "

@@ -123,8 +123,7 @@ def polish(parents: np.ndarray, active: np.ndarray, traced: int, pose: np.ndarra
             prog = program_timed(parents.shape[0], len(target.points), sliders)
             t_in = np.asarray(target.inputs, float)
             span = float(t_in[-1] - t_in[0])
-            c = target.points - target.points.mean(0)
-            tgt = jnp.asarray(c / np.sqrt(np.mean(np.sum(c * c, axis=1))), jnp.float64)
+            tgt = jnp.asarray(_dist.normalise(target.points)[0], jnp.float64)
             args = (jnp.full(len(t_in), 1.0 / len(t_in)), jnp.asarray((t_in - t_in[0]) / span, jnp.float64))
         else:
             prog = program(parents.shape[0], n_points, sliders)

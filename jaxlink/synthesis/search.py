@@ -345,25 +345,28 @@ def _loss(params, par, act, tr, target, closed, u, sliders):
 
 @functools.partial(jax.jit, static_argnames=("steps", "sliders"))
 def _refine(parents, active, traced, poses, arcs, target, lr, closed, u, *, steps: int, sliders: bool = False):
-    # the step size falls from lr to lr / 10 along a half cosine: long strides first, a fine fit at the end
+    """Each candidate's pose and arc after `steps` Adam steps (`_adam`) on `_loss`: (poses, arcs, losses)."""
+    return jax.vmap(lambda par, act, tr, pose, arc: _adam(
+        _loss, (pose, arc), (par, act, tr, target, closed, u, sliders), lr, steps))(
+        parents, active, traced, poses, arcs)
+
+
+def _adam(loss, params, args, lr, steps: int):
+    """(pose, arc, the last loss) after `steps` Adam steps on `loss(params, *args)` from `params`
+    = (pose, arc): the step size falls from lr to lr / 10 along a half cosine (long strides first, a
+    fine fit at the end); a non-finite gradient component counts as 0."""
     opt = optax.adam(lambda k: lr * (0.55 + 0.45 * jnp.cos(np.pi * jnp.minimum(k, steps) / steps)))
+    g = jax.value_and_grad(loss)
 
-    def one(par, act, tr, pose, arc):
-        params = (pose, arc)
-        state = opt.init(params)
-        g = jax.value_and_grad(_loss)
+    def step(carry, _):
+        params, state = carry
+        v, grads = g(params, *args)
+        grads = jax.tree_util.tree_map(lambda x: jnp.where(jnp.isfinite(x), x, 0.0), grads)
+        upd, state = opt.update(grads, state, params)
+        return (optax.apply_updates(params, upd), state), v
 
-        def step(carry, _):
-            params, state = carry
-            v, grads = g(params, par, act, tr, target, closed, u, sliders)
-            grads = jax.tree_util.tree_map(lambda x: jnp.where(jnp.isfinite(x), x, 0.0), grads)
-            upd, state = opt.update(grads, state, params)
-            return (optax.apply_updates(params, upd), state), v
-
-        (params, _), vals = jax.lax.scan(step, (params, state), None, length=steps)
-        return params[0], params[1], vals[-1]
-
-    return jax.vmap(one)(parents, active, traced, poses, arcs)
+    (params, _), vals = jax.lax.scan(step, (params, opt.init(params)), None, length=steps)
+    return params[0], params[1], vals[-1]
 
 
 def timed_samples(target: Target, n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
@@ -381,8 +384,7 @@ def timed_samples(target: Target, n: int) -> tuple[np.ndarray, np.ndarray, np.nd
     u = np.zeros(n)
     u[:m] = (t[idx] - t[0]) / span
     p = np.zeros((n, 2))
-    c = pts[idx] - pts[idx].mean(0)
-    p[:m] = c / np.sqrt(np.mean(np.sum(c * c, axis=1)))
+    p[:m] = _dist.normalise(pts[idx])[0]
     return p, w, u, span
 
 
@@ -422,24 +424,9 @@ def _refine_timed(parents, active, traced, poses, arcs, target, w, lr, u, *, ste
     """`_refine` for a timed target: Adam on the pose and the interval's start (its span the
     target's) against the square of the ordered distance at the target's inputs (`timed_samples`),
     plus the margin penalty at those and at `_TIMED_MARGIN_T` inputs across the interval."""
-    opt = optax.adam(lambda k: lr * (0.55 + 0.45 * jnp.cos(np.pi * jnp.minimum(k, steps) / steps)))
-
-    def one(par, act, tr, pose, arc):
-        params = (pose, arc)
-        state = opt.init(params)
-        g = jax.value_and_grad(_loss_timed)
-
-        def step(carry, _):
-            params, state = carry
-            v, grads = g(params, par, act, tr, target, w, u, sliders)
-            grads = jax.tree_util.tree_map(lambda x: jnp.where(jnp.isfinite(x), x, 0.0), grads)
-            upd, state = opt.update(grads, state, params)
-            return (optax.apply_updates(params, upd), state), v
-
-        (params, _), vals = jax.lax.scan(step, (params, state), None, length=steps)
-        return params[0], params[1], vals[-1]
-
-    return jax.vmap(one)(parents, active, traced, poses, arcs)
+    return jax.vmap(lambda par, act, tr, pose, arc: _adam(
+        _loss_timed, (pose, arc), (par, act, tr, target, w, u, sliders), lr, steps))(
+        parents, active, traced, poses, arcs)
 
 
 def _rotate(poses, phi):

@@ -103,6 +103,8 @@ def _timed(pts: np.ndarray, t: np.ndarray, closed: bool | None, unit: str, sourc
     if not (np.all(dt > 0) or np.all(dt < 0)):
         raise MechanismError(f"{source}: a timed target's input angles must go one way (all increasing or all "
                              "decreasing), every point at its own angle")
+    if np.linalg.norm(pts - pts.mean(0), axis=1).max() <= 1e-12 * max(1.0, float(np.abs(pts).max())):
+        raise MechanismError(f"{source}: a timed target's points are all one point: nothing to match")
     span = abs(float(t[-1] - t[0]))
     if span >= 2 * np.pi:
         raise MechanismError(f"{source}: a timed target's input angles span {math.degrees(span):.6g}°: at most "

@@ -110,17 +110,19 @@ def slide(topo: Topology, k: int, *, name: str | None = None) -> Topology:
     return Topology(name, dyads, topo.traced, tuple(sorted(topo.sliders + (k,))))
 
 
-def bodies(topo: Topology) -> list[tuple[int, ...]]:
-    """The moving rigid bodies, each a tuple of joints (its first joint its reference; the crank
-    first): a dyad on two joints of one body adds a point of it, else two binary links."""
+def _walk(topo: Topology) -> tuple[list[tuple[int, ...]], list[bool]]:
+    """(`bodies`, `rigid`): the bodies grown dyad by dyad, and which dyads added a point of one."""
     out: list[list[int]] = [[0, CRANK]]
+    flags = []
     frame = set(range(N_FRAME))
     for k, (p1, p2) in enumerate(topo.dyads):
         j = CRANK + 1 + k
         if k in topo.sliders:
             out.append([p1, j])  # the link to the slider; the slider's block is no body of joints
+            flags.append(False)
             continue
         home = [b for b in out if p1 in b and p2 in b]
+        flags.append(bool(home))
         if home:
             home[0].append(j)
         elif p1 in frame and p2 in frame:  # pragma: no cover - refused by grow
@@ -128,7 +130,13 @@ def bodies(topo: Topology) -> list[tuple[int, ...]]:
         else:
             out.append([p1, j])
             out.append([p2, j])
-    return [tuple(b) for b in out]
+    return [tuple(b) for b in out], flags
+
+
+def bodies(topo: Topology) -> list[tuple[int, ...]]:
+    """The moving rigid bodies, each a tuple of joints (its first joint its reference; the crank
+    first): a dyad on two joints of one body adds a point of it, else two binary links."""
+    return _walk(topo)[0]
 
 
 def rigid(topo: Topology) -> list[bool]:
@@ -136,22 +144,7 @@ def rigid(topo: Topology) -> list[bool]:
     triangle never changes, so its reach margin is a constant of the design, not a limit of the
     motion — a point on the line of a link (margin 0: the feed dog on its carrier's line) is as
     good as any (`tracer`)."""
-    out: list[list[int]] = [[0, CRANK]]
-    flags = []
-    for k, (p1, p2) in enumerate(topo.dyads):
-        j = CRANK + 1 + k
-        if k in topo.sliders:
-            out.append([p1, j])
-            flags.append(False)
-            continue
-        home = [b for b in out if p1 in b and p2 in b]
-        flags.append(bool(home))
-        if home:
-            home[0].append(j)
-        else:
-            out.append([p1, j])
-            out.append([p2, j])
-    return flags
+    return _walk(topo)[1]
 
 
 def _four_bar() -> Topology:
