@@ -16,8 +16,11 @@ run, on the same designs:
   B designs × 360 positions, against `jl.solve(mech, phis, P, q0)` of the same designs and angles
   (every moving joint's position, `Solution.points`), float64;
 - **one revolution**: pylinkage's `Linkage.step_fast(360)` against `jl.solve(mech, phis, p, q0)`
-  of one design, each called 200 times in a row from Python, the two taking turns in every round
-  (`single_design_calls`, as in `fourbar_vs_pylinkage.py`: each result kept, and each dropped).
+  of one design (the whole `Solution`: angles, positions, result codes, residuals) and against
+  `jl.solve(..., unknowns=False)` (the positions, result codes and residuals without the angles:
+  what `step_fast` returns is every joint's position), each called 200 times in a row from
+  Python, the three taking turns in every round (`single_design_calls`, as in
+  `fourbar_vs_pylinkage.py`: each result kept, and each dropped).
 
 Error: max |Δ| (m) of the positions of every moving joint of both legs (C, D, E, F, G, H, I)
 against an independent numpy reference (circle intersections on the sketch's branch, the fixed
@@ -371,15 +374,22 @@ def main(argv=None) -> dict:
                         "pylinkage_nan_fraction": pl_nan, "ratio_batch": tb2 / tb,
                         "jaxlink_vs_pylinkage_batch_max_abs_m": float(np.nanmax(np.abs(pl7 - xy)))})
 
-    # ---- one design, one revolution, 200 calls in a row
+    # ---- one design, one revolution, 200 calls in a row: the whole Solution (angles, positions,
+    # result codes, residuals), and the positions alone with their result codes and residuals
+    # (`unknowns=False`: what step_fast returns, every joint's position, without the angles)
     p1 = jnp.asarray(P[0])
 
     def jl_one():
         return jl.solve(mech, ph, p1, q0)
 
-    one = jl_one()
+    def jl_pos():
+        return jl.solve(mech, ph, p1, q0, unknowns=False)
+
+    one, pos = jl_one(), jl_pos()
     err1 = float(np.max(np.abs(jaxlink_positions(mech, one.points) - ref7[0])))
-    calls = {"jaxlink": jl_one}
+    same = bool(np.array_equal(np.asarray(one.points), np.asarray(pos.points)))
+    results["positions_alone_identical"] = same
+    calls = {"jaxlink": jl_one, "jaxlink_positions": jl_pos}
     if have_pl:
         lk1 = pylinkage_strider()
         lk1.step_fast(iterations=STEPS)  # compile (numba cache) and build solver data
@@ -391,15 +401,20 @@ def main(argv=None) -> dict:
     for m in ("kept", "dropped"):
         sfx = "" if m == "kept" else "_dropped"
         t1, w1 = per_call["jaxlink", m]
+        t3, w3 = per_call["jaxlink_positions", m]
         log(f"jaxlink solve, 1 design per call ({m})", STEPS / t1, err1, w1 / t1)
+        log(f"jaxlink solve(unknowns=False), 1 design per call ({m})", STEPS / t3, err1, w3 / t3)
         results[f"jaxlink_single_call_ms{sfx}"] = 1e3 * t1
         results[f"jaxlink_single_call_worst_ms{sfx}"] = 1e3 * w1
+        results[f"jaxlink_positions_call_ms{sfx}"] = 1e3 * t3
+        results[f"jaxlink_positions_call_worst_ms{sfx}"] = 1e3 * w3
         if have_pl:
             t2, w2 = per_call["pylinkage", m]
             log(f"pylinkage Linkage.step_fast, 1 design per call ({m})", STEPS / t2, err1_pl, w2 / t2)
             results[f"pylinkage_step_fast_call_ms{sfx}"] = 1e3 * t2
             results[f"pylinkage_step_fast_call_worst_ms{sfx}"] = 1e3 * w2
             results[f"ratio_single{sfx}"] = t2 / t1
+            results[f"ratio_positions{sfx}"] = t2 / t3
     results["jaxlink_single_max_abs_error_m"] = err1
     if have_pl:
         results["pylinkage_single_max_abs_error_m"] = err1_pl
@@ -411,7 +426,9 @@ def main(argv=None) -> dict:
     if "ratio_batch" in results:
         print(f"batch: jaxlink = {results['ratio_batch']:.2f}x pylinkage's Ensemble.simulate; one revolution: "
               f"{results['ratio_single']:.2f}x its step_fast (results kept), "
-              f"{results['ratio_single_dropped']:.2f}x (each dropped)")
+              f"{results['ratio_single_dropped']:.2f}x (each dropped); the positions alone (unknowns=False, "
+              f"the same points bit for bit: {results['positions_alone_identical']}): "
+              f"{results['ratio_positions']:.2f}x kept, {results['ratio_positions_dropped']:.2f}x dropped")
     results["cores"] = cores()
     results["machine"] = {"cpus": os.cpu_count(), "platform": platform.platform(), "jax": jax.__version__}
     if args.json:

@@ -91,7 +91,7 @@ class Solution(NamedTuple):
     **Fields:**
 
     - `q`: (…, N, n) unknowns, SI, in the order of `Mechanism.unknown_names`. Where not converged:
-      the last finite iterate (never NaN).
+      the last finite iterate (never NaN). None from `solve(..., unknowns=False)`.
     - `points`: (…, N, n_points, 2) the points of interest, metres, in the order of
       `Mechanism.point_names` (NaN where the position did not converge).
     - `result`: (…, N) int8 code, see `RESULTS`.

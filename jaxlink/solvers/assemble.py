@@ -221,8 +221,10 @@ def _mask_points(pts, code):
     return jnp.where(assembled[..., None, None], pts, jnp.nan)
 
 
-def _batch(mech, phis, p, q0, options: NewtonOptions, points: bool) -> Solution:
-    """The common body of `solve` and `solve_path`: shapes, dtypes, defaults, the lead-in."""
+def _batch(mech, phis, p, q0, options: NewtonOptions, points: bool, unknowns: bool = True) -> Solution:
+    """The common body of `solve` and `solve_path`: shapes, dtypes, defaults, the lead-in. Without
+    `unknowns` the `Solution`'s q is None (XLA then drops the angles' computation: the closed
+    form's atan2s; the other outputs are the same values, bit for bit)."""
     p = jnp.asarray(mech.parameters if p is None else p)
     if not jnp.issubdtype(p.dtype, jnp.floating):
         p = p.astype(jnp.result_type(float))
@@ -243,7 +245,9 @@ def _batch(mech, phis, p, q0, options: NewtonOptions, points: bool) -> Solution:
     structure = mech.structure if isinstance(mech, Mechanism) else mech
     # (the points' mask and their finiteness check are part of `_solve_batch`: `_finalize`)
     q, rn, code, k, pts = _solve_batch(structure, options, points, P, phis, Q0, phi_ref)
-    sol = Solution(q=q, points=pts, result=code, stats=SolveStats(residual=rn, steps=k))
+    # (q None only where the caller asked for the positions alone: `solve(..., unknowns=False)`)
+    sol = Solution(q=q if unknowns else None,  # type: ignore[arg-type]
+                   points=pts, result=code, stats=SolveStats(residual=rn, steps=k))
     return sol if batch else jax.tree_util.tree_map(lambda x: x[0], sol)
 
 
@@ -253,8 +257,8 @@ _warned_float32 = False
 def _warn_if_float32(p) -> None:
     """Warn once when float64 numbers (the file's, or numpy float64) meet JAX's float32 default."""
     global _warned_float32
-    if _warned_float32 or jax.config.read("jax_enable_x64"):
-        return
+    if _warned_float32 or isinstance(p, jax.Array) or jax.config.read("jax_enable_x64"):
+        return  # (a JAX array's dtype is the caller's choice, float64 or float32)
     # a traced `p` has a dtype; only a Python or numpy value is converted to read it (never a tracer)
     dtype = getattr(p, "dtype", None)
     if p is None or np.result_type(np.asarray(p).dtype if dtype is None else dtype) == np.float64:
@@ -267,13 +271,13 @@ def _warn_if_float32(p) -> None:
             stacklevel=3)
 
 
-@functools.partial(jax.jit, static_argnames=("options", "points"))
-def _solve_jit(mech, phis, p, q0, options, points):
-    return _batch(mech, phis, p, q0, options, points)
+@functools.partial(jax.jit, static_argnames=("options", "points", "unknowns"))
+def _solve_jit(mech, phis, p, q0, options, points, unknowns=True):
+    return _batch(mech, phis, p, q0, options, points, unknowns)
 
 
 def solve(mech: Mechanism, phis, p=None, q0=None, *, options: NewtonOptions = NewtonOptions(),
-          points: bool = True, max_bytes: int | None = None) -> Solution:
+          points: bool = True, unknowns: bool = True, max_bytes: int | None = None) -> Solution:
     """Solve the positions of one design or a batch of designs along a sequence of inputs.
 
     **Arguments:**
@@ -287,6 +291,10 @@ def solve(mech: Mechanism, phis, p=None, q0=None, *, options: NewtonOptions = Ne
       at `[input] start`; the solve continues from there to `phis[0]` first (a lead-in).
     - `options`: `NewtonOptions` (static: another value compiles anew).
     - `points`: also compute the points of interest (`Solution.points`).
+    - `unknowns`: also return the unknowns (`Solution.q`). False: q is None, and the solve is
+      the positions alone (with the result codes and residuals), the same values bit for bit;
+      in closed form it skips every solved angle's atan2 (the Strider, one design × 360
+      positions: about 0.65× the time).
     - `max_bytes`: the device memory a batch may use (default: a quarter of the device's memory,
       of the available host memory on a CPU). A larger batch is solved in chunks of designs that
       fit, identical to the unchunked solve: kept on the device where the whole result fits
@@ -302,10 +310,12 @@ def solve(mech: Mechanism, phis, p=None, q0=None, *, options: NewtonOptions = Ne
     (`jax.device_put(p, NamedSharding(...))`) is solved where it lies.
     """
     _warn_if_float32(p)
+    if not isinstance(unknowns, bool):
+        raise TypeError(f"unknowns must be True or False, not {unknowns!r}")
     plan = _chunk_designs(mech, phis, p, points, max_bytes)
     if plan is None:
-        return _solve_jit(mech, phis, p, q0, options, points)
-    return _solve_chunked(mech, phis, p, q0, options, points, *plan)
+        return _solve_jit(mech, phis, p, q0, options, points, unknowns)
+    return _solve_chunked(mech, phis, p, q0, options, points, *plan, unknowns=unknowns)
 
 
 # device memory of one solved position, per value it returns (q, points, residual, code, steps):
@@ -334,7 +344,7 @@ def _chunk_designs(mech, phis, p, points: bool, max_bytes) -> tuple[int, bool] |
     `max_bytes`, else None (one call). The result stays on the device where twice its size (the
     chunks' results and their concatenation) leaves room for the chunks' working memory; the
     chunks are then sized to that room. Otherwise each chunk is copied to the host."""
-    if p is None or isinstance(p, jax.core.Tracer) or isinstance(phis, jax.core.Tracer) or np.ndim(p) != 2:
+    if p is None or np.ndim(p) != 2 or isinstance(p, jax.core.Tracer) or isinstance(phis, jax.core.Tracer):
         return None
     if max_bytes is not None and not (int(max_bytes) > 0):
         raise ValueError(f"max_bytes must be a positive number of bytes, not {max_bytes!r}")
@@ -357,7 +367,8 @@ def _chunk_designs(mech, phis, p, points: bool, max_bytes) -> tuple[int, bool] |
     return largest(budget), False
 
 
-def _solve_chunked(mech, phis, p, q0, options, points, chunk: int, on_device: bool = False) -> Solution:
+def _solve_chunked(mech, phis, p, q0, options, points, chunk: int, on_device: bool = False, *,
+                   unknowns: bool = True) -> Solution:
     """`_solve_jit` over chunks of `chunk` designs (the last one padded by repeating its first
     design, so one compiled shape serves them all). `on_device`: the chunks are sliced, solved and
     concatenated on the device (the result jax arrays); else each is copied to the host when done
@@ -372,7 +383,7 @@ def _solve_chunked(mech, phis, p, q0, options, points, chunk: int, on_device: bo
         n = min(chunk, B - lo)
         take = slice(lo, lo + n) if n == chunk else np.concatenate([np.arange(lo, lo + n), np.full(chunk - n, lo)])
         sol = _solve_jit(mech, phis if PH is None else PH[take], P[take], q0 if Q0 is None else Q0[take],
-                         options, points)
+                         options, points, unknowns)
         if on_device:
             parts.append(sol if n == chunk else jax.tree_util.tree_map(lambda x, n=n: x[:n], sol))
         else:
