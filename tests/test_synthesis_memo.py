@@ -20,6 +20,7 @@ from jaxlink.synthesis import search
 from jaxlink.synthesis.topology import as_arrays, topologies
 
 B = 32  # a four-bar's screen on 32 random poses: small programs
+LIM = 4.0  # a size bound that some of those poses exceed (`size`): used by the bounded programs only
 N_DYADS = 2  # the four-bar with its coupler point: two dyads (`topology`)
 
 
@@ -27,20 +28,21 @@ def _inputs(slider: bool = False):
     arr = as_arrays(topologies(4, sliders=True)[1:] if slider else topologies(4))  # the slider-crank, the four-bar
     assert arr.parents.shape[1] == N_DYADS and arr.parents.shape[0] == 1
     rep = [np.repeat(a[:1], B, 0) for a in (arr.parents, arr.active, arr.traced)]
-    return (jax.random.PRNGKey(3), *rep, np.linspace(0.5, 1.5, search.DESC_N).astype(np.float32))
+    return (jax.random.PRNGKey(3), *rep, np.linspace(0.5, 1.5, search.DESC_N).astype(np.float32), np.float32(LIM))
 
 
-def _same_as_fresh(memo, slider: bool = False) -> bool:
+def _same_as_fresh(memo, slider: bool = False, bounded: bool = False) -> bool:
     """Request the closed target's screen, then the open one's through `memo`; compare the open
     one's output with a program compiled afresh for it (`_compiled` without its cache). `slider`:
-    the revolute open screen first, then the slider-crank's."""
+    the revolute open screen first, then the slider-crank's; `bounded`: the unbounded open screen
+    first, then the bounded one (`size`)."""
     x64 = bool(jax.config.read("jax_enable_x64"))
     args = _inputs(slider)
-    closed = not slider
-    memo("screen", B, N_DYADS, closed, 0, True, False, x64)
-    got = memo("screen", B, N_DYADS, False, 0, True, slider, x64)(*args)
-    again = memo("screen", B, N_DYADS, False, 0, True, slider, x64)(*args)
-    fresh = search._compiled.__wrapped__("screen", B, N_DYADS, False, 0, True, slider, x64)(*args)
+    closed = not (slider or bounded)
+    memo("screen", B, N_DYADS, closed, 0, True, False, False, x64)
+    got = memo("screen", B, N_DYADS, False, 0, True, slider, bounded, x64)(*args)
+    again = memo("screen", B, N_DYADS, False, 0, True, slider, bounded, x64)(*args)
+    fresh = search._compiled.__wrapped__("screen", B, N_DYADS, False, 0, True, slider, bounded, x64)(*args)
     same = [np.array_equal(np.asarray(a), np.asarray(b), equal_nan=True) and np.shape(a) == np.shape(b)
             for a, b in zip(got + again, fresh + fresh)]
     return all(same)
@@ -52,20 +54,26 @@ def test_memoized_program_equals_a_fresh_compile_and_a_wrong_key_is_caught():
     info = search._compiled.cache_info()
     assert info.hits >= 1 and info.currsize == 2  # the repeated request came from the memo
     assert _same_as_fresh(search._compiled, slider=True)
+    assert _same_as_fresh(search._compiled, bounded=True)
 
     @functools.lru_cache(maxsize=16)
-    def blind(which, b, n_dyads, closed, steps, quick, sliders, x64):
+    def blind(which, b, n_dyads, closed, steps, quick, sliders, bounded, x64):
         return search._compiled.__wrapped__(which, b, n_dyads, True if closed is None else closed, steps, quick,
-                                            False if sliders is None else sliders, x64)
+                                            False if sliders is None else sliders,
+                                            False if bounded is None else bounded, x64)
 
-    def blind_memo(which, b, n_dyads, closed, steps, quick, sliders, x64):  # the key without `closed`
-        return blind(which, b, n_dyads, None, steps, quick, sliders, x64)
+    def blind_memo(which, b, n_dyads, closed, steps, quick, sliders, bounded, x64):  # the key without `closed`
+        return blind(which, b, n_dyads, None, steps, quick, sliders, bounded, x64)
 
-    def blind_sliders(which, b, n_dyads, closed, steps, quick, sliders, x64):  # the key without `sliders`
-        return blind(which, b, n_dyads, closed, steps, quick, None, x64)
+    def blind_sliders(which, b, n_dyads, closed, steps, quick, sliders, bounded, x64):  # the key without `sliders`
+        return blind(which, b, n_dyads, closed, steps, quick, None, bounded, x64)
+
+    def blind_bounded(which, b, n_dyads, closed, steps, quick, sliders, bounded, x64):  # the key without `bounded`
+        return blind(which, b, n_dyads, closed, steps, quick, sliders, None, x64)
 
     assert not _same_as_fresh(blind_memo)
     assert not _same_as_fresh(blind_sliders, slider=True)
+    assert not _same_as_fresh(blind_bounded, bounded=True)
 
 
 def _programs(static_closed: bool, screens_only: bool = False, only: str | None = None,
@@ -88,32 +96,37 @@ def _programs(static_closed: bool, screens_only: bool = False, only: str | None 
         return jax.ShapeDtypeStruct(np.shape(x), np.asarray(x).dtype)
 
     desc = np.linspace(0.5, 1.5, search.DESC_N).astype(f32)
-    calls = {f"screen-{'closed' if c else 'open'}": (search._screen_of, (jax.random.PRNGKey(3), *topo, desc),
-                                                     (c, False)) for c in (static_closed, False)}
+    lim = f32(LIM)
+    calls = {f"screen-{'closed' if c else 'open'}": (search._screen_of, (jax.random.PRNGKey(3), *topo, desc, lim),
+                                                     (c, False, False)) for c in (static_closed, False)}
     calls["rank"] = (search._rank_of, (*topo, poses, arcs, rng.uniform(-1, 1, (search.RANK_T, 2)).astype(f32), f32(1),
-                                       rng.uniform(0, 1, search.RANK_T).astype(f32)), (False,))
+                                       rng.uniform(0, 1, search.RANK_T).astype(f32), lim), (False, False))
     calls["refine"] = (search._refine_of, (*topo, poses, arcs, rng.uniform(-1, 1, (search.TARGET_N, 2)).astype(f32),
-                                           f32(0.01), f32(1), rng.uniform(0, 1, search.REFINE_T).astype(f32)),
-                       (5, False))
+                                           f32(0.01), f32(1), rng.uniform(0, 1, search.REFINE_T).astype(f32), lim),
+                       (5, False, False))
+    # the refinement with the size penalty for the bound `lim` (`size`): another program
+    calls["refine-bounded"] = (search._refine_of, calls["refine"][1], (5, False, True))
     from jaxlink.synthesis import polish
 
     x = np.concatenate([poses[0].ravel(), arcs[0]]).astype(np.float64)
     calls["polish"] = (polish._value_and_grad, (x, topo[0][0], topo[1][0], topo[2][0],
                                                 rng.uniform(-1, 1, (polish.POLISH_T, 2)), np.float64(1),
-                                                np.linspace(0, 1, polish.POLISH_T), np.float64(0.003)), ())
+                                                np.linspace(0, 1, polish.POLISH_T), np.float64(0.003),
+                                                np.float64(LIM)), ())
     # a timed target's programs (`search._screen_timed`, `_refine_timed`, `polish.program_timed`)
     nt = search.TIMED_SCREEN_T
     w = np.full(nt, 1.0 / nt, f32)
     rt = search.REFINE_T
     calls["screen_timed"] = (search._screen_timed_of,
                              (jax.random.PRNGKey(4), *topo, rng.uniform(-1, 1, (nt, 2)).astype(f32), w,
-                              np.linspace(0, 1, nt).astype(f32), f32(2.0)), (False,))
+                              np.linspace(0, 1, nt).astype(f32), f32(2.0), lim), (False, False))
     calls["refine_timed"] = (search._refine_timed_of,
                              (*topo, poses, arcs, rng.uniform(-1, 1, (rt, 2)).astype(f32), np.full(rt, 1 / rt, f32),
-                              f32(0.01), np.linspace(0, 1, rt).astype(f32)), (5, False))
+                              f32(0.01), np.linspace(0, 1, rt).astype(f32), lim), (5, False, False))
     calls["polish_timed"] = (polish._value_and_grad_timed, (x, topo[0][0], topo[1][0], topo[2][0],
                                                             rng.uniform(-1, 1, (9, 2)), np.full(9, 1 / 9),
-                                                            np.linspace(0, 1, 9), np.float64(0.003)), (False,))
+                                                            np.linspace(0, 1, 9), np.float64(0.003),
+                                                            np.float64(LIM)), (False, False))
     out = {}
     for name, (fun, args, static) in calls.items():
         if (screens_only and not name.startswith("screen")) or (only and name != only):
@@ -147,13 +160,16 @@ def test_stored_programs_cold_warm_and_off_give_the_same_bits_and_a_wrong_key_is
         jax.config.update("jax_compilation_cache_dir", str(tmp_path / "good"))
         cold = _programs(True)
         stored = sorted(p.name for p in (tmp_path / "good").glob("*" + cache.TRACE_SUFFIX))
-        assert len(stored) == 8  # the screen twice (open, closed), the rank, the refinement, the polish; timed: 3
+        assert len(stored) == 9  # the screen twice (open, closed), the rank, the refinement unbounded and
+        # bounded, the polish; timed: 3
         stores = []
         monkeypatch.setattr(cache, "_store", lambda *a: stores.append(a))
         warm = _programs(True)
         assert stores == []  # every program came from the store: none traced again
         monkeypatch.undo()
         assert _same(cold, off) and _same(warm, off)
+        # the bound changes the refinement (else a key blind to `bounded` could not be caught)
+        assert not all(np.array_equal(x, y) for x, y in zip(off["refine"], off["refine-bounded"]))
         # the XLA options are not in the trace's key: the rank stored above (for level 0), compiled at
         # another level, is the uncached rank at that level
         other = {"xla_backend_optimization_level": 2}

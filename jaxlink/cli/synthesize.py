@@ -45,6 +45,11 @@ def register(sub) -> None:
     p.add_argument("--topologies", default=None, metavar="NAMES",
                    help="comma-separated topology names to search (default: all up to --max-links; the "
                         "slider topologies by name without --sliders too)")
+    p.add_argument("--max-size", type=float, default=None, metavar="K",
+                   help="keep the designs within a size: every link at most K times the target's extent (the "
+                        "largest distance between two of its points), every frame pivot within K times it of the "
+                        "target's centre (e.g. 2; default: no bound). Each design's size, in extents, is in the "
+                        "table and the JSON either way")
     p.add_argument("--samples", type=int, default=8192, metavar="N",
                    help="random candidates per topology and round (default 8192)")
     p.add_argument("--points", type=int, default=200, metavar="N",
@@ -82,12 +87,14 @@ def cmd_synthesize(args) -> int:
     names = [n.strip() for n in args.topologies.split(",") if n.strip()] if args.topologies else None
     res = synthesize(tgt, time_limit=args.time_limit, seed=args.seed, rounds=args.rounds, max_links=args.max_links,
                      topologies=names, n_points=args.points, count=args.count, samples=args.samples,
-                     sliders=args.sliders,
+                     sliders=args.sliders, max_size=args.max_size,
                      log=(lambda s: print(s, file=sys.stderr)) if printer else None)
     if not printer:
         return 0 if res.designs else 1
     if not res.designs:
-        print("no design assembled over its interval: give more --time-limit or --samples", file=sys.stderr)
+        print("no design assembled over its interval" + ("" if args.max_size is None else
+              f" within --max-size {args.max_size:g}") + ": give more --time-limit or --samples"
+              + ("" if args.max_size is None else ", or a larger --max-size"), file=sys.stderr)
         return 1
     print(table(res))
     for f in write_all(args.out, res, plot_it=not args.no_plot):

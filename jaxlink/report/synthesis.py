@@ -14,11 +14,15 @@ def table(res) -> str:
     t = res.target
     kind = (f"timed over {abs(np.degrees(t.inputs[-1] - t.inputs[0])):.6g}° (distance: the ordered one)" if t.timed
             else "closed" if t.closed else "open")
+    unit = f" {t.unit}" if t.unit else ""
+    bound = "" if res.max_size is None else f"; designs at most {res.max_size:g} extents (--max-size)"
     lines = [f"target      {t.source}: {len(t.points)} points, {kind}" + (f", in {t.unit}" if t.unit else ""),
-             f"{'rank':>4}  {'topology':<26}{'joints':>7}{'links':>6}{'distance':>11}"
+             f"extent      {res.extent:.6g}{unit} (the largest distance between two target points: the unit of "
+             f"`size`, the longest link or the frame pivot furthest from the target's centre){bound}",
+             f"{'rank':>4}  {'topology':<26}{'joints':>7}{'links':>6}{'distance':>11}{'size':>7}"
              f"{'start_deg':>11}{'stop_deg':>11}{'found_s':>9}  pareto"]
     for i, d in enumerate(res.designs, 1):
-        lines.append(f"{i:>4}  {d.topology:<26}{d.joints:>7}{d.links:>6}{d.distance:>11.5f}"
+        lines.append(f"{i:>4}  {d.topology:<26}{d.joints:>7}{d.links:>6}{d.distance:>11.5f}{d.size:>7.2f}"
                      f"{d.start_deg:>11.3f}{d.stop_deg:>11.3f}{d.found_s:>9.1f}  {'*' if d.pareto else ''}")
     lines.append(f"wall time   {res.wall_s:.1f} s")
     return "\n".join(lines)
@@ -29,13 +33,14 @@ def to_json(res) -> dict:
     t = res.target
     return {
         "target": {"source": t.source, "points": len(t.points), "closed": t.closed, "unit": t.unit,
-                   "timed": t.timed},
+                   "timed": t.timed, "extent": res.extent},
+        "max_size": res.max_size,
         "wall_s": res.wall_s,
         "designs": [{
             "rank": i, "topology": d.topology, "joints": d.joints, "links": d.links,
             "distance": d.distance, "start_deg": d.start_deg, "stop_deg": d.stop_deg, "count": d.n_inputs,
             "scale": d.scale, "rotation_deg": d.rotation_deg, "translation": list(d.translation),
-            "margin": d.margin, "lengths": d.lengths, "found_s": d.found_s, "pareto": d.pareto,
+            "margin": d.margin, "size": d.size, "lengths": d.lengths, "found_s": d.found_s, "pareto": d.pareto,
             "joint_positions": d.sketch.tables()["sketch"]["joints"],
             "links_joints": d.sketch.tables()["sketch"]["links"],
             "frame": d.sketch.tables()["sketch"]["frame"],

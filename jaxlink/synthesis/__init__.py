@@ -6,6 +6,7 @@
 - `topology`: one-DOF revolute linkages grown by dyads (four-bar, Watt and Stephenson six-bars, eight-bars);
 - `tracer`: batched (JAX) and exact (NumPy) tracing from a pose, the dyads' reach margins;
 - `assembly`: the check that a candidate assembles over its whole interval on its branch;
+- `size`: a design's size in extents of the target, and the bound a search keeps to (`max_size`);
 - `search`: screen → rank → refine → score rounds;
 - `mechanism`: a candidate as a sketch file; `api`: `synthesize`.
 

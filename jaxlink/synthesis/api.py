@@ -12,6 +12,7 @@ import numpy as np
 from ..errors import MechanismError
 from ..model.sketch import Sketch
 from . import distance as _dist
+from . import size as _size
 from .mechanism import crank_angle, placed_pose, to_sketch
 from .search import Candidate, interval_offsets, search
 from .target import Target, load_target, make_target
@@ -32,6 +33,8 @@ class Design(NamedTuple):
     - `scale`, `rotation_deg`, `translation`: the placement of the search's normalised mechanism
       onto the target (x ↦ k R(φ) x + t);
     - `margin`: the smallest reach margin of its dyads over the interval (`assembly`);
+    - `size`: its longest link, or its frame pivot furthest from the target's centre, over the
+      target's extent (its largest distance between two points): `size.design_size`;
     - `lengths`: the crank's and every dyad link's length (target unit);
     - `sketch`: the mechanism (`jaxlink.Sketch`), `curve`: the traced path (n_inputs, 2);
     - `found_s`: seconds from the start of the search to this answer; `pareto`: no other answer
@@ -60,14 +63,19 @@ class Design(NamedTuple):
     pareto: bool
     inputs_deg: np.ndarray | None = None
     at_inputs: np.ndarray | None = None
+    size: float = float("nan")
 
 
 class Synthesis(NamedTuple):
-    """`target`; `designs`: the best answer of each topology, best first; `wall_s`: the search's time."""
+    """`target`; `designs`: the best answer of each topology, best first; `wall_s`: the search's time;
+    `max_size`: the bound on the designs' size (None: none); `extent`: the target's extent (its
+    largest distance between two points, in its unit: the size's unit)."""
 
     target: Target
     designs: list[Design]
     wall_s: float
+    max_size: float | None = None
+    extent: float = float("nan")
 
     @property
     def best(self) -> Design:
@@ -86,11 +94,12 @@ def _design(c: Candidate, target: Target, n_trace: int, name: str) -> Design:
     curve = _dist.place(trace_exact(c.topology, c.pose, th)[0][:, c.topology.traced], m)
     sk = to_sketch(c.topology, placed, name=name, unit=target.unit,
                    description=f"{c.topology.name}, synthesized for {target.source} (distance {m.distance:.6g})")
+    inputs_deg, at_inputs = _timed_points(c, target, m, start)
     return Design(c.topology.name, c.topology.n_joints, c.topology.n_links, float(m.distance), start,
                   start + math.degrees(span), n_trace, float(m.scale), math.degrees(m.rotation),
                   (float(m.translation[0]), float(m.translation[1])), float(c.assembly.margin),
                   {k: v * m.scale for k, v in lengths(c.topology, c.pose).items()}, sk, curve, c.found_s, False,
-                  *_timed_points(c, target, m, start))
+                  inputs_deg, at_inputs, float(c.size))
 
 
 def _timed_points(c: Candidate, target: Target, m: _dist.Match, start_deg: float):
@@ -109,7 +118,8 @@ def synthesize(target: Any, *, closed: bool | None = None, time_limit: float = 6
                rounds: int | None = None, max_links: int = 8, sliders: bool = False,
                topologies: list[str | Topology] | None = None,
                n_points: int = _dist.N_POINTS, count: int = 1000, samples: int = 8192, name: str = "synthesized",
-               log: Callable[[str], None] | None = None, **search_options) -> Synthesis:
+               max_size: float | None = None, log: Callable[[str], None] | None = None,
+               **search_options) -> Synthesis:
     """Find linkages whose traced point follows `target` (a path to a .csv/.npy/.svg file, an
     (N, 2) array or a `Target`), up to `max_links` links, within about `time_limit` seconds.
     `closed`: match a closed loop over a whole crank turn, or an open path over a sub-interval
@@ -125,6 +135,9 @@ def synthesize(target: Any, *, closed: bool | None = None, time_limit: float = 6
     number of devices, any number of processes. Spread over this process's devices, and over the
     processes of a `jax.distributed` group (`jaxlink.optimize.initialize_distributed`, called first
     in every process): every process returns the same designs (`search`).
+    `max_size` K: only designs whose links are at most K times the target's extent (its largest
+    distance between two points) and whose frame pivots are within K times it of the target's
+    centre (`jaxlink.synthesis.size`; each design's `size` is reported either way).
     Computes in float64 for the answers (NumPy) whatever JAX's x64 setting."""
     if rounds is not None and (isinstance(rounds, bool) or not isinstance(rounds, (int, np.integer)) or rounds < 1):
         raise MechanismError(f"rounds = {rounds!r}: the number of rounds must be a whole number, at least 1")
@@ -133,6 +146,11 @@ def synthesize(target: Any, *, closed: bool | None = None, time_limit: float = 6
                              "the frame counted)")
     if not isinstance(sliders, (bool, np.bool_)):
         raise MechanismError(f"sliders = {sliders!r}: True (also the slider variants) or False")
+    if max_size is not None and (isinstance(max_size, bool) or not isinstance(max_size, (int, float, np.integer,
+                                                                                        np.floating))
+                                 or not math.isfinite(max_size) or max_size <= 0):
+        raise MechanismError(f"max_size = {max_size!r}: a positive number of target extents (the largest "
+                             "distance between two target points), or None for no bound")
     fin = search_options.get("finish")
     if fin is not None and (isinstance(fin, bool) or not isinstance(fin, (int, np.integer)) or fin < 0):
         raise MechanismError(f"finish = {fin!r}: the number of candidates polished at the end must be a whole "
@@ -159,7 +177,8 @@ def synthesize(target: Any, *, closed: bool | None = None, time_limit: float = 6
             raise MechanismError(f"two topologies named {next(n for n in names if names.count(n) > 1)!r}: "
                                  "name each (`grow(..., name=...)`); the answers are keyed by name")
     found = search(tgt, topos, time_limit=time_limit, seed=seed, rounds=rounds, samples=samples, n_trace=count,
-                   n_points=n_points, t0=t0, log=log, **search_options)
+                   n_points=n_points, t0=t0, log=log, max_size=None if max_size is None else float(max_size),
+                   **search_options)
     best: dict[str, Candidate] = {}
     for c in found:
         if c.topology.name not in best:
@@ -168,4 +187,5 @@ def synthesize(target: Any, *, closed: bool | None = None, time_limit: float = 6
     designs.sort(key=lambda d: d.distance)
     designs = [d._replace(pareto=not any(o.joints <= d.joints and o.distance < d.distance for o in designs))
                for d in designs]
-    return Synthesis(tgt, designs, time.perf_counter() - t0)
+    return Synthesis(tgt, designs, time.perf_counter() - t0, None if max_size is None else float(max_size),
+                     _size.extent(tgt.points))

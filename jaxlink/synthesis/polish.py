@@ -29,6 +29,7 @@ import numpy as np
 
 from ..cache import compiled
 from . import distance as _dist
+from . import size as _size
 from .target import Target, arclength_resample
 from .topology import CRANK
 from .tracer import trace
@@ -45,7 +46,7 @@ BACK = (1.0, 0.9, 0.75, 0.5, 0.25)
 TIMED_TOL = {"ftol": 1e-15, "gtol": 1e-12}
 
 
-def _loss(x, parents, active, traced, target, closed, u, tau, sliders=False):
+def _loss(x, parents, active, traced, target, closed, u, tau, lim=np.inf, sliders=False, bounded=False):
     nj = CRANK + 1 + parents.shape[0]
     pose = x[:2 * nj].reshape(nj, 2)
     start, span = x[2 * nj], jnp.where(closed > 0, 2 * np.pi, x[2 * nj + 1])
@@ -53,30 +54,36 @@ def _loss(x, parents, active, traced, target, closed, u, tau, sliders=False):
     fit = _dist.soft_chamfer(pos[:, traced], target, closed, tau=tau)
     pen = jnp.sum(jax.nn.relu(FLOOR - marg) ** 2)
     shorter = (1 - closed) * (jax.nn.relu(span - 2 * np.pi) ** 2 + jax.nn.relu(0.05 - span) ** 2)
-    return fit + WEIGHT * pen + 100.0 * shorter
+    out = fit + WEIGHT * pen + 100.0 * shorter
+    if bounded:  # the size penalty (`size`) as in the refinement
+        frame = _size.weighted_frame(pos[:, traced], _dist.arclength_weights(pos[:, traced], closed))
+        out = out + _size.WEIGHT * _size.penalty(parents, active, pose, *frame, lim, sliders)
+    return out
 
 
-def _value_and_grad(x, parents, active, traced, target, closed, u, tau, sliders=False):
-    return jax.value_and_grad(_loss)(x, parents, active, traced, target, closed, u, tau, sliders)
+def _value_and_grad(x, parents, active, traced, target, closed, u, tau, lim, sliders=False, bounded=False):
+    return jax.value_and_grad(_loss)(x, parents, active, traced, target, closed, u, tau, lim, sliders, bounded)
 
 
 @functools.lru_cache(maxsize=8)
-def program(n_dyads: int, n_points: int = _dist.N_POINTS, sliders: bool = False):
+def program(n_dyads: int, n_points: int = _dist.N_POINTS, sliders: bool = False, bounded: bool = False):
     """The compiled value and gradient (float64) of the polishing loss for `n_dyads` dyads
     (a padded topology, `topology.as_arrays`) and a target of `n_points` points: a callable on
-    (x, parents, active, traced, target, closed, u, tau), x the pose flattened, then start and span.
-    `sliders`: the parents may hold slider dyads (`tracer.trace`)."""
+    (x, parents, active, traced, target, closed, u, tau, lim), x the pose flattened, then start and
+    span. `sliders`: the parents may hold slider dyads (`tracer.trace`); `bounded`: with the size
+    penalty for the bound `lim` (`size`; unused without it)."""
     f64 = np.float64
     nj = CRANK + 1 + n_dyads
     with jax.enable_x64(True):
         avals = (jax.ShapeDtypeStruct((2 * nj + 2,), f64), jax.ShapeDtypeStruct((n_dyads, 2), np.int32),
                  jax.ShapeDtypeStruct((n_dyads,), bool), jax.ShapeDtypeStruct((), np.int32),
                  jax.ShapeDtypeStruct((n_points, 2), f64), jax.ShapeDtypeStruct((), f64),
-                 jax.ShapeDtypeStruct((POLISH_T,), f64), jax.ShapeDtypeStruct((), f64))
-        return compiled("synthesis-polish", _value_and_grad, avals, (sliders,))
+                 jax.ShapeDtypeStruct((POLISH_T,), f64), jax.ShapeDtypeStruct((), f64),
+                 jax.ShapeDtypeStruct((), f64))
+        return compiled("synthesis-polish", _value_and_grad, avals, (sliders, bounded))
 
 
-def _loss_timed(x, parents, active, traced, target, w, u, tau, sliders=False):
+def _loss_timed(x, parents, active, traced, target, w, u, tau, lim=np.inf, sliders=False, bounded=False):
     """A timed target's polishing loss: the square of the ordered distance at its points (`u`, the
     fractions of its span; `w` 1/N each) and the margin penalty there and at `POLISH_T` inputs across
     the interval; the span (x's last) is the target's, fixed (`tau` unused: the same signature)."""
@@ -86,47 +93,57 @@ def _loss_timed(x, parents, active, traced, target, w, u, tau, sliders=False):
     um = jnp.linspace(0.0, 1.0, POLISH_T, dtype=x.dtype)
     pos, marg = trace(parents, active, pose, start + span * jnp.concatenate([u, um]), sliders)
     fit = _dist.ordered_sq(pos[:u.shape[0], traced], target, w, eps=1e-30)
-    return fit + WEIGHT * jnp.sum(jax.nn.relu(FLOOR - marg) ** 2)
+    out = fit + WEIGHT * jnp.sum(jax.nn.relu(FLOOR - marg) ** 2)
+    if bounded:  # the size penalty (`size`), the curve at the target's inputs
+        frame = _size.weighted_frame(pos[:u.shape[0], traced], w)
+        out = out + _size.WEIGHT * _size.penalty(parents, active, pose, *frame, lim, sliders)
+    return out
 
 
-def _value_and_grad_timed(x, parents, active, traced, target, w, u, tau, sliders=False):
-    return jax.value_and_grad(_loss_timed)(x, parents, active, traced, target, w, u, tau, sliders)
+def _value_and_grad_timed(x, parents, active, traced, target, w, u, tau, lim, sliders=False, bounded=False):
+    return jax.value_and_grad(_loss_timed)(x, parents, active, traced, target, w, u, tau, lim, sliders, bounded)
 
 
 @functools.lru_cache(maxsize=8)
-def program_timed(n_dyads: int, n_points: int, sliders: bool = False):
+def program_timed(n_dyads: int, n_points: int, sliders: bool = False, bounded: bool = False):
     """`program` for a timed target of `n_points` points: a callable on (x, parents, active, traced,
-    target (normalised), w, u, tau)."""
+    target (normalised), w, u, tau, lim)."""
     f64 = np.float64
     nj = CRANK + 1 + n_dyads
     with jax.enable_x64(True):
         avals = (jax.ShapeDtypeStruct((2 * nj + 2,), f64), jax.ShapeDtypeStruct((n_dyads, 2), np.int32),
                  jax.ShapeDtypeStruct((n_dyads,), bool), jax.ShapeDtypeStruct((), np.int32),
                  jax.ShapeDtypeStruct((n_points, 2), f64), jax.ShapeDtypeStruct((n_points,), f64),
-                 jax.ShapeDtypeStruct((n_points,), f64), jax.ShapeDtypeStruct((), f64))
-        return compiled("synthesis-polish-timed", _value_and_grad_timed, avals, (sliders,))
+                 jax.ShapeDtypeStruct((n_points,), f64), jax.ShapeDtypeStruct((), f64),
+                 jax.ShapeDtypeStruct((), f64))
+        return compiled("synthesis-polish-timed", _value_and_grad_timed, avals, (sliders, bounded))
 
 
 def polish(parents: np.ndarray, active: np.ndarray, traced: int, pose: np.ndarray, start: float, span: float,
-           target: Target, *, n_points: int = _dist.N_POINTS, sliders: bool = False) -> tuple[np.ndarray, float, float]:
+           target: Target, *, n_points: int = _dist.N_POINTS, sliders: bool = False,
+           max_size: float | None = None) -> tuple[np.ndarray, float, float]:
     """(pose, start, span) of one candidate (a row of `topology.as_arrays`, its pose padded like it)
-    after L-BFGS at each τ of `TAUS` (module doc); the caller scores it and walks back (`BACK`)."""
+    after L-BFGS at each τ of `TAUS` (module doc), with the size penalty for `max_size` (`size`) if
+    given; the caller scores it and walks back (`BACK`)."""
     from scipy.optimize import minimize
 
     closed = target.closed
     timed = target.timed
     nj = pose.shape[0]
+    bounded = max_size is not None and bool(np.isfinite(max_size))
+    _, rms, ext = _size.target_frame(target, n_points)
+    lim = _size.limit(max_size, ext, rms) if bounded else np.inf
     with jax.enable_x64(True):
         par, act = jnp.asarray(parents, jnp.int32), jnp.asarray(active, bool)
         tr = jnp.asarray(traced, jnp.int32)
         if timed:  # every point, its own input; the span exact
-            prog = program_timed(parents.shape[0], len(target.points), sliders)
+            prog = program_timed(parents.shape[0], len(target.points), sliders, bounded)
             t_in = np.asarray(target.inputs, float)
             span = float(t_in[-1] - t_in[0])
             tgt = jnp.asarray(_dist.normalise(target.points)[0], jnp.float64)
             args = (jnp.full(len(t_in), 1.0 / len(t_in)), jnp.asarray((t_in - t_in[0]) / span, jnp.float64))
         else:
-            prog = program(parents.shape[0], n_points, sliders)
+            prog = program(parents.shape[0], n_points, sliders, bounded)
             tgt = jnp.asarray(_dist.normalise(arclength_resample(target.points, n_points, closed))[0], jnp.float64)
             u = jnp.asarray(np.arange(POLISH_T) / (POLISH_T if closed else POLISH_T - 1), jnp.float64)
             args = (jnp.asarray(float(closed), jnp.float64), u)
@@ -135,7 +152,7 @@ def polish(parents: np.ndarray, active: np.ndarray, traced: int, pose: np.ndarra
             t = jnp.asarray(tau, jnp.float64)
 
             def f(x, t=t):
-                v, g = prog(jnp.asarray(x, jnp.float64), par, act, tr, tgt, *args, t)
+                v, g = prog(jnp.asarray(x, jnp.float64), par, act, tr, tgt, *args, t, jnp.asarray(lim, jnp.float64))
                 v, g = float(v), np.asarray(g, float)
                 if not (np.isfinite(v) and np.all(np.isfinite(g))):
                     return np.inf, np.zeros_like(x)

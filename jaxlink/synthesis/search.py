@@ -46,6 +46,7 @@ import optax
 
 from ..cache import compiled
 from . import distance as _dist
+from . import size as _size
 from . import spread as _spread
 from .assembly import Assembly, certify
 from .polish import BACK
@@ -96,7 +97,8 @@ class Programs(NamedTuple):
 
 def programs(n_topos: int, n_dyads: int, closed: bool, *, samples: int, screen_keep: int, refine: int,
              steps: int, quick: bool = False, where: _spread.Layout | None = None,
-             polish_points: int = 0, sliders: bool = False, timed: bool = False) -> Programs:
+             polish_points: int = 0, sliders: bool = False, timed: bool = False,
+             bounded: bool = False) -> Programs:
     """Compile the screen, the rank and the refinement for these shapes, all three at once (XLA
     compiles in parallel threads; on a cold start compiling is most of a short search's time).
     The rank compiles at XLA's lowest optimisation level (about half the compile time, its run
@@ -110,17 +112,19 @@ def programs(n_topos: int, n_dyads: int, closed: bool, *, samples: int, screen_k
     `RANK_BLOCK`, `REFINE_BLOCK` rows), the same block whatever the devices and processes (`where`,
     default `spread.layout()`), and is called on whole batches (`spread.Blocked`).
     `timed`: a timed target's two programs (`_screen_timed`, `_refine_timed`; no rank: `rank` None)
-    and its polish (`polish.program_timed` for `polish_points` points)."""
+    and its polish (`polish.program_timed` for `polish_points` points). `bounded`: the programs
+    that keep a design within a size (`size`; their last argument the bound, unused without it)."""
     keep = min(screen_keep, samples * len(_subarcs(closed)))
     sizes: tuple[int, ...] = (samples, keep * n_topos, min(refine, keep) * n_topos)
     caps: tuple[int, ...] = (SCREEN_BLOCK, RANK_BLOCK, REFINE_BLOCK_QUICK if quick else REFINE_BLOCK)
-    jobs = [("screen", n_dyads, closed, 0, quick and closed, sliders), ("rank", n_dyads, False, 0, True, sliders),
-            ("refine", n_dyads, False, steps, quick, sliders)]
+    jobs = [("screen", n_dyads, closed, 0, quick and closed, sliders, bounded),
+            ("rank", n_dyads, False, 0, True, sliders, bounded),
+            ("refine", n_dyads, False, steps, quick, sliders, bounded)]
     if timed:
         sizes = (samples, min(refine, samples * _STARTS) * n_topos)
         caps = (SCREEN_BLOCK, REFINE_BLOCK_QUICK if quick else REFINE_BLOCK)
-        jobs = [("screen-timed", n_dyads, False, 0, quick, sliders), ("refine-timed", n_dyads, False, steps, quick,
-                                                                       sliders)]
+        jobs = [("screen-timed", n_dyads, False, 0, quick, sliders, bounded),
+                ("refine-timed", n_dyads, False, steps, quick, sliders, bounded)]
     x64 = bool(jax.config.read("jax_enable_x64"))  # the traced program's default dtypes depend on it
     where = _spread.layout() if where is None else where
     if where.devices > len(jax.local_devices()):
@@ -128,8 +132,9 @@ def programs(n_topos: int, n_dyads: int, closed: bool, *, samples: int, screen_k
     block = [_spread.blocks(n, cap)[1] for n, cap in zip(sizes, caps)]
     tasks = [(job, b, d) for job, b in zip(jobs, block) for d in range(where.devices)]
     with ThreadPoolExecutor(len(tasks) + (polish_points > 0)) as ex:
-        pol = (None if polish_points <= 0 else ex.submit(_polish_program_timed, n_dyads, polish_points, sliders)
-               if timed else ex.submit(_polish_program, n_dyads, polish_points, sliders))
+        pol = (None if polish_points <= 0
+               else ex.submit(_polish_program_timed, n_dyads, polish_points, sliders, bounded) if timed
+               else ex.submit(_polish_program, n_dyads, polish_points, sliders, bounded))
         compiled = list(ex.map(lambda t: _compiled(t[0][0], t[1], *t[0][1:], x64, t[2]), tasks))
         if pol is not None:
             pol.result()
@@ -143,8 +148,8 @@ def programs(n_topos: int, n_dyads: int, closed: bool, *, samples: int, screen_k
 
 
 @functools.lru_cache(maxsize=32)
-def _compiled(which: str, b: int, n_dyads: int, closed: bool, steps: int, quick: bool, sliders: bool, x64: bool,
-              device: int = 0):
+def _compiled(which: str, b: int, n_dyads: int, closed: bool, steps: int, quick: bool, sliders: bool,
+              bounded: bool, x64: bool, device: int = 0):
     """One program of `programs` for a block of `b` rows on this process's `device`-th device (kept
     for the process, keyed by every static input and the x64 mode; the dynamic data are arguments
     of the program: a second search of the same shapes compiles nothing; the rank's and the
@@ -160,54 +165,56 @@ def _compiled(which: str, b: int, n_dyads: int, closed: bool, steps: int, quick:
 
     topo = arg((b, n_dyads, 2), i32), arg((b, n_dyads), bool), arg((b,), i32)
     if which == "screen":
-        return compiled("synthesis-screen", _screen_of, (arg((2,), np.uint32), *topo, arg((DESC_N,))),
-                        (closed, sliders), options)
+        return compiled("synthesis-screen", _screen_of, (arg((2,), np.uint32), *topo, arg((DESC_N,)), arg(())),
+                        (closed, sliders, bounded), options)
     if which == "screen-timed":
         return compiled("synthesis-screen-timed", _screen_timed_of,
                         (arg((2,), np.uint32), *topo, arg((TIMED_SCREEN_T, 2)), arg((TIMED_SCREEN_T,)),
-                         arg((TIMED_SCREEN_T,)), arg(())), (sliders,), options)
+                         arg((TIMED_SCREEN_T,)), arg(()), arg(())), (sliders, bounded), options)
     poses, arcs = arg((b, nj, 2)), arg((b, 2))
     if which == "refine-timed":
         return compiled("synthesis-refine-timed", _refine_timed_of,
-                        (*topo, poses, arcs, arg((REFINE_T, 2)), arg((REFINE_T,)), arg(()), arg((REFINE_T,))),
-                        (steps, sliders), options)
+                        (*topo, poses, arcs, arg((REFINE_T, 2)), arg((REFINE_T,)), arg(()), arg((REFINE_T,)),
+                         arg(())), (steps, sliders, bounded), options)
     if which == "rank":
-        return compiled("synthesis-rank", _rank_of, (*topo, poses, arcs, arg((RANK_T, 2)), arg(()), arg((RANK_T,))),
-                        (sliders,), options)
+        return compiled("synthesis-rank", _rank_of, (*topo, poses, arcs, arg((RANK_T, 2)), arg(()), arg((RANK_T,)),
+                                                     arg(())), (sliders, bounded), options)
     return compiled("synthesis-refine", _refine_of, (*topo, poses, arcs, arg((TARGET_N, 2)), arg(()), arg(()),
-                                                     arg((REFINE_T,))), (steps, sliders), options)
+                                                     arg((REFINE_T,)), arg(())), (steps, sliders, bounded), options)
 
 
-def _screen_of(key, parents, active, traced, target_desc, closed, sliders):
+def _screen_of(key, parents, active, traced, target_desc, lim, closed, sliders, bounded):
     """`_screen` with its static options last (a stored program's signature: `cache.compiled`)."""
-    return _screen(key, parents, active, traced, target_desc, closed=closed, sliders=sliders)
+    return _screen(key, parents, active, traced, target_desc, lim, closed=closed, sliders=sliders, bounded=bounded)
 
 
-def _rank_of(parents, active, traced, poses, arcs, target, closed, u, sliders):
-    """`_rank` with its static option last (`cache.compiled`)."""
-    return _rank(parents, active, traced, poses, arcs, target, closed, u, sliders=sliders)
+def _rank_of(parents, active, traced, poses, arcs, target, closed, u, lim, sliders, bounded):
+    """`_rank` with its static options last (`cache.compiled`)."""
+    return _rank(parents, active, traced, poses, arcs, target, closed, u, lim, sliders=sliders, bounded=bounded)
 
 
-def _screen_timed_of(key, parents, active, traced, target, w, u, span, sliders):
-    """`_screen_timed` with its static option last (`cache.compiled`)."""
-    return _screen_timed(key, parents, active, traced, target, w, u, span, sliders=sliders)
+def _screen_timed_of(key, parents, active, traced, target, w, u, span, lim, sliders, bounded):
+    """`_screen_timed` with its static options last (`cache.compiled`)."""
+    return _screen_timed(key, parents, active, traced, target, w, u, span, lim, sliders=sliders, bounded=bounded)
 
 
-def _refine_timed_of(parents, active, traced, poses, arcs, target, w, lr, u, steps, sliders):
+def _refine_timed_of(parents, active, traced, poses, arcs, target, w, lr, u, lim, steps, sliders, bounded):
     """`_refine_timed` with its static options last (`cache.compiled`)."""
-    return _refine_timed(parents, active, traced, poses, arcs, target, w, lr, u, steps=steps, sliders=sliders)
+    return _refine_timed(parents, active, traced, poses, arcs, target, w, lr, u, lim, steps=steps, sliders=sliders,
+                         bounded=bounded)
 
 
-def _refine_of(parents, active, traced, poses, arcs, target, lr, closed, u, steps, sliders):
+def _refine_of(parents, active, traced, poses, arcs, target, lr, closed, u, lim, steps, sliders, bounded):
     """`_refine` with its static options last (`cache.compiled`)."""
-    return _refine(parents, active, traced, poses, arcs, target, lr, closed, u, steps=steps, sliders=sliders)
+    return _refine(parents, active, traced, poses, arcs, target, lr, closed, u, lim, steps=steps, sliders=sliders,
+                   bounded=bounded)
 
 
 class Candidate(NamedTuple):
     """A scored mechanism: its `topology`, `pose` (joint positions at input offset 0, the search's
     own coordinates), input offsets `start`, `span` (rad) of the traced interval, the exact
-    `match` (distance and placement), the `assembly` check, when it was found (s), and whether it
-    is the result of the float64 `polish`."""
+    `match` (distance and placement), the `assembly` check, when it was found (s), whether it
+    is the result of the float64 `polish`, and its `size` (`size.design_size`: in the target's extents)."""
 
     topology: Topology
     pose: np.ndarray
@@ -217,18 +224,22 @@ class Candidate(NamedTuple):
     assembly: Assembly
     found_s: float
     polished: bool = False
+    size: float = float("nan")
 
 
-def _radii(curve, closed: bool):
+def _radii(curve, closed: bool, frame: bool = False):
     """The descriptor before sorting: distances from the centroid of the arclength-resampled,
-    normalised curve (`_screen` sorts them, `sortnet.sort_first`)."""
+    normalised curve (`_screen` sorts them, `sortnet.sort_first`). `frame`: also that centroid and
+    the RMS radius (`size`)."""
     seg = jnp.sqrt(jnp.sum(jnp.diff(curve, axis=0) ** 2, axis=-1) + 1e-12)
     s = jnp.concatenate([jnp.zeros(1, curve.dtype), jnp.cumsum(seg)])
     q = s[-1] * (jnp.arange(DESC_N) / (DESC_N if closed else DESC_N - 1))
     c = jnp.stack([jnp.interp(q, s, curve[:, 0]), jnp.interp(q, s, curve[:, 1])], axis=-1)
-    c = c - c.mean(0)
+    mean = c.mean(0)
+    c = c - mean
     r = jnp.sqrt(jnp.sum(c * c, axis=-1) + 1e-12)
-    return r / jnp.sqrt(jnp.mean(r * r))
+    rms = jnp.sqrt(jnp.mean(r * r))
+    return (r / rms, mean, rms) if frame else r / rms
 
 
 def _desc(points: np.ndarray, closed: bool) -> np.ndarray:
@@ -272,11 +283,13 @@ def _half_samples(curve, ok, reach: int):
     return jnp.concatenate([c2] * reps + [c2[:1]]), jnp.concatenate([o2] * reps + [o2[:1]])
 
 
-@functools.partial(jax.jit, static_argnames=("closed", "sliders"))
-def _screen(key, parents, active, traced, target_desc, *, closed: bool, sliders: bool = False):
+@functools.partial(jax.jit, static_argnames=("closed", "sliders", "bounded"))
+def _screen(key, parents, active, traced, target_desc, lim=np.inf, *, closed: bool, sliders: bool = False,
+            bounded: bool = False):
     """Descriptor distances (B, S) of random poses (B, J, 2) over the sub-arcs; inf where a dyad does
-    not close at a sample of the sub-arc. Each sub-arc's points are a static strided slice of the
-    curve at half samples (`_subarc_slices`: no gathers)."""
+    not close at a sample of the sub-arc (or, `bounded`, where the design is larger than `lim`:
+    `size`). Each sub-arc's points are a static strided slice of the curve at half samples
+    (`_subarc_slices`: no gathers)."""
     b = parents.shape[0]
     poses = jax.random.uniform(key, (b, CRANK + 1 + parents.shape[1], 2), _DT, -1.0, 1.0)
     th = jnp.asarray(2 * np.pi * np.arange(SCREEN_T + 1) / SCREEN_T, _DT)
@@ -286,15 +299,19 @@ def _screen(key, parents, active, traced, target_desc, *, closed: bool, sliders:
     slices = _subarc_slices(closed)
     reach = max(st + step * (k - 1) for st, step, k in slices)
 
-    def per_candidate(curve, okk):
+    def per_candidate(curve, okk, par, act, pose):
         c2, o2 = _half_samples(curve, okk, reach)
         pts = jnp.stack([jax.lax.slice(c2, (st, 0), (st + step * (k - 1) + 1, 2), (step, 1))
                          for st, step, k in slices])
         valid = jnp.stack([jnp.all(jax.lax.slice(o2, (st,), (st + step * (k - 1) + 1,), (step,)))
                            for st, step, k in slices])
-        return jax.vmap(lambda p: _radii(p, closed))(pts), valid
+        if not bounded:
+            return jax.vmap(lambda p: _radii(p, closed))(pts), valid
+        r, mean, rms = jax.vmap(lambda p: _radii(p, closed, frame=True))(pts)
+        fits = jax.vmap(lambda m, s: _size.within(par, act, pose, m, s, lim, sliders))(mean, rms)
+        return r, valid & fits
 
-    r, valid = jax.vmap(per_candidate)(curves, ok)            # (B, S, DESC_N), (B, S)
+    r, valid = jax.vmap(per_candidate)(curves, ok, parents, active, poses)  # (B, S, DESC_N), (B, S)
     desc = sort_first(jnp.moveaxis(r, -1, 0))                # sorted along the leading axis: no gathers
     d = jnp.mean(jnp.abs(desc - target_desc[:, None, None]), axis=0)
     return poses, jnp.where(valid, d, jnp.inf)
@@ -311,15 +328,18 @@ def _u(n: int, closed: bool) -> np.ndarray:
     return (np.arange(n) / (n if closed else n - 1)).astype(np.float32)
 
 
-@functools.partial(jax.jit, static_argnames=("sliders",))
-def _rank(parents, active, traced, poses, arcs, target, closed, u, *, sliders: bool = False):
+@functools.partial(jax.jit, static_argnames=("sliders", "bounded"))
+def _rank(parents, active, traced, poses, arcs, target, closed, u, lim=np.inf, *, sliders: bool = False,
+          bounded: bool = False):
     """(chamfer at the best of `_ROT` rotations, that rotation) of each candidate over its sub-arc.
-    `closed` a 0/1 array (one program for open and closed targets), `u` from `_u`."""
+    `closed` a 0/1 array (one program for open and closed targets), `u` from `_u`; inf where a dyad
+    does not close at a sample (or, `bounded`, where the design is larger than `lim`: `size`)."""
 
     def one(par, act, tr, pose, arc):
         pos, marg = trace(par, act, pose, arc[0] + arc[1] * u, sliders)
         c = pos[:, tr]
         w = _dist.arclength_weights(c, closed)
+        fits = _size.within(par, act, pose, *_size.weighted_frame(c, w), lim, sliders) if bounded else True
         c = _normalised(c, w)
         phis = 2 * np.pi * jnp.arange(_ROT, dtype=_DT) / _ROT
         rot = jnp.stack([jnp.stack([jnp.cos(phis), -jnp.sin(phis)], -1),
@@ -328,26 +348,32 @@ def _rank(parents, active, traced, poses, arcs, target, closed, u, *, sliders: b
         d = jnp.sqrt(jnp.sum((rc[:, :, None] - target[None, None]) ** 2, -1) + 1e-12)
         val = jnp.sum(w * d.min(2), axis=1) + d.min(1).mean(1)
         k = jnp.argmin(val)
-        return jnp.where(jnp.min(marg) > 0, val[k], jnp.inf), phis[k]
+        return jnp.where((jnp.min(marg) > 0) & fits, val[k], jnp.inf), phis[k]
 
     return jax.vmap(one)(parents, active, traced, poses, arcs)
 
 
-def _loss(params, par, act, tr, target, closed, u, sliders):
+def _loss(params, par, act, tr, target, closed, u, sliders, lim=np.inf, bounded=False):
     pose, arc = params
     start, span = arc[0], jnp.where(closed > 0, jnp.asarray(2 * np.pi, arc.dtype), arc[1])
     pos, marg = trace(par, act, pose, start + span * u, sliders)
     fit = _dist.soft_chamfer(pos[:, tr], target, closed, tau=0.01)
     pen = jnp.mean(jnp.sum(jax.nn.relu(MARGIN_FLOOR - marg) ** 2, axis=-1))
     shorter = (1 - closed) * (jax.nn.relu(span - 2 * np.pi) ** 2 + jax.nn.relu(0.05 - span) ** 2)
-    return fit + 100.0 * pen + 100.0 * shorter
+    out = fit + 100.0 * pen + 100.0 * shorter
+    if bounded:  # the size penalty (`size`), in the surrogate's normalisation of the curve
+        frame = _size.weighted_frame(pos[:, tr], _dist.arclength_weights(pos[:, tr], closed))
+        out = out + _size.WEIGHT * _size.penalty(par, act, pose, *frame, lim, sliders)
+    return out
 
 
-@functools.partial(jax.jit, static_argnames=("steps", "sliders"))
-def _refine(parents, active, traced, poses, arcs, target, lr, closed, u, *, steps: int, sliders: bool = False):
-    """Each candidate's pose and arc after `steps` Adam steps (`_adam`) on `_loss`: (poses, arcs, losses)."""
+@functools.partial(jax.jit, static_argnames=("steps", "sliders", "bounded"))
+def _refine(parents, active, traced, poses, arcs, target, lr, closed, u, lim=np.inf, *, steps: int,
+            sliders: bool = False, bounded: bool = False):
+    """Each candidate's pose and arc after `steps` Adam steps (`_adam`) on `_loss`: (poses, arcs, losses).
+    `bounded`: with the size penalty for the bound `lim` (`size`)."""
     return jax.vmap(lambda par, act, tr, pose, arc: _adam(
-        _loss, (pose, arc), (par, act, tr, target, closed, u, sliders), lr, steps))(
+        _loss, (pose, arc), (par, act, tr, target, closed, u, sliders, lim, bounded), lr, steps))(
         parents, active, traced, poses, arcs)
 
 
@@ -388,8 +414,9 @@ def timed_samples(target: Target, n: int) -> tuple[np.ndarray, np.ndarray, np.nd
     return p, w, u, span
 
 
-@functools.partial(jax.jit, static_argnames=("sliders",))
-def _screen_timed(key, parents, active, traced, target, w, u, span, *, sliders: bool = False):
+@functools.partial(jax.jit, static_argnames=("sliders", "bounded"))
+def _screen_timed(key, parents, active, traced, target, w, u, span, lim=np.inf, *, sliders: bool = False,
+                  bounded: bool = False):
     """A timed target's screen: random poses (B, J, 2), each traced from `_STARTS` starts over a turn
     at the target's inputs (start + span u), and the square of the ordered distance at each start
     (`distance.ordered_sq`: the target's own measure, no descriptor) (B, `_STARTS`); inf where a
@@ -403,29 +430,37 @@ def _screen_timed(key, parents, active, traced, target, w, u, span, *, sliders: 
         pos, marg = trace(par, act, pose, th, sliders)
         c = pos[:, tr].reshape(_STARTS, -1, 2)
         ok = jnp.all((jnp.min(marg, axis=-1) > 0).reshape(_STARTS, -1) | (w[None, :] == 0), axis=1)
+        if bounded:  # within the size (`size`) at each start
+            ok = ok & jax.vmap(lambda cc: _size.within(par, act, pose, *_size.weighted_frame(cc, w), lim,
+                                                       sliders))(c)
         d = jax.vmap(lambda cc: _dist.ordered_sq(cc, target, w))(c)
         return jnp.where(ok, d, jnp.inf)
 
     return poses, jax.vmap(one)(parents, active, traced, poses)
 
 
-def _loss_timed(params, par, act, tr, target, w, u, sliders):
+def _loss_timed(params, par, act, tr, target, w, u, sliders, lim=np.inf, bounded=False):
     pose, arc = params
     span = jax.lax.stop_gradient(arc[1])  # the target's: fixed
     um = jnp.asarray(np.linspace(0.0, 1.0, _TIMED_MARGIN_T), u.dtype)
     pos, marg = trace(par, act, pose, arc[0] + span * jnp.concatenate([u, um]), sliders)
     fit = _dist.ordered_sq(pos[:u.shape[0], tr], target, w)
     pen = jnp.mean(jnp.sum(jax.nn.relu(MARGIN_FLOOR - marg) ** 2, axis=-1))
-    return fit + 100.0 * pen
+    out = fit + 100.0 * pen
+    if bounded:  # the size penalty (`size`), the curve at the target's inputs with its weights
+        frame = _size.weighted_frame(pos[:u.shape[0], tr], w)
+        out = out + _size.WEIGHT * _size.penalty(par, act, pose, *frame, lim, sliders)
+    return out
 
 
-@functools.partial(jax.jit, static_argnames=("steps", "sliders"))
-def _refine_timed(parents, active, traced, poses, arcs, target, w, lr, u, *, steps: int, sliders: bool = False):
+@functools.partial(jax.jit, static_argnames=("steps", "sliders", "bounded"))
+def _refine_timed(parents, active, traced, poses, arcs, target, w, lr, u, lim=np.inf, *, steps: int,
+                  sliders: bool = False, bounded: bool = False):
     """`_refine` for a timed target: Adam on the pose and the interval's start (its span the
     target's) against the square of the ordered distance at the target's inputs (`timed_samples`),
     plus the margin penalty at those and at `_TIMED_MARGIN_T` inputs across the interval."""
     return jax.vmap(lambda par, act, tr, pose, arc: _adam(
-        _loss_timed, (pose, arc), (par, act, tr, target, w, u, sliders), lr, steps))(
+        _loss_timed, (pose, arc), (par, act, tr, target, w, u, sliders, lim, bounded), lr, steps))(
         parents, active, traced, poses, arcs)
 
 
@@ -465,8 +500,19 @@ def score(topo: Topology, pose: np.ndarray, start: float, span: float, target: T
     return _dist.match(pos[:, topo.traced], target.points, closed=target.closed, n=n_points), asm
 
 
+def size_of(topo: Topology, pose, m: _dist.Match, target: Target, n_points: int = _dist.N_POINTS,
+            frame: tuple | None = None) -> float:
+    """The size of a scored design (`size.design_size`), in the target's extents; nan without a match.
+    `frame`: the target's `size.target_frame`, if known."""
+    if not np.isfinite(m.distance):
+        return float("nan")
+    centre, _, ext = _size.target_frame(target, n_points) if frame is None else frame
+    _, pivots = _size.terms(topo, pose)
+    return _size.design_size(topo, pose, m.scale, _dist.place(pivots, m), centre, ext)
+
+
 def _full_slots(prog, key, arr, samples, screen_keep, refine, tdesc, trank, flag, arcs_all, closed, elites,
-                jitter, rng):
+                jitter, rng, lim):
     """A full round's refinement slots: screen, rank, the best `refine` per topology rotated to their
     best angle; the last half of each topology's slots restart from its best refined so far, jittered."""
     n_topos = arr.parents.shape[0]
@@ -476,7 +522,7 @@ def _full_slots(prog, key, arr, samples, screen_keep, refine, tdesc, trank, flag
         par = np.repeat(arr.parents[ti:ti + 1], samples, 0)
         act = np.repeat(arr.active[ti:ti + 1], samples, 0)
         trc = np.repeat(arr.traced[ti:ti + 1], samples, 0)
-        poses, d = prog.screen(sub, par, act, trc, tdesc)
+        poses, d = prog.screen(sub, par, act, trc, tdesc, lim)
         d = np.asarray(d)
         flat = np.argsort(d, axis=None)[:screen_keep]  # a fixed count: the same shapes every round
         ci, ai = np.unravel_index(flat, d.shape)
@@ -487,7 +533,7 @@ def _full_slots(prog, key, arr, samples, screen_keep, refine, tdesc, trank, flag
     arc = np.concatenate(picks_arc)
     tix = np.concatenate(picks_topo)
     val, phi = prog.rank(arr.parents[tix], arr.active[tix], arr.traced[tix], pose, arc, trank, flag,
-                         _u(RANK_T, closed))
+                         _u(RANK_T, closed), lim)
     val, phi = np.asarray(val), np.asarray(phi)
     # `refine` per topology (the same shapes every round); the inf ones are dropped after
     sel = np.concatenate([np.flatnonzero(tix == ti)[np.argsort(val[tix == ti], kind="stable")][:refine]
@@ -505,7 +551,7 @@ def _full_slots(prog, key, arr, samples, screen_keep, refine, tdesc, trank, flag
     return stix, poses0, arcs0, rank_ok
 
 
-def _full_slots_timed(prog, key, arr, refine, screen_target, elites, jitter, rng):
+def _full_slots_timed(prog, key, arr, refine, screen_target, elites, jitter, rng, lim):
     """A timed target's full round's slots: the screen's best `refine` (pose, start) per topology
     (its span the target's), the last half of each topology's slots its best refined so far, jittered."""
     n_topos = arr.parents.shape[0]
@@ -514,7 +560,7 @@ def _full_slots_timed(prog, key, arr, refine, screen_target, elites, jitter, rng
     for ti in range(n_topos):
         sub = jax.random.fold_in(key, ti)
         par, act, trc = (np.repeat(x[ti:ti + 1], prog.screen.n, 0) for x in (arr.parents, arr.active, arr.traced))
-        poses, d = prog.screen(sub, par, act, trc, tt, tw, tu, np.float32(span))
+        poses, d = prog.screen(sub, par, act, trc, tt, tw, tu, np.float32(span), lim)
         d = np.asarray(d)
         flat = np.argsort(d, axis=None)[:refine]
         ci, si = np.unravel_index(flat, d.shape)
@@ -560,7 +606,7 @@ def search(target: Target, topos: list[Topology], *, time_limit: float, seed: in
            rounds: int | None = None, samples: int = 8192, screen_keep: int = 128, refine: int = 8,
            steps: int = 300, n_trace: int = 1000, n_points: int = _dist.N_POINTS, per_topology: int = 2,
            lr: float = 0.01, jitter: float = 0.02, quick: bool | None = None, t0: float | None = None,
-           finish: int | None = None, log=None) -> list[Candidate]:
+           finish: int | None = None, max_size: float | None = None, log=None) -> list[Candidate]:
     """Rounds of screen → rank → refine → score until `time_limit` seconds (at least one round).
     `quick` (`programs`; default: when `time_limit` ≤ 15 s) trades run time for compile time.
     After each full round, and whenever the time left is too short for another full round but not
@@ -574,22 +620,33 @@ def search(target: Target, topos: list[Topology], *, time_limit: float, seed: in
     (`_to_polish`), are polished in float64 (`polish`), each if a polish as long as the last one
     (before the first: as the round's refinement) fits in the time left (with `rounds`: always).
     Each polished candidate is scored like the others and added beside its original.
-    Returns every scored candidate that assembles, best first."""
+    `max_size` K: every answer's size (`size.design_size`) at most K — its links at most K times the
+    target's extent, its frame pivots within K times it of the target's centre —, the screen, the
+    rank, the refinements and the polish kept within it (`size`); default: no bound (each answer's
+    size is reported either way).
+    Returns every scored candidate that assembles (and is within `max_size`), best first."""
     if rounds is not None and (isinstance(rounds, bool) or not isinstance(rounds, (int, np.integer)) or rounds < 1):
         raise ValueError(f"rounds = {rounds!r}: a whole number of rounds, at least 1")
     if finish is not None and (isinstance(finish, bool) or not isinstance(finish, (int, np.integer)) or finish < 0):
         raise ValueError(f"finish = {finish!r}: a whole number of candidates to polish, at least 0")
+    if max_size is not None and not (isinstance(max_size, (int, float, np.integer, np.floating))
+                                     and not isinstance(max_size, bool) and max_size > 0):
+        raise ValueError(f"max_size = {max_size!r}: a positive number of target extents")
     t0 = time.perf_counter() if t0 is None else t0
     closed = target.closed
     timed = target.timed
     arr = as_arrays(topos)
+    bounded = max_size is not None and bool(np.isfinite(max_size))
+    frame = _size.target_frame(target, n_points)
+    bound = float(max_size) if max_size is not None and bounded else np.inf  # in target extents
+    lim = np.float32(_size.limit(bound, frame[2], frame[1]))
     quick = time_limit <= 15.0 if quick is None else quick
     finish = (0 if quick else 4) if finish is None else finish
     sliders = any(t.sliders for t in topos)
     polish_points = (len(target.points) if timed else n_points) if finish > 0 else 0
     prog = programs(len(topos), arr.parents.shape[1], closed, samples=samples, screen_keep=screen_keep,
                     refine=refine, steps=steps, quick=quick, polish_points=polish_points,
-                    sliders=sliders, timed=timed)
+                    sliders=sliders, timed=timed, bounded=bounded)
     if timed:  # the screen's and the refinement's samples of the target; `jitter` leaves the span alone
         ts = timed_samples(target, TIMED_SCREEN_T)
         screen_target = (*(np.asarray(x, np.float32) for x in ts[:3]), ts[3])
@@ -622,7 +679,7 @@ def search(target: Target, topos: list[Topology], *, time_limit: float, seed: in
         origins.add(id(c))
         ti = topos.index(c.topology)
         new = _polished(c, arr.parents[ti], arr.active[ti], int(arr.traced[ti]), target, n_trace, n_points, t0,
-                        sliders)
+                        sliders, max_size if bounded else None)
         if new is not None:
             found.append(new)
         t_polish = time.perf_counter() - t1  # the estimate of the next one
@@ -637,19 +694,20 @@ def search(target: Target, topos: list[Topology], *, time_limit: float, seed: in
             stix, poses0, arcs0 = _polish_slots(elites, elite_vals, len(stix), jitter, closed or timed, rng)
             rank_ok = np.ones(len(stix), bool)
         elif timed:
-            stix, poses0, arcs0, rank_ok = _full_slots_timed(prog, key, arr, nsl, screen_target, elites, jitter, rng)
+            stix, poses0, arcs0, rank_ok = _full_slots_timed(prog, key, arr, nsl, screen_target, elites, jitter, rng,
+                                                             lim)
             key = jax.random.fold_in(key, rnd)
         else:
             stix, poses0, arcs0, rank_ok = _full_slots(prog, key, arr, samples, screen_keep, refine, tdesc,
-                                                       trank, flag, arcs_all, closed, elites, jitter, rng)
+                                                       trank, flag, arcs_all, closed, elites, jitter, rng, lim)
             key = jax.random.fold_in(key, rnd)
         t_ref = time.perf_counter()
         if timed:
             p, a, v = prog.refine(arr.parents[stix], arr.active[stix], arr.traced[stix], poses0, arcs0, rt, rw,
-                                  np.float32(lr), ru)
+                                  np.float32(lr), ru, lim)
         else:
             p, a, v = prog.refine(arr.parents[stix], arr.active[stix], arr.traced[stix], poses0,
-                                  arcs0, ttarget, np.float32(lr), flag, _u(REFINE_T, closed))
+                                  arcs0, ttarget, np.float32(lr), flag, _u(REFINE_T, closed), lim)
         p, a, v = np.asarray(p, float), np.asarray(a, float), np.asarray(v)
         for ti in range(len(topos)):
             idx = np.flatnonzero((stix == ti) & np.isfinite(v) & rank_ok)
@@ -667,8 +725,10 @@ def search(target: Target, topos: list[Topology], *, time_limit: float, seed: in
                 span = (float(target.inputs[-1] - target.inputs[0]) if target.inputs is not None
                         else 2 * np.pi if closed else float(a[i, 1]))
                 m, asm = score(topos[ti], p[i], start, span, target, n_trace=n_trace, n_points=n_points)
-                if np.isfinite(m.distance) and asm.ok:
-                    found.append(Candidate(topos[ti], p[i], start, span, m, asm, time.perf_counter() - t0))
+                sz = size_of(topos[ti], p[i], m, target, n_points, frame)
+                if np.isfinite(m.distance) and asm.ok and (not bounded or sz <= bound):
+                    found.append(Candidate(topos[ti], p[i], start, span, m, asm, time.perf_counter() - t0,
+                                           size=sz))
         if log is not None:
             best = min((c.match.distance for c in found), default=float("inf"))
             log(f"round {rnd}{' (polish)' if polish else ''}: {len(found)} candidates, best distance {best:.4f}, "
@@ -732,15 +792,16 @@ def _to_polish(found: list[Candidate], origins: set[int], n: int, best: float | 
 
 
 def _polished(c: Candidate, parents, active, traced: int, target: Target, n_trace: int, n_points: int,
-              t0: float, sliders: bool = False) -> Candidate | None:
-    """`c` polished (`polish.polish`) and scored; if it does not assemble, the first point back
-    towards `c` (`polish.BACK`) that does; None if none does."""
+              t0: float, sliders: bool = False, max_size: float | None = None) -> Candidate | None:
+    """`c` polished (`polish.polish`) and scored; if it does not assemble (or is larger than
+    `max_size`), the first point back towards `c` (`polish.BACK`) that does; None if none does."""
     pose, start, span = _polish(parents, active, traced, c.pose, c.start, c.span, target, n_points=n_points,
-                                sliders=sliders)
+                                sliders=sliders, max_size=max_size)
     for f in BACK:
         p = c.pose + f * (pose - c.pose)
         st, sp = c.start + f * (start - c.start), c.span + f * (span - c.span)
         m, asm = score(c.topology, p, st, sp, target, n_trace=n_trace, n_points=n_points)
-        if np.isfinite(m.distance) and asm.ok:
-            return Candidate(c.topology, p, st, sp, m, asm, time.perf_counter() - t0, True)
+        sz = size_of(c.topology, p, m, target, n_points)
+        if np.isfinite(m.distance) and asm.ok and (max_size is None or sz <= max_size):
+            return Candidate(c.topology, p, st, sp, m, asm, time.perf_counter() - t0, True, sz)
     return None
