@@ -104,8 +104,6 @@ def _programs(static_closed: bool, screens_only: bool = False, only: str | None 
     calls["refine"] = (search._refine_of, (*topo, poses, arcs, rng.uniform(-1, 1, (search.TARGET_N, 2)).astype(f32),
                                            f32(0.01), f32(1), rng.uniform(0, 1, search.REFINE_T).astype(f32), lim),
                        (5, False, False))
-    # the refinement with the size penalty for the bound `lim` (`size`): another program
-    calls["refine-bounded"] = (search._refine_of, calls["refine"][1], (5, False, True))
     from jaxlink.synthesis import polish
 
     x = np.concatenate([poses[0].ravel(), arcs[0]]).astype(np.float64)
@@ -160,16 +158,13 @@ def test_stored_programs_cold_warm_and_off_give_the_same_bits_and_a_wrong_key_is
         jax.config.update("jax_compilation_cache_dir", str(tmp_path / "good"))
         cold = _programs(True)
         stored = sorted(p.name for p in (tmp_path / "good").glob("*" + cache.TRACE_SUFFIX))
-        assert len(stored) == 9  # the screen twice (open, closed), the rank, the refinement unbounded and
-        # bounded, the polish; timed: 3
+        assert len(stored) == 8  # the screen twice (open, closed), the rank, the refinement, the polish; timed: 3
         stores = []
         monkeypatch.setattr(cache, "_store", lambda *a: stores.append(a))
         warm = _programs(True)
         assert stores == []  # every program came from the store: none traced again
         monkeypatch.undo()
         assert _same(cold, off) and _same(warm, off)
-        # the bound changes the refinement (else a key blind to `bounded` could not be caught)
-        assert not all(np.array_equal(x, y) for x, y in zip(off["refine"], off["refine-bounded"]))
         # the XLA options are not in the trace's key: the rank stored above (for level 0), compiled at
         # another level, is the uncached rank at that level
         other = {"xla_backend_optimization_level": 2}
