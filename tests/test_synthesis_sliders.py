@@ -196,14 +196,14 @@ def test_sliders_option_adds_the_slider_topologies(tmp_path, monkeypatch):
 
 def test_certify_of_slider_topologies_is_one_bracket_at_a_time_bit_for_bit():
     """`certify`'s side-by-side brackets against the one-at-a-time reference (`test_synthesis`) on
-    random assemblable poses of every slider topology up to 8 links, random intervals, and the
-    slider-crank failing between samples (above)."""
+    random assemblable poses of every slider and slotted-lever topology up to 8 links, random
+    intervals, and the slider-crank failing between samples (above)."""
     from test_synthesis import _certify_one
 
     rng = np.random.default_rng(4)
     n = failing = 0
-    for topo in T.topologies(8, sliders=True):
-        if not topo.sliders:
+    for topo in T.topologies(8, sliders=True, levers=True):  # the slotted levers too
+        if not (topo.sliders or topo.levers):
             continue
         for _ in range(25):
             pose = rng.uniform(-1, 1, (T.CRANK + 1 + len(topo.dyads), 2))

@@ -13,7 +13,8 @@ def register(sub) -> None:
         description=(
             "Path synthesis: one-degree-of-freedom revolute linkages grown by dyads (the four-bar, the Watt and "
             "Stephenson six-bars, eight-bars; with --sliders also their variants with sliders on frame guides, "
-            "the slider-crank first) whose traced point follows TARGET (a .csv of x, y, a .npy (N, 2) "
+            "the slider-crank first; with --levers their variants with a slotted lever) whose traced point "
+            "follows TARGET (a .csv of x, y, a .npy (N, 2) "
             "array or an .svg path) up to translation, rotation and scale, scored by the symmetric chamfer "
             "distance of the "
             "normalised curves (docs/methods/synthesis.md). Writes the best mechanism as a sketch file that "
@@ -42,9 +43,14 @@ def register(sub) -> None:
                    help="also search the variants with sliders: a dyad between a moving joint and a frame pivot "
                         "used by nothing else becomes a slider on a frame guide (the four-bar's rocker a "
                         "slider: the slider-crank); 18 more topologies up to 8 links, 39 up to 10")
+    p.add_argument("--levers", action="store_true",
+                   help="also search the variants with a slotted lever: a dyad between a moving joint and a frame "
+                        "pivot (not the crank's) becomes a lever turning about the pivot, the moving joint's pin "
+                        "sliding in its slot (the Whitworth quick return, the oscillating cylinder); 10 more "
+                        "topologies up to 8 links, 25 more up to 10")
     p.add_argument("--topologies", default=None, metavar="NAMES",
                    help="comma-separated topology names to search (default: all up to --max-links; the "
-                        "slider topologies by name without --sliders too)")
+                        "slider and lever topologies by name without --sliders or --levers too)")
     p.add_argument("--max-size", type=float, default=None, metavar="K",
                    help="keep the designs within a size: every link at most K times the target's extent (the "
                         "largest distance between two of its points), every frame pivot within K times it of the "
@@ -87,7 +93,7 @@ def cmd_synthesize(args) -> int:
     names = [n.strip() for n in args.topologies.split(",") if n.strip()] if args.topologies else None
     res = synthesize(tgt, time_limit=args.time_limit, seed=args.seed, rounds=args.rounds, max_links=args.max_links,
                      topologies=names, n_points=args.points, count=args.count, samples=args.samples,
-                     sliders=args.sliders, max_size=args.max_size,
+                     sliders=args.sliders, levers=args.levers, max_size=args.max_size,
                      log=(lambda s: print(s, file=sys.stderr)) if printer else None)
     if not printer:
         return 0 if res.designs else 1

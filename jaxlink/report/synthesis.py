@@ -44,7 +44,10 @@ def to_json(res) -> dict:
             "joint_positions": d.sketch.tables()["sketch"]["joints"],
             "links_joints": d.sketch.tables()["sketch"]["links"],
             "frame": d.sketch.tables()["sketch"]["frame"],
-            "sliders": {j: v["along"] for j, v in d.sketch.tables()["sketch"].get("sliders", {}).items()},
+            "sliders": {j: v["along"] for j, v in d.sketch.tables()["sketch"].get("sliders", {}).items()
+                        if "along" in v},
+            "levers": {j: {"on": v["on"], "through": v["through"]}
+                       for j, v in d.sketch.tables()["sketch"].get("sliders", {}).items() if "through" in v},
             "inputs_deg": None if d.inputs_deg is None else [float(x) for x in d.inputs_deg],
         } for i, d in enumerate(res.designs, 1)],
     }
@@ -81,6 +84,12 @@ def plot(path, res) -> None:
         ax.plot(pts[:, 0], pts[:, 1], color="C1", lw=1.2)
     size = float(np.max(np.ptp(np.concatenate([t, d.curve, np.array(list(js.values()))]), axis=0)))
     for n, v in sk.get("sliders", {}).items():  # a slider's frame guide, dashed, through its joint
+        if "through" in v:  # a slotted lever's slot: from its pivot through the block's pin and on
+            a, b = np.asarray(js[v["through"]], float), np.asarray(js[n], float)
+            u = (b - a) / np.hypot(*(b - a))
+            g = a + np.outer([0.0, np.hypot(*(b - a)) + 0.2 * size], u)
+            ax.plot(g[:, 0], g[:, 1], color="C1", lw=0.8, ls="--")
+            continue
         u = np.asarray(v["along"], float) / np.hypot(*v["along"])
         g = np.asarray(js[n]) + np.outer([-0.6 * size, 0.6 * size], u)
         ax.plot(g[:, 0], g[:, 1], color="k", lw=0.8, ls="--")

@@ -115,7 +115,7 @@ def _timed_points(c: Candidate, target: Target, m: _dist.Match, start_deg: float
 
 
 def synthesize(target: Any, *, closed: bool | None = None, time_limit: float = 60.0, seed: int = 0,
-               rounds: int | None = None, max_links: int = 8, sliders: bool = False,
+               rounds: int | None = None, max_links: int = 8, sliders: bool = False, levers: bool = False,
                topologies: list[str | Topology] | None = None,
                n_points: int = _dist.N_POINTS, count: int = 1000, samples: int = 8192, name: str = "synthesized",
                max_size: float | None = None, log: Callable[[str], None] | None = None,
@@ -127,7 +127,9 @@ def synthesize(target: Any, *, closed: bool | None = None, time_limit: float = 6
     the name of a built-in one (`jaxlink.synthesis.topology.topologies`) or a `Topology` (e.g. one
     grown by `topology.grow` or `topology.slide`, at most `topology.MAX_DYADS` dyads, every name
     distinct); default the built-ins up to `max_links`, with their slider variants when `sliders`
-    (`topology.with_sliders`: the slider-crank, …).
+    (`topology.with_sliders`: the slider-crank, …), and with their slotted-lever variants when
+    `levers` (`topology.with_levers`: a lever turning about a frame pivot, the block pinned at a
+    moving joint sliding in its slot, as in the Whitworth quick return).
     Returns the best design of each topology, best first (`Synthesis.best`); `seed` makes it
     repeatable for a given number of rounds: `rounds` = N runs exactly N rounds (the polishing
     rounds counted, `search.search`) whatever the time, `time_limit` then only choosing the
@@ -146,6 +148,8 @@ def synthesize(target: Any, *, closed: bool | None = None, time_limit: float = 6
                              "the frame counted)")
     if not isinstance(sliders, (bool, np.bool_)):
         raise MechanismError(f"sliders = {sliders!r}: True (also the slider variants) or False")
+    if not isinstance(levers, (bool, np.bool_)):
+        raise MechanismError(f"levers = {levers!r}: True (also the slotted-lever variants) or False")
     if max_size is not None and (isinstance(max_size, bool) or not isinstance(max_size, (int, float, np.integer,
                                                                                         np.floating))
                                  or not math.isfinite(max_size) or max_size <= 0):
@@ -162,9 +166,9 @@ def synthesize(target: Any, *, closed: bool | None = None, time_limit: float = 6
         tgt = load_target(target, closed=closed)
     else:
         tgt = make_target(target, closed=closed)
-    topos = builtin_topologies(max_links, sliders=bool(sliders))
+    topos = builtin_topologies(max_links, sliders=bool(sliders), levers=bool(levers))
     if topologies is not None:
-        known = {t.name: t for t in builtin_topologies(99, sliders=True)}
+        known = {t.name: t for t in builtin_topologies(99, sliders=True, levers=True)}
         bad = [n for n in topologies if not isinstance(n, Topology) and n not in known]
         if bad:
             raise MechanismError(f"unknown topology {bad[0]!r}; the topologies are {', '.join(known)}")

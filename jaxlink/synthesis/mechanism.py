@@ -43,7 +43,8 @@ def to_sketch(topo: Topology, placed: np.ndarray, *, name: str = "synthesized", 
               description: str = "") -> Sketch:
     """The sketch of a topology in a placed pose (joint positions in `unit`), angles in degrees; a
     slider dyad's joint slides on the frame's line through it towards its guide's anchor (the
-    anchor itself no joint of the file)."""
+    anchor itself no joint of the file); a slotted lever's block pin slides on the lever's line
+    through its pivot."""
     names = joint_names(topo)
     sk = Sketch(name, length_unit=unit if unit in LENGTH_UNITS else "mm", angle_unit="deg",
                 description=description)
@@ -53,8 +54,14 @@ def to_sketch(topo: Topology, placed: np.ndarray, *, name: str = "synthesized", 
             sk.frame(n, x, y)
         else:
             sk.joint(n, x, y)
+    link_of = {}
     for k, b in enumerate(bodies(topo)):
-        sk.link("crank" if k == 0 else f"link{k}", *(names[j] for j in b))
+        link_of[b] = "crank" if k == 0 else f"link{k}"
+        sk.link(link_of[b], *(names[j] for j in b))
+    for k in topo.levers:
+        pivot, pin, j = topo.dyads[k][0], topo.dyads[k][1], CRANK + 1 + k
+        lever = next(b for b in link_of if pivot in b and j in b)  # the lever and the points on it
+        sk.slider(names[pin], on=link_of[lever], through=names[pivot])
     for k in topo.sliders:
         j, anchor = CRANK + 1 + k, topo.dyads[k][1]
         g = placed[j] - placed[anchor]

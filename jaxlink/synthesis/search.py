@@ -642,7 +642,7 @@ def search(target: Target, topos: list[Topology], *, time_limit: float, seed: in
     lim = np.float32(_size.limit(bound, frame[2], frame[1]))
     quick = time_limit <= 15.0 if quick is None else quick
     finish = (0 if quick else 4) if finish is None else finish
-    sliders = any(t.sliders for t in topos)
+    sliders = any(t.sliders or t.levers for t in topos)  # the programs that trace both kinds
     polish_points = (len(target.points) if timed else n_points) if finish > 0 else 0
     prog = programs(len(topos), arr.parents.shape[1], closed, samples=samples, screen_keep=screen_keep,
                     refine=refine, steps=steps, quick=quick, polish_points=polish_points,

@@ -7,7 +7,8 @@ The **size** of a design is measured on what does not move, so that it is exact 
 .. math::  S = \max\Bigl(\max_i L_i,\ \max_j |F_j - c|\Bigr) / E,
 
 - L_i every link's length in the target's unit: the crank, each dyad's two links (a plate's sides
-  for a point carried with a body; a slider's one link);
+  for a point carried with a body; a slider's one link; a slotted lever's joint's distance from
+  the lever's pivot);
 - F_j every frame pivot the linkage uses (the crank's pivot, every dyad's frame parent; not a
   slider guide's anchor, which is no joint), placed onto the target (`distance.place`);
 - c the target's centre: its centroid as the distance normalises it (of the arclength resampling
@@ -34,7 +35,7 @@ import numpy as np
 
 from . import distance as _dist
 from .target import Target, arclength_resample
-from .topology import CRANK, RIGID, SLIDER, Topology
+from .topology import CRANK, LEVER, RIGID, SLIDER, Topology
 
 #: the refinements' and the polish's aim, a fraction of the bound (their curve normalisation is the
 #: surrogate's, not the exact distance's)
@@ -76,7 +77,7 @@ def terms(topo: Topology, pose) -> tuple[np.ndarray, np.ndarray]:
         j = CRANK + 1 + k
         lengths.append(np.hypot(*(pose[j] - pose[p1])))
         used |= {p1} if p1 < CRANK else set()
-        if k not in topo.sliders:
+        if k not in topo.sliders and k not in topo.levers:
             lengths.append(np.hypot(*(pose[j] - pose[p2])))
             used |= {p2} if p2 < CRANK else set()
     return np.asarray(lengths), pose[sorted(used)]
@@ -107,9 +108,11 @@ def ratios(parents, active, pose, mean, rms, sliders: bool = False):
     for k in range(parents.shape[0]):
         j = CRANK + 1 + k
         p1, p2 = parents[k, 0], parents[k, 1]
+        lever = p2 >= LEVER if sliders else jnp.asarray(False)
+        p2 = jnp.where(lever, p2 - LEVER, p2)
         p2 = jnp.where(p2 >= RIGID, p2 - RIGID, p2)
-        slider = p2 >= SLIDER if sliders else jnp.asarray(False)
-        p2 = jnp.where(slider, p2 - SLIDER, p2)
+        slider = (p2 >= SLIDER) | lever if sliders else jnp.asarray(False)  # one link, no frame anchor
+        p2 = jnp.where(p2 >= SLIDER, p2 - SLIDER, p2)
         on = active[k]
         lens.append(jnp.where(on, jnp.sqrt(jnp.sum((pose[j] - pose[p1]) ** 2) + 1e-30), 0.0))
         lens.append(jnp.where(on & ~slider, jnp.sqrt(jnp.sum((pose[j] - pose[p2]) ** 2) + 1e-30), 0.0))

@@ -15,6 +15,14 @@ other dyad uses, only the guide's anchor — and the joint's own position in the
 rocker so becomes the slider-crank's slider; `topologies(sliders=True)` adds every built-in's
 variants with one or more of its eligible dyads (`slidable`) sliding.
 
+A dyad may also be a **slotted lever** (RPR, `lever`): a lever turning about a frame joint (its
+first parent) through whose slot the block pinned at its second parent (a moving joint) slides, the
+slot on the line through the pivot (the Whitworth quick return, the crank-shaper, the oscillating
+cylinder); the dyad's joint is a point of the lever. The lever's angle is that of the line from its
+pivot to the block's pin, so it has no toggle: it fails only where the pin passes over the pivot.
+`topologies(levers=True)` adds every built-in's variants with one of its eligible dyads
+(`leverable`) a slotted lever.
+
 The topologies of one search are padded to the same number of dyads so that all of them share one
 batched program (`as_arrays`): padding dyads are inactive.
 """
@@ -36,18 +44,22 @@ FRAME_BODY = -1
 SLIDER = 32
 #: added to the second parent of a dyad that is a point of a rigid body (`rigid`) in `as_arrays`
 RIGID = 64
+#: added to the second parent of a slotted-lever dyad (`lever`) in `as_arrays` (decoded first: the largest)
+LEVER = 128
 
 
 class Topology(NamedTuple):
     """A dyadic linkage. `dyads[k] = (p1, p2)`: joint `CRANK + 1 + k` is attached to joints p1 and
     p2; `traced`: the joint whose path is matched; `sliders`: the dyads (indices k) whose joint is
     attached to p1 only and slides on the frame's line through the frame joint p2 and its own pose
-    position (`slide`)."""
+    position (`slide`); `levers`: the dyads whose joint is a point of a lever turning about the frame
+    joint p1, through whose slot the block pinned at p2 slides (`lever`)."""
 
     name: str
     dyads: tuple[tuple[int, int], ...]
     traced: int
     sliders: tuple[int, ...] = ()
+    levers: tuple[int, ...] = ()
 
     @property
     def n_joints(self) -> int:
@@ -56,8 +68,8 @@ class Topology(NamedTuple):
 
     @property
     def n_links(self) -> int:
-        """Links, the frame and each slider's block included."""
-        return 1 + len(bodies(self)) + len(self.sliders)
+        """Links, the frame and each slider's and slotted lever's block included."""
+        return 1 + len(bodies(self)) + len(self.sliders) + len(self.levers)
 
     def used_frame(self) -> list[int]:
         """The frame joints that are joints of the linkage (F0 and every pivot of a dyad's link)."""
@@ -72,7 +84,8 @@ def grow(topo: Topology, p1: int, p2: int, *, name: str | None = None, trace: bo
         raise ValueError(f"a dyad attaches to two different earlier joints, got {p1}, {p2}")
     if p1 < N_FRAME and p2 < N_FRAME:
         raise ValueError("a dyad on two frame joints does not move")
-    return Topology(name or topo.name, topo.dyads + ((p1, p2),), j if trace else topo.traced, topo.sliders)
+    return Topology(name or topo.name, topo.dyads + ((p1, p2),), j if trace else topo.traced, topo.sliders,
+                    topo.levers)
 
 
 def slidable(topo: Topology) -> list[int]:
@@ -80,14 +93,13 @@ def slidable(topo: Topology) -> list[int]:
     another body (their frame link a rocker), the frame joint used by no other dyad."""
     out = []
     for k, (p1, p2) in enumerate(topo.dyads):
-        if k in topo.sliders or (p1 < N_FRAME) == (p2 < N_FRAME):
+        if k in topo.sliders or k in topo.levers or (p1 < N_FRAME) == (p2 < N_FRAME):
             continue
         f = p1 if p1 < N_FRAME else p2
         other = p2 if f == p1 else p1
         if f == 0 or any(f in d for i, d in enumerate(topo.dyads) if i != k):
             continue
-        if any(f in b and other in b for b in bodies(Topology(topo.name, topo.dyads[:k], topo.traced,
-                                                              tuple(i for i in topo.sliders if i < k)))):
+        if any(f in b and other in b for b in bodies(_prefix(topo, k))):
             continue  # a point of a body already holding both: no rocker to replace
         out.append(k)
     return out
@@ -107,7 +119,47 @@ def slide(topo: Topology, k: int, *, name: str | None = None) -> Topology:
     j = CRANK + 1 + k
     if name is None:
         name = "slider-crank" if topo.name == "four-bar" else f"{topo.name}+slider-J{j}"
-    return Topology(name, dyads, topo.traced, tuple(sorted(topo.sliders + (k,))))
+    return Topology(name, dyads, topo.traced, tuple(sorted(topo.sliders + (k,))), topo.levers)
+
+
+def _prefix(topo: Topology, k: int) -> Topology:
+    """The topology of the dyads before dyad `k`."""
+    return Topology(topo.name, topo.dyads[:k], topo.traced, tuple(i for i in topo.sliders if i < k),
+                    tuple(i for i in topo.levers if i < k))
+
+
+def leverable(topo: Topology) -> list[int]:
+    """The dyads that may become slotted levers (`lever`): neither sliders nor levers yet, on one frame
+    joint other than the crank's pivot and a moving joint of another body (not a point of a body
+    holding both)."""
+    out = []
+    for k, (p1, p2) in enumerate(topo.dyads):
+        if k in topo.sliders or k in topo.levers or (p1 < N_FRAME) == (p2 < N_FRAME):
+            continue
+        f, other = (p1, p2) if p1 < N_FRAME else (p2, p1)
+        if f == 0 or any(f in b and other in b for b in bodies(_prefix(topo, k))):
+            continue
+        out.append(k)
+    return out
+
+
+def lever(topo: Topology, k: int, *, name: str | None = None) -> Topology:
+    """The topology with dyad `k` a slotted lever (`leverable`): its joint J a point of a lever turning
+    about the dyad's frame joint, through whose slot (on the line through the pivot) the block pinned
+    at the dyad's moving parent slides; the pivot stored first. Named `NAME+lever-J<j>` by default."""
+    if k not in leverable(topo):
+        raise ValueError(f"{topo.name}: dyad {k} cannot become a slotted lever (`leverable`: {leverable(topo)})")
+    p1, p2 = topo.dyads[k]
+    if p2 < N_FRAME:
+        p1, p2 = p2, p1
+    dyads = topo.dyads[:k] + ((p1, p2),) + topo.dyads[k + 1:]
+    return Topology(name or f"{topo.name}+lever-J{CRANK + 1 + k}", dyads, topo.traced, topo.sliders,
+                    tuple(sorted(topo.levers + (k,))))
+
+
+def with_levers(topo: Topology) -> list[Topology]:
+    """`topo`'s variants with one of its `leverable` dyads a slotted lever."""
+    return [lever(topo, k) for k in leverable(topo)]
 
 
 def _walk(topo: Topology) -> tuple[list[tuple[int, ...]], list[bool]]:
@@ -117,8 +169,10 @@ def _walk(topo: Topology) -> tuple[list[tuple[int, ...]], list[bool]]:
     frame = set(range(N_FRAME))
     for k, (p1, p2) in enumerate(topo.dyads):
         j = CRANK + 1 + k
-        if k in topo.sliders:
-            out.append([p1, j])  # the link to the slider; the slider's block is no body of joints
+        if k in topo.sliders or k in topo.levers:
+            # a slider: the link to it (its block no body of joints); a slotted lever: the lever, its
+            # pivot and J (the block pinned at p2 no body of joints)
+            out.append([p1, j])
             flags.append(False)
             continue
         home = [b for b in out if p1 in b and p2 in b]
@@ -215,7 +269,7 @@ def with_sliders(topo: Topology) -> list[Topology]:
     return out
 
 
-def topologies(max_links: int = 8, *, sliders: bool = False) -> list[Topology]:
+def topologies(max_links: int = 8, *, sliders: bool = False, levers: bool = False) -> list[Topology]:
     """The built-in topologies up to `max_links` links (the frame included): the four-bar with a
     coupler point; the six-bars — Watt (the two ternary links adjacent) with the dyad between
     coupler and crank, coupler and rocker, rocker and frame, crank and frame; Stephenson (not
@@ -223,7 +277,8 @@ def topologies(max_links: int = 8, *, sliders: bool = False) -> list[Topology]:
     the six-bars (`EIGHT_FROM`) by a dyad from the traced link to a frame pivot or the crank pin
     (`_eight_bar`), where that joint is not already on the traced link; the ten-bars (12 joints)
     grown from every eight-bar the same way (`max_links` ≥ 10). `sliders`: after those, each one's
-    variants with sliders (`with_sliders`: the slider-crank, …), in the same order."""
+    variants with sliders (`with_sliders`: the slider-crank, …), in the same order; `levers`: then
+    each one's variants with a slotted lever (`with_levers`)."""
     out = [_four_bar()]
     six = [_six_bar(*s) for s in SIX_BARS]
     out += six
@@ -231,8 +286,11 @@ def topologies(max_links: int = 8, *, sliders: bool = False) -> list[Topology]:
     out += eight
     if max_links >= 10:
         out += [g for e in eight for g in _grown(e)]
+    base = list(out)
     if sliders:
-        out += [v for t in out for v in with_sliders(t)]
+        out += [v for t in base for v in with_sliders(t)]
+    if levers:
+        out += [v for t in base for v in with_levers(t)]
     return [t for t in out if t.n_links <= max_links]
 
 
@@ -247,7 +305,7 @@ class TopologyArrays(NamedTuple):
 def as_arrays(topos: list[Topology]) -> TopologyArrays:
     """Stack topologies, padding each to the most dyads among them (inactive, attached to C and F1);
     a slider dyad's second parent + `SLIDER` (`tracer.trace` with `sliders`), a rigid body's point's
-    + `RIGID` (`rigid`)."""
+    + `RIGID` (`rigid`), a slotted lever's + `LEVER` (`tracer.trace` with `sliders`)."""
     nd = max(len(t.dyads) for t in topos)
     par = np.zeros((len(topos), nd, 2), np.int32)
     act = np.zeros((len(topos), nd), bool)
@@ -257,6 +315,6 @@ def as_arrays(topos: list[Topology]) -> TopologyArrays:
         par[i, :, 0], par[i, :, 1] = CRANK, 1
         fixed = rigid(t)
         for k, (p1, p2) in enumerate(t.dyads):
-            par[i, k] = (p1, p2 + SLIDER * (k in t.sliders) + RIGID * fixed[k])
+            par[i, k] = (p1, p2 + SLIDER * (k in t.sliders) + RIGID * fixed[k] + LEVER * (k in t.levers))
             act[i, k] = True
     return TopologyArrays(par, act, np.array([t.traced for t in topos], np.int32))

@@ -27,6 +27,16 @@ A = P₂ and its pose position J⁰, direction u = (J⁰ − A)/|J⁰ − A|) pu
 with σ = sign(u · (J⁰ − P₁⁰)), l₁ = |J⁰ − P₁⁰|, and its margin S = 1 − e²/l₁² (the cosine² of the
 angle between the link and the line; 0 where the link stands square to the line, the slider's
 dead centre).
+
+A **slotted lever** dyad (`topology.lever`: RPR, the lever turning about the frame joint P₁, the
+block pinned at P₂ sliding in its slot, which lies on the line through the pivot) puts its joint,
+a point of the lever, at
+
+.. math::  J = P_1 + \frac{\lambda}{d} w + \frac{\mu}{d} w^\perp,\quad w = P_2 - P_1,\ d = |w|,
+
+with λ = (w⁰·v⁰)/d⁰, μ = (w⁰ × v⁰)/d⁰ from the pose (v⁰ = J⁰ − P₁⁰): J keeps its place on the lever,
+whose direction is that of w. Its margin S = d²/d⁰² is 0 only where the pin passes over the pivot
+(the lever's angle undefined there); it has no toggle.
 """
 
 from __future__ import annotations
@@ -34,7 +44,7 @@ from __future__ import annotations
 import jax.numpy as jnp
 import numpy as np
 
-from .topology import CRANK, RIGID, SLIDER, Topology, rigid
+from .topology import CRANK, LEVER, RIGID, SLIDER, Topology, rigid
 
 
 def _margin(l1, l2, d2):
@@ -64,8 +74,9 @@ def trace(parents, active, pose, thetas, sliders: bool = False):
     """Positions (T, J, 2) and margins (T, D) (1 where inactive) of one
     candidate over the input offsets `thetas` (T,). A dyad that does not close puts its joint on
     the line P₁P₂ (h = 0): finite, its margin negative. `sliders` (static): the parents may hold
-    slider dyads (`topology.as_arrays`: the second parent + `SLIDER`), each traced by both rules and
-    the slider's kept; without it every dyad is RRR. Pure; `vmap` over candidates."""
+    slider and slotted-lever dyads (`topology.as_arrays`: the second parent + `SLIDER`, + `LEVER`),
+    each traced by every rule and its own kept; without it every dyad is RRR. Pure; `vmap` over
+    candidates."""
     f0 = pose[0]
     c0 = pose[CRANK] - f0
     r = _norm(c0)
@@ -78,6 +89,9 @@ def trace(parents, active, pose, thetas, sliders: bool = False):
     for k in range(parents.shape[0]):
         j = CRANK + 1 + k
         p1, p2 = parents[k, 0], parents[k, 1]
+        if sliders:
+            lever = p2 >= LEVER
+            p2 = jnp.where(lever, p2 - LEVER, p2)
         fixed = p2 >= RIGID
         p2 = jnp.where(fixed, p2 - RIGID, p2)
         if sliders:
@@ -108,6 +122,10 @@ def trace(parents, active, pose, thetas, sliders: bool = False):
             spos, ss = _slid(a1, pose[p2], pose[j], l1, g_sigma)
             jpos = jnp.where(slider, spos, jpos)
             s = jnp.where(slider, ss, s)
+            d0 = jnp.sqrt(ww)  # a slotted lever: J's place on the lever, in units of length
+            lpos = a1 + ((alpha * d0) / d)[:, None] * w + ((beta * d0) / d)[:, None] * perp
+            jpos = jnp.where(lever, lpos, jpos)
+            s = jnp.where(lever, d2 / ww, s)
         pos = pos.at[:, j].set(jnp.where(active[k], jpos, pos[:, j]))
         margins.append(jnp.where(active[k] & ~fixed, s, 1.0))
     return pos, jnp.stack(margins, axis=-1)
@@ -127,6 +145,20 @@ def trace_exact(topo: Topology, pose: np.ndarray, thetas: np.ndarray) -> tuple[n
     fixed = rigid(topo)
     for k, (p1, p2) in enumerate(topo.dyads):
         j = CRANK + 1 + k
+        if k in topo.levers:  # J's place on the lever turning about p1 through p2's pin (module doc)
+            w0, v0 = pose[p2] - pose[p1], pose[j] - pose[p1]
+            ww = w0[0] * w0[0] + w0[1] * w0[1]
+            d0 = np.sqrt(ww)
+            lam = (w0[0] * v0[0] + w0[1] * v0[1]) / d0
+            mu = (w0[0] * v0[1] - w0[1] * v0[0]) / d0
+            w = pos[:, p2] - pos[:, p1]
+            d2 = np.sum(w * w, axis=-1)
+            d = np.sqrt(d2)
+            perp = np.stack([-w[:, 1], w[:, 0]], axis=-1)
+            margins[:, k] = d2 / ww
+            di = np.where(d > 0, 1.0 / np.where(d > 0, d, 1.0), 0.0)  # the pin on the pivot: J there, margin 0
+            pos[:, j] = pos[:, p1] + (lam * di)[:, None] * w + (mu * di)[:, None] * perp
+            continue
         if k in topo.sliders:
             g = pose[j] - pose[p2]
             u = g / np.hypot(*g)
@@ -156,6 +188,7 @@ def trace_exact(topo: Topology, pose: np.ndarray, thetas: np.ndarray) -> tuple[n
             continue
         s = _margin(l1, l2, d2)
         margins[:, k] = s
+        d = np.where(d > 0, d, 1.0)  # parents on one point (a lever's pin over its pivot): finite, S < 0
         h = l1 * l2 * np.sqrt(np.maximum(s, 0.0)) / d
         a = (l1 * l1 - l2 * l2 + d2) / (2.0 * d)
         pos[:, j] = pos[:, p1] + (a / d)[:, None] * w + (sigma * h / d)[:, None] * perp
@@ -164,12 +197,15 @@ def trace_exact(topo: Topology, pose: np.ndarray, thetas: np.ndarray) -> tuple[n
 
 def lengths(topo: Topology, pose: np.ndarray) -> dict[str, float]:
     """The dimensions a pose fixes: the crank and each dyad's two links (a slider dyad's one link, and
-    `e{j}`: its guide's offset, the distance of the crank's pivot F0 from the line)."""
+    `e{j}`: its guide's offset, the distance of the crank's pivot F0 from the line; a slotted lever's
+    joint its distance from the lever's pivot)."""
     pose = np.asarray(pose, float)
     out = {"crank": float(np.hypot(*(pose[CRANK] - pose[0])))}
     for k, (p1, p2) in enumerate(topo.dyads):
         j = CRANK + 1 + k
         out[f"l{j}_{p1}"] = float(np.hypot(*(pose[j] - pose[p1])))
+        if k in topo.levers:  # J's distance from the lever's pivot only: the block slides
+            continue
         if k in topo.sliders:
             g = pose[j] - pose[p2]
             q = pose[0] - pose[p2]
