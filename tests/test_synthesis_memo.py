@@ -20,7 +20,9 @@ from jaxlink.synthesis import search
 from jaxlink.synthesis.topology import as_arrays, topologies
 
 B = 32  # a four-bar's screen on 32 random poses: small programs
-LIM = 4.0  # a size bound that some of those poses exceed (`size`): used by the bounded programs only
+#: the bounds (a size some of those poses exceed, `size`; a margin floor, `transmission`): read by the
+#: bounded programs only
+LIM = np.array([4.0, 0.1], np.float32)
 N_DYADS = 2  # the four-bar with its coupler point: two dyads (`topology`)
 
 
@@ -28,7 +30,7 @@ def _inputs(slider: bool = False):
     arr = as_arrays(topologies(4, sliders=True)[1:] if slider else topologies(4))  # the slider-crank, the four-bar
     assert arr.parents.shape[1] == N_DYADS and arr.parents.shape[0] == 1
     rep = [np.repeat(a[:1], B, 0) for a in (arr.parents, arr.active, arr.traced)]
-    return (jax.random.PRNGKey(3), *rep, np.linspace(0.5, 1.5, search.DESC_N).astype(np.float32), np.float32(LIM))
+    return (jax.random.PRNGKey(3), *rep, np.linspace(0.5, 1.5, search.DESC_N).astype(np.float32), LIM)
 
 
 def _same_as_fresh(memo, slider: bool = False, bounded: bool = False) -> bool:
@@ -96,7 +98,7 @@ def _programs(static_closed: bool, screens_only: bool = False, only: str | None 
         return jax.ShapeDtypeStruct(np.shape(x), np.asarray(x).dtype)
 
     desc = np.linspace(0.5, 1.5, search.DESC_N).astype(f32)
-    lim = f32(LIM)
+    lim = LIM
     calls = {f"screen-{'closed' if c else 'open'}": (search._screen_of, (jax.random.PRNGKey(3), *topo, desc, lim),
                                                      (c, False, False)) for c in (static_closed, False)}
     calls["rank"] = (search._rank_of, (*topo, poses, arcs, rng.uniform(-1, 1, (search.RANK_T, 2)).astype(f32), f32(1),
@@ -110,7 +112,7 @@ def _programs(static_closed: bool, screens_only: bool = False, only: str | None 
     calls["polish"] = (polish._value_and_grad, (x, topo[0][0], topo[1][0], topo[2][0],
                                                 rng.uniform(-1, 1, (polish.POLISH_T, 2)), np.float64(1),
                                                 np.linspace(0, 1, polish.POLISH_T), np.float64(0.003),
-                                                np.float64(LIM)), ())
+                                                LIM.astype(np.float64)), ())
     # a timed target's programs (`search._screen_timed`, `_refine_timed`, `polish.program_timed`)
     nt = search.TIMED_SCREEN_T
     w = np.full(nt, 1.0 / nt, f32)
@@ -124,7 +126,7 @@ def _programs(static_closed: bool, screens_only: bool = False, only: str | None 
     calls["polish_timed"] = (polish._value_and_grad_timed, (x, topo[0][0], topo[1][0], topo[2][0],
                                                             rng.uniform(-1, 1, (9, 2)), np.full(9, 1 / 9),
                                                             np.linspace(0, 1, 9), np.float64(0.003),
-                                                            np.float64(LIM)), (False, False))
+                                                            LIM.astype(np.float64)), (False, False))
     out = {}
     for name, (fun, args, static) in calls.items():
         if (screens_only and not name.startswith("screen")) or (only and name != only):

@@ -56,6 +56,11 @@ def register(sub) -> None:
                         "largest distance between two of its points), every frame pivot within K times it of the "
                         "target's centre (e.g. 2; default: no bound). Each design's size, in extents, is in the "
                         "table and the JSON either way")
+    p.add_argument("--min-transmission", type=float, default=None, metavar="DEG",
+                   help="keep every design's transmission angle (between the two links of each revolute dyad, "
+                        "between a slider's link and its guide's normal) at least DEG degrees over its whole "
+                        "interval, checked between samples (e.g. 40; default: none). Each design's least angle "
+                        "is in the table (mu_deg) and the JSON either way")
     p.add_argument("--samples", type=int, default=8192, metavar="N",
                    help="random candidates per topology and round (default 8192)")
     p.add_argument("--points", type=int, default=200, metavar="N",
@@ -94,13 +99,15 @@ def cmd_synthesize(args) -> int:
     res = synthesize(tgt, time_limit=args.time_limit, seed=args.seed, rounds=args.rounds, max_links=args.max_links,
                      topologies=names, n_points=args.points, count=args.count, samples=args.samples,
                      sliders=args.sliders, levers=args.levers, max_size=args.max_size,
+                     min_transmission=args.min_transmission,
                      log=(lambda s: print(s, file=sys.stderr)) if printer else None)
     if not printer:
         return 0 if res.designs else 1
     if not res.designs:
-        print("no design assembled over its interval" + ("" if args.max_size is None else
-              f" within --max-size {args.max_size:g}") + ": give more --time-limit or --samples"
-              + ("" if args.max_size is None else ", or a larger --max-size"), file=sys.stderr)
+        bounds = ([f"--max-size {args.max_size:g}"] if args.max_size is not None else []) + (
+            [f"--min-transmission {args.min_transmission:g}"] if args.min_transmission is not None else [])
+        print("no design assembled over its interval" + (f" within {' and '.join(bounds)}" if bounds else "")
+              + ": give more --time-limit or --samples" + (", or looser bounds" if bounds else ""), file=sys.stderr)
         return 1
     print(table(res))
     for f in write_all(args.out, res, plot_it=not args.no_plot):

@@ -16,13 +16,16 @@ def table(res) -> str:
             else "closed" if t.closed else "open")
     unit = f" {t.unit}" if t.unit else ""
     bound = "" if res.max_size is None else f"; designs at most {res.max_size:g} extents (--max-size)"
+    if res.min_transmission is not None:
+        bound += f"; transmission angles at least {res.min_transmission:g}° (--min-transmission)"
     lines = [f"target      {t.source}: {len(t.points)} points, {kind}" + (f", in {t.unit}" if t.unit else ""),
              f"extent      {res.extent:.6g}{unit} (the largest distance between two target points: the unit of "
              f"`size`, the longest link or the frame pivot furthest from the target's centre){bound}",
-             f"{'rank':>4}  {'topology':<26}{'joints':>7}{'links':>6}{'distance':>11}{'size':>7}"
+             f"{'rank':>4}  {'topology':<26}{'joints':>7}{'links':>6}{'distance':>11}{'size':>7}{'mu_deg':>8}"
              f"{'start_deg':>11}{'stop_deg':>11}{'found_s':>9}  pareto"]
     for i, d in enumerate(res.designs, 1):
         lines.append(f"{i:>4}  {d.topology:<26}{d.joints:>7}{d.links:>6}{d.distance:>11.5f}{d.size:>7.2f}"
+                     f"{d.transmission_deg:>8.1f}"
                      f"{d.start_deg:>11.3f}{d.stop_deg:>11.3f}{d.found_s:>9.1f}  {'*' if d.pareto else ''}")
     lines.append(f"wall time   {res.wall_s:.1f} s")
     return "\n".join(lines)
@@ -35,12 +38,14 @@ def to_json(res) -> dict:
         "target": {"source": t.source, "points": len(t.points), "closed": t.closed, "unit": t.unit,
                    "timed": t.timed, "extent": res.extent},
         "max_size": res.max_size,
+        "min_transmission_deg": res.min_transmission,
         "wall_s": res.wall_s,
         "designs": [{
             "rank": i, "topology": d.topology, "joints": d.joints, "links": d.links,
             "distance": d.distance, "start_deg": d.start_deg, "stop_deg": d.stop_deg, "count": d.n_inputs,
             "scale": d.scale, "rotation_deg": d.rotation_deg, "translation": list(d.translation),
-            "margin": d.margin, "size": d.size, "lengths": d.lengths, "found_s": d.found_s, "pareto": d.pareto,
+            "margin": d.margin, "size": d.size, "transmission_deg": d.transmission_deg, "lengths": d.lengths,
+            "found_s": d.found_s, "pareto": d.pareto,
             "joint_positions": d.sketch.tables()["sketch"]["joints"],
             "links_joints": d.sketch.tables()["sketch"]["links"],
             "frame": d.sketch.tables()["sketch"]["frame"],

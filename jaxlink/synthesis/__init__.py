@@ -7,6 +7,7 @@
 - `tracer`: batched (JAX) and exact (NumPy) tracing from a pose, the dyads' reach margins;
 - `assembly`: the check that a candidate assembles over its whole interval on its branch;
 - `size`: a design's size in extents of the target, and the bound a search keeps to (`max_size`);
+- `transmission`: a design's least transmission angle, and the floor a search keeps to (`min_transmission`);
 - `search`: screen → rank → refine → score rounds;
 - `mechanism`: a candidate as a sketch file; `api`: `synthesize`.
 

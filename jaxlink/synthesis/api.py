@@ -13,8 +13,9 @@ from ..errors import MechanismError
 from ..model.sketch import Sketch
 from . import distance as _dist
 from . import size as _size
+from . import transmission as _tm
 from .mechanism import crank_angle, placed_pose, to_sketch
-from .search import Candidate, interval_offsets, search
+from .search import Candidate, certified_interval, interval_offsets, search
 from .target import Target, load_target, make_target
 from .topology import MAX_DYADS, Topology
 from .topology import topologies as builtin_topologies
@@ -35,6 +36,9 @@ class Design(NamedTuple):
     - `margin`: the smallest reach margin of its dyads over the interval (`assembly`);
     - `size`: its longest link, or its frame pivot furthest from the target's centre, over the
       target's extent (its largest distance between two points): `size.design_size`;
+    - `transmission_deg`: its least transmission angle over the interval (degrees, 0–90: the angle
+      between the two links of a revolute dyad, between a slider's link and its guide's normal;
+      located between samples, `transmission.least`);
     - `lengths`: the crank's and every dyad link's length (target unit);
     - `sketch`: the mechanism (`jaxlink.Sketch`), `curve`: the traced path (n_inputs, 2);
     - `found_s`: seconds from the start of the search to this answer; `pareto`: no other answer
@@ -64,18 +68,21 @@ class Design(NamedTuple):
     inputs_deg: np.ndarray | None = None
     at_inputs: np.ndarray | None = None
     size: float = float("nan")
+    transmission_deg: float = float("nan")
 
 
 class Synthesis(NamedTuple):
     """`target`; `designs`: the best answer of each topology, best first; `wall_s`: the search's time;
     `max_size`: the bound on the designs' size (None: none); `extent`: the target's extent (its
-    largest distance between two points, in its unit: the size's unit)."""
+    largest distance between two points, in its unit: the size's unit); `min_transmission`: the
+    least transmission angle asked for (degrees; None: none)."""
 
     target: Target
     designs: list[Design]
     wall_s: float
     max_size: float | None = None
     extent: float = float("nan")
+    min_transmission: float | None = None
 
     @property
     def best(self) -> Design:
@@ -95,11 +102,13 @@ def _design(c: Candidate, target: Target, n_trace: int, name: str) -> Design:
     sk = to_sketch(c.topology, placed, name=name, unit=target.unit,
                    description=f"{c.topology.name}, synthesized for {target.source} (distance {m.distance:.6g})")
     inputs_deg, at_inputs = _timed_points(c, target, m, start)
+    mu = _tm.least(c.topology, c.pose, *certified_interval(c.start, c.span, target))
+    mu_deg = _tm.angle_deg(mu.margin) if np.isfinite(mu.margin) else float("nan")
     return Design(c.topology.name, c.topology.n_joints, c.topology.n_links, float(m.distance), start,
                   start + math.degrees(span), n_trace, float(m.scale), math.degrees(m.rotation),
                   (float(m.translation[0]), float(m.translation[1])), float(c.assembly.margin),
                   {k: v * m.scale for k, v in lengths(c.topology, c.pose).items()}, sk, curve, c.found_s, False,
-                  inputs_deg, at_inputs, float(c.size))
+                  inputs_deg, at_inputs, float(c.size), mu_deg)
 
 
 def _timed_points(c: Candidate, target: Target, m: _dist.Match, start_deg: float):
@@ -118,7 +127,8 @@ def synthesize(target: Any, *, closed: bool | None = None, time_limit: float = 6
                rounds: int | None = None, max_links: int = 8, sliders: bool = False, levers: bool = False,
                topologies: list[str | Topology] | None = None,
                n_points: int = _dist.N_POINTS, count: int = 1000, samples: int = 8192, name: str = "synthesized",
-               max_size: float | None = None, log: Callable[[str], None] | None = None,
+               max_size: float | None = None, min_transmission: float | None = None,
+               log: Callable[[str], None] | None = None,
                **search_options) -> Synthesis:
     """Find linkages whose traced point follows `target` (a path to a .csv/.npy/.svg file, an
     (N, 2) array or a `Target`), up to `max_links` links, within about `time_limit` seconds.
@@ -140,6 +150,9 @@ def synthesize(target: Any, *, closed: bool | None = None, time_limit: float = 6
     `max_size` K: only designs whose links are at most K times the target's extent (its largest
     distance between two points) and whose frame pivots are within K times it of the target's
     centre (`jaxlink.synthesis.size`; each design's `size` is reported either way).
+    `min_transmission` μ (degrees): only designs whose transmission angle stays at least μ over
+    their interval (`jaxlink.synthesis.transmission`; each design's `transmission_deg` is reported
+    either way).
     Computes in float64 for the answers (NumPy) whatever JAX's x64 setting."""
     if rounds is not None and (isinstance(rounds, bool) or not isinstance(rounds, (int, np.integer)) or rounds < 1):
         raise MechanismError(f"rounds = {rounds!r}: the number of rounds must be a whole number, at least 1")
@@ -155,6 +168,10 @@ def synthesize(target: Any, *, closed: bool | None = None, time_limit: float = 6
                                  or not math.isfinite(max_size) or max_size <= 0):
         raise MechanismError(f"max_size = {max_size!r}: a positive number of target extents (the largest "
                              "distance between two target points), or None for no bound")
+    if min_transmission is not None and (isinstance(min_transmission, bool) or not isinstance(
+            min_transmission, (int, float, np.integer, np.floating)) or not 0 < min_transmission < 90):
+        raise MechanismError(f"min_transmission = {min_transmission!r}: an angle in degrees between 0 and 90 "
+                             "(e.g. 40), or None for none")
     fin = search_options.get("finish")
     if fin is not None and (isinstance(fin, bool) or not isinstance(fin, (int, np.integer)) or fin < 0):
         raise MechanismError(f"finish = {fin!r}: the number of candidates polished at the end must be a whole "
@@ -182,6 +199,7 @@ def synthesize(target: Any, *, closed: bool | None = None, time_limit: float = 6
                                  "name each (`grow(..., name=...)`); the answers are keyed by name")
     found = search(tgt, topos, time_limit=time_limit, seed=seed, rounds=rounds, samples=samples, n_trace=count,
                    n_points=n_points, t0=t0, log=log, max_size=None if max_size is None else float(max_size),
+                   min_transmission=None if min_transmission is None else float(min_transmission),
                    **search_options)
     best: dict[str, Candidate] = {}
     for c in found:
@@ -192,4 +210,4 @@ def synthesize(target: Any, *, closed: bool | None = None, time_limit: float = 6
     designs = [d._replace(pareto=not any(o.joints <= d.joints and o.distance < d.distance for o in designs))
                for d in designs]
     return Synthesis(tgt, designs, time.perf_counter() - t0, None if max_size is None else float(max_size),
-                     _size.extent(tgt.points))
+                     _size.extent(tgt.points), None if min_transmission is None else float(min_transmission))

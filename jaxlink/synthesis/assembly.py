@@ -37,20 +37,28 @@ class Assembly(NamedTuple):
     ok: bool
 
 
-def certify(topo: Topology, pose: np.ndarray, start: float, span: float) -> Assembly:
+def certify(topo: Topology, pose: np.ndarray, start: float, span: float, only=None) -> Assembly:
     """The smallest margin of every dyad over θ ∈ [start, start + span] (input offsets from the pose).
     The golden-section searches of all brackets (every dyad's `REFINE` smallest local minima) run
     side by side, one trace of the linkage at all their points per step; each bracket takes the
     steps it would alone (it stops once narrower than 1e-12 rad) and the smallest margin found is
     the first in the order dyad, bracket, point (the search one bracket at a time, the reference
-    in `tests/test_synthesis.py`, gives the same answer bit for bit)."""
+    in `tests/test_synthesis.py`, gives the same answer bit for bit). `only`: the dyads (indices)
+    whose margins count (default every one; the others read as +inf)."""
     if not topo.dyads:  # pragma: no cover - every topology has a dyad
         return Assembly(np.inf, start, -1, True)
     th = start + span * np.linspace(0.0, 1.0, DENSE + 1)
+    skip = None if only is None else np.array([k not in set(only) for k in range(len(topo.dyads))])
+    if skip is not None and skip.all():
+        return Assembly(np.inf, start, -1, True)
     m = trace_exact(topo, pose, th)[1]
+    if skip is not None:
+        m = np.where(skip, np.inf, m)
     h = th[1] - th[0]
     ks, cs = [], []
     for k in range(m.shape[1]):
+        if skip is not None and skip[k]:
+            continue
         mk = m[:, k]
         inner = np.flatnonzero((mk[1:-1] <= mk[:-2]) & (mk[1:-1] <= mk[2:])) + 1
         sel = inner[np.argsort(mk[inner])][:REFINE]

@@ -30,6 +30,7 @@ import numpy as np
 from ..cache import compiled
 from . import distance as _dist
 from . import size as _size
+from . import transmission as _tm
 from .target import Target, arclength_resample
 from .topology import CRANK
 from .tracer import trace
@@ -46,32 +47,33 @@ BACK = (1.0, 0.9, 0.75, 0.5, 0.25)
 TIMED_TOL = {"ftol": 1e-15, "gtol": 1e-12}
 
 
-def _loss(x, parents, active, traced, target, closed, u, tau, lim=np.inf, sliders=False, bounded=False):
+def _loss(x, parents, active, traced, target, closed, u, tau, bounds=(np.inf, 0.0), sliders=False, bounded=False):
     nj = CRANK + 1 + parents.shape[0]
     pose = x[:2 * nj].reshape(nj, 2)
     start, span = x[2 * nj], jnp.where(closed > 0, 2 * np.pi, x[2 * nj + 1])
     pos, marg = trace(parents, active, pose, start + span * u, sliders)
     fit = _dist.soft_chamfer(pos[:, traced], target, closed, tau=tau)
-    pen = jnp.sum(jax.nn.relu(FLOOR - marg) ** 2)
+    floor = jnp.maximum(FLOOR, _tm.AIM * _tm.thresholds(parents, bounds[1], sliders)) if bounded else FLOOR
+    pen = jnp.sum(jax.nn.relu(floor - marg) ** 2)
     shorter = (1 - closed) * (jax.nn.relu(span - 2 * np.pi) ** 2 + jax.nn.relu(0.05 - span) ** 2)
     out = fit + WEIGHT * pen + 100.0 * shorter
     if bounded:  # the size penalty (`size`) as in the refinement
         frame = _size.weighted_frame(pos[:, traced], _dist.arclength_weights(pos[:, traced], closed))
-        out = out + _size.WEIGHT * _size.penalty(parents, active, pose, *frame, lim, sliders)
+        out = out + _size.WEIGHT * _size.penalty(parents, active, pose, *frame, bounds[0], sliders)
     return out
 
 
-def _value_and_grad(x, parents, active, traced, target, closed, u, tau, lim, sliders=False, bounded=False):
-    return jax.value_and_grad(_loss)(x, parents, active, traced, target, closed, u, tau, lim, sliders, bounded)
+def _value_and_grad(x, parents, active, traced, target, closed, u, tau, bounds, sliders=False, bounded=False):
+    return jax.value_and_grad(_loss)(x, parents, active, traced, target, closed, u, tau, bounds, sliders, bounded)
 
 
 @functools.lru_cache(maxsize=8)
 def program(n_dyads: int, n_points: int = _dist.N_POINTS, sliders: bool = False, bounded: bool = False):
     """The compiled value and gradient (float64) of the polishing loss for `n_dyads` dyads
     (a padded topology, `topology.as_arrays`) and a target of `n_points` points: a callable on
-    (x, parents, active, traced, target, closed, u, tau, lim), x the pose flattened, then start and
+    (x, parents, active, traced, target, closed, u, tau, bounds), x the pose flattened, then start and
     span. `sliders`: the parents may hold slider dyads (`tracer.trace`); `bounded`: with the size
-    penalty for the bound `lim` (`size`; unused without it)."""
+    penalty for the bound `bounds` (`size`; unused without it)."""
     f64 = np.float64
     nj = CRANK + 1 + n_dyads
     with jax.enable_x64(True):
@@ -79,11 +81,11 @@ def program(n_dyads: int, n_points: int = _dist.N_POINTS, sliders: bool = False,
                  jax.ShapeDtypeStruct((n_dyads,), bool), jax.ShapeDtypeStruct((), np.int32),
                  jax.ShapeDtypeStruct((n_points, 2), f64), jax.ShapeDtypeStruct((), f64),
                  jax.ShapeDtypeStruct((POLISH_T,), f64), jax.ShapeDtypeStruct((), f64),
-                 jax.ShapeDtypeStruct((), f64))
+                 jax.ShapeDtypeStruct((2,), f64))
         return compiled("synthesis-polish", _value_and_grad, avals, (sliders, bounded))
 
 
-def _loss_timed(x, parents, active, traced, target, w, u, tau, lim=np.inf, sliders=False, bounded=False):
+def _loss_timed(x, parents, active, traced, target, w, u, tau, bounds=(np.inf, 0.0), sliders=False, bounded=False):
     """A timed target's polishing loss: the square of the ordered distance at its points (`u`, the
     fractions of its span; `w` 1/N each) and the margin penalty there and at `POLISH_T` inputs across
     the interval; the span (x's last) is the target's, fixed (`tau` unused: the same signature)."""
@@ -93,21 +95,22 @@ def _loss_timed(x, parents, active, traced, target, w, u, tau, lim=np.inf, slide
     um = jnp.linspace(0.0, 1.0, POLISH_T, dtype=x.dtype)
     pos, marg = trace(parents, active, pose, start + span * jnp.concatenate([u, um]), sliders)
     fit = _dist.ordered_sq(pos[:u.shape[0], traced], target, w, eps=1e-30)
-    out = fit + WEIGHT * jnp.sum(jax.nn.relu(FLOOR - marg) ** 2)
+    floor = jnp.maximum(FLOOR, _tm.AIM * _tm.thresholds(parents, bounds[1], sliders)) if bounded else FLOOR
+    out = fit + WEIGHT * jnp.sum(jax.nn.relu(floor - marg) ** 2)
     if bounded:  # the size penalty (`size`), the curve at the target's inputs
         frame = _size.weighted_frame(pos[:u.shape[0], traced], w)
-        out = out + _size.WEIGHT * _size.penalty(parents, active, pose, *frame, lim, sliders)
+        out = out + _size.WEIGHT * _size.penalty(parents, active, pose, *frame, bounds[0], sliders)
     return out
 
 
-def _value_and_grad_timed(x, parents, active, traced, target, w, u, tau, lim, sliders=False, bounded=False):
-    return jax.value_and_grad(_loss_timed)(x, parents, active, traced, target, w, u, tau, lim, sliders, bounded)
+def _value_and_grad_timed(x, parents, active, traced, target, w, u, tau, bounds, sliders=False, bounded=False):
+    return jax.value_and_grad(_loss_timed)(x, parents, active, traced, target, w, u, tau, bounds, sliders, bounded)
 
 
 @functools.lru_cache(maxsize=8)
 def program_timed(n_dyads: int, n_points: int, sliders: bool = False, bounded: bool = False):
     """`program` for a timed target of `n_points` points: a callable on (x, parents, active, traced,
-    target (normalised), w, u, tau, lim)."""
+    target (normalised), w, u, tau, bounds)."""
     f64 = np.float64
     nj = CRANK + 1 + n_dyads
     with jax.enable_x64(True):
@@ -115,24 +118,25 @@ def program_timed(n_dyads: int, n_points: int, sliders: bool = False, bounded: b
                  jax.ShapeDtypeStruct((n_dyads,), bool), jax.ShapeDtypeStruct((), np.int32),
                  jax.ShapeDtypeStruct((n_points, 2), f64), jax.ShapeDtypeStruct((n_points,), f64),
                  jax.ShapeDtypeStruct((n_points,), f64), jax.ShapeDtypeStruct((), f64),
-                 jax.ShapeDtypeStruct((), f64))
+                 jax.ShapeDtypeStruct((2,), f64))
         return compiled("synthesis-polish-timed", _value_and_grad_timed, avals, (sliders, bounded))
 
 
 def polish(parents: np.ndarray, active: np.ndarray, traced: int, pose: np.ndarray, start: float, span: float,
            target: Target, *, n_points: int = _dist.N_POINTS, sliders: bool = False,
-           max_size: float | None = None) -> tuple[np.ndarray, float, float]:
+           max_size: float | None = None, min_transmission: float | None = None) -> tuple[np.ndarray, float, float]:
     """(pose, start, span) of one candidate (a row of `topology.as_arrays`, its pose padded like it)
-    after L-BFGS at each τ of `TAUS` (module doc), with the size penalty for `max_size` (`size`) if
-    given; the caller scores it and walks back (`BACK`)."""
+    after L-BFGS at each τ of `TAUS` (module doc), with the size penalty for `max_size` (`size`) and
+    the margin floor of `min_transmission` (degrees, `transmission`) if given; the caller scores it and
+    walks back (`BACK`)."""
     from scipy.optimize import minimize
 
     closed = target.closed
     timed = target.timed
     nj = pose.shape[0]
-    bounded = max_size is not None and bool(np.isfinite(max_size))
+    bounded = (max_size is not None and bool(np.isfinite(max_size))) or min_transmission is not None
     _, rms, ext = _size.target_frame(target, n_points)
-    lim = _size.limit(max_size, ext, rms) if bounded else np.inf
+    bounds = np.array([_size.limit(max_size, ext, rms), _tm.floor_of(min_transmission)])
     with jax.enable_x64(True):
         par, act = jnp.asarray(parents, jnp.int32), jnp.asarray(active, bool)
         tr = jnp.asarray(traced, jnp.int32)
@@ -152,7 +156,7 @@ def polish(parents: np.ndarray, active: np.ndarray, traced: int, pose: np.ndarra
             t = jnp.asarray(tau, jnp.float64)
 
             def f(x, t=t):
-                v, g = prog(jnp.asarray(x, jnp.float64), par, act, tr, tgt, *args, t, jnp.asarray(lim, jnp.float64))
+                v, g = prog(jnp.asarray(x, jnp.float64), par, act, tr, tgt, *args, t, jnp.asarray(bounds, jnp.float64))
                 v, g = float(v), np.asarray(g, float)
                 if not (np.isfinite(v) and np.all(np.isfinite(g))):
                     return np.inf, np.zeros_like(x)

@@ -48,6 +48,7 @@ from ..cache import compiled
 from . import distance as _dist
 from . import size as _size
 from . import spread as _spread
+from . import transmission as _tm
 from .assembly import Assembly, certify
 from .polish import BACK
 from .polish import polish as _polish
@@ -165,48 +166,48 @@ def _compiled(which: str, b: int, n_dyads: int, closed: bool, steps: int, quick:
 
     topo = arg((b, n_dyads, 2), i32), arg((b, n_dyads), bool), arg((b,), i32)
     if which == "screen":
-        return compiled("synthesis-screen", _screen_of, (arg((2,), np.uint32), *topo, arg((DESC_N,)), arg(())),
+        return compiled("synthesis-screen", _screen_of, (arg((2,), np.uint32), *topo, arg((DESC_N,)), arg((2,))),
                         (closed, sliders, bounded), options)
     if which == "screen-timed":
         return compiled("synthesis-screen-timed", _screen_timed_of,
                         (arg((2,), np.uint32), *topo, arg((TIMED_SCREEN_T, 2)), arg((TIMED_SCREEN_T,)),
-                         arg((TIMED_SCREEN_T,)), arg(()), arg(())), (sliders, bounded), options)
+                         arg((TIMED_SCREEN_T,)), arg(()), arg((2,))), (sliders, bounded), options)
     poses, arcs = arg((b, nj, 2)), arg((b, 2))
     if which == "refine-timed":
         return compiled("synthesis-refine-timed", _refine_timed_of,
                         (*topo, poses, arcs, arg((REFINE_T, 2)), arg((REFINE_T,)), arg(()), arg((REFINE_T,)),
-                         arg(())), (steps, sliders, bounded), options)
+                         arg((2,))), (steps, sliders, bounded), options)
     if which == "rank":
         return compiled("synthesis-rank", _rank_of, (*topo, poses, arcs, arg((RANK_T, 2)), arg(()), arg((RANK_T,)),
-                                                     arg(())), (sliders, bounded), options)
+                                                     arg((2,))), (sliders, bounded), options)
     return compiled("synthesis-refine", _refine_of, (*topo, poses, arcs, arg((TARGET_N, 2)), arg(()), arg(()),
-                                                     arg((REFINE_T,)), arg(())), (steps, sliders, bounded), options)
+                                                     arg((REFINE_T,)), arg((2,))), (steps, sliders, bounded), options)
 
 
-def _screen_of(key, parents, active, traced, target_desc, lim, closed, sliders, bounded):
+def _screen_of(key, parents, active, traced, target_desc, bounds, closed, sliders, bounded):
     """`_screen` with its static options last (a stored program's signature: `cache.compiled`)."""
-    return _screen(key, parents, active, traced, target_desc, lim, closed=closed, sliders=sliders, bounded=bounded)
+    return _screen(key, parents, active, traced, target_desc, bounds, closed=closed, sliders=sliders, bounded=bounded)
 
 
-def _rank_of(parents, active, traced, poses, arcs, target, closed, u, lim, sliders, bounded):
+def _rank_of(parents, active, traced, poses, arcs, target, closed, u, bounds, sliders, bounded):
     """`_rank` with its static options last (`cache.compiled`)."""
-    return _rank(parents, active, traced, poses, arcs, target, closed, u, lim, sliders=sliders, bounded=bounded)
+    return _rank(parents, active, traced, poses, arcs, target, closed, u, bounds, sliders=sliders, bounded=bounded)
 
 
-def _screen_timed_of(key, parents, active, traced, target, w, u, span, lim, sliders, bounded):
+def _screen_timed_of(key, parents, active, traced, target, w, u, span, bounds, sliders, bounded):
     """`_screen_timed` with its static options last (`cache.compiled`)."""
-    return _screen_timed(key, parents, active, traced, target, w, u, span, lim, sliders=sliders, bounded=bounded)
+    return _screen_timed(key, parents, active, traced, target, w, u, span, bounds, sliders=sliders, bounded=bounded)
 
 
-def _refine_timed_of(parents, active, traced, poses, arcs, target, w, lr, u, lim, steps, sliders, bounded):
+def _refine_timed_of(parents, active, traced, poses, arcs, target, w, lr, u, bounds, steps, sliders, bounded):
     """`_refine_timed` with its static options last (`cache.compiled`)."""
-    return _refine_timed(parents, active, traced, poses, arcs, target, w, lr, u, lim, steps=steps, sliders=sliders,
+    return _refine_timed(parents, active, traced, poses, arcs, target, w, lr, u, bounds, steps=steps, sliders=sliders,
                          bounded=bounded)
 
 
-def _refine_of(parents, active, traced, poses, arcs, target, lr, closed, u, lim, steps, sliders, bounded):
+def _refine_of(parents, active, traced, poses, arcs, target, lr, closed, u, bounds, steps, sliders, bounded):
     """`_refine` with its static options last (`cache.compiled`)."""
-    return _refine(parents, active, traced, poses, arcs, target, lr, closed, u, lim, steps=steps, sliders=sliders,
+    return _refine(parents, active, traced, poses, arcs, target, lr, closed, u, bounds, steps=steps, sliders=sliders,
                    bounded=bounded)
 
 
@@ -284,10 +285,10 @@ def _half_samples(curve, ok, reach: int):
 
 
 @functools.partial(jax.jit, static_argnames=("closed", "sliders", "bounded"))
-def _screen(key, parents, active, traced, target_desc, lim=np.inf, *, closed: bool, sliders: bool = False,
+def _screen(key, parents, active, traced, target_desc, bounds=(np.inf, 0.0), *, closed: bool, sliders: bool = False,
             bounded: bool = False):
     """Descriptor distances (B, S) of random poses (B, J, 2) over the sub-arcs; inf where a dyad does
-    not close at a sample of the sub-arc (or, `bounded`, where the design is larger than `lim`:
+    not close at a sample of the sub-arc (or, `bounded`, where the design is larger than `bounds`:
     `size`). Each sub-arc's points are a static strided slice of the curve at half samples
     (`_subarc_slices`: no gathers)."""
     b = parents.shape[0]
@@ -295,7 +296,11 @@ def _screen(key, parents, active, traced, target_desc, lim=np.inf, *, closed: bo
     th = jnp.asarray(2 * np.pi * np.arange(SCREEN_T + 1) / SCREEN_T, _DT)
     pos, marg = jax.vmap(functools.partial(trace, sliders=sliders), in_axes=(0, 0, 0, None))(parents, active, poses, th)
     curves = pos[jnp.arange(b), :, traced]                    # (B, T+1, 2), the last = the first
-    ok = jnp.min(marg, axis=-1) > 0                            # (B, T+1)
+    if bounded:  # every dyad's margin above its floor (`transmission`: 0 without one)
+        thr = jax.vmap(lambda par: _tm.thresholds(par, bounds[1], sliders))(parents)
+        ok = jnp.min(marg - thr[:, None, :], axis=-1) > 0
+    else:
+        ok = jnp.min(marg, axis=-1) > 0                        # (B, T+1)
     slices = _subarc_slices(closed)
     reach = max(st + step * (k - 1) for st, step, k in slices)
 
@@ -308,7 +313,7 @@ def _screen(key, parents, active, traced, target_desc, lim=np.inf, *, closed: bo
         if not bounded:
             return jax.vmap(lambda p: _radii(p, closed))(pts), valid
         r, mean, rms = jax.vmap(lambda p: _radii(p, closed, frame=True))(pts)
-        fits = jax.vmap(lambda m, s: _size.within(par, act, pose, m, s, lim, sliders))(mean, rms)
+        fits = jax.vmap(lambda m, s: _size.within(par, act, pose, m, s, bounds[0], sliders))(mean, rms)
         return r, valid & fits
 
     r, valid = jax.vmap(per_candidate)(curves, ok, parents, active, poses)  # (B, S, DESC_N), (B, S)
@@ -329,17 +334,20 @@ def _u(n: int, closed: bool) -> np.ndarray:
 
 
 @functools.partial(jax.jit, static_argnames=("sliders", "bounded"))
-def _rank(parents, active, traced, poses, arcs, target, closed, u, lim=np.inf, *, sliders: bool = False,
+def _rank(parents, active, traced, poses, arcs, target, closed, u, bounds=(np.inf, 0.0), *, sliders: bool = False,
           bounded: bool = False):
     """(chamfer at the best of `_ROT` rotations, that rotation) of each candidate over its sub-arc.
     `closed` a 0/1 array (one program for open and closed targets), `u` from `_u`; inf where a dyad
-    does not close at a sample (or, `bounded`, where the design is larger than `lim`: `size`)."""
+    does not close at a sample (or, `bounded`, where the design is larger than `bounds`: `size`)."""
 
     def one(par, act, tr, pose, arc):
         pos, marg = trace(par, act, pose, arc[0] + arc[1] * u, sliders)
         c = pos[:, tr]
         w = _dist.arclength_weights(c, closed)
-        fits = _size.within(par, act, pose, *_size.weighted_frame(c, w), lim, sliders) if bounded else True
+        fits = True
+        if bounded:  # within the size, every dyad's margin above its floor
+            fits = _size.within(par, act, pose, *_size.weighted_frame(c, w), bounds[0], sliders) & (
+                jnp.min(marg - _tm.thresholds(par, bounds[1], sliders)) > 0)
         c = _normalised(c, w)
         phis = 2 * np.pi * jnp.arange(_ROT, dtype=_DT) / _ROT
         rot = jnp.stack([jnp.stack([jnp.cos(phis), -jnp.sin(phis)], -1),
@@ -353,27 +361,28 @@ def _rank(parents, active, traced, poses, arcs, target, closed, u, lim=np.inf, *
     return jax.vmap(one)(parents, active, traced, poses, arcs)
 
 
-def _loss(params, par, act, tr, target, closed, u, sliders, lim=np.inf, bounded=False):
+def _loss(params, par, act, tr, target, closed, u, sliders, bounds=(np.inf, 0.0), bounded=False):
     pose, arc = params
     start, span = arc[0], jnp.where(closed > 0, jnp.asarray(2 * np.pi, arc.dtype), arc[1])
     pos, marg = trace(par, act, pose, start + span * u, sliders)
     fit = _dist.soft_chamfer(pos[:, tr], target, closed, tau=0.01)
-    pen = jnp.mean(jnp.sum(jax.nn.relu(MARGIN_FLOOR - marg) ** 2, axis=-1))
+    floor = jnp.maximum(MARGIN_FLOOR, _tm.AIM * _tm.thresholds(par, bounds[1], sliders)) if bounded else MARGIN_FLOOR
+    pen = jnp.mean(jnp.sum(jax.nn.relu(floor - marg) ** 2, axis=-1))
     shorter = (1 - closed) * (jax.nn.relu(span - 2 * np.pi) ** 2 + jax.nn.relu(0.05 - span) ** 2)
     out = fit + 100.0 * pen + 100.0 * shorter
     if bounded:  # the size penalty (`size`), in the surrogate's normalisation of the curve
         frame = _size.weighted_frame(pos[:, tr], _dist.arclength_weights(pos[:, tr], closed))
-        out = out + _size.WEIGHT * _size.penalty(par, act, pose, *frame, lim, sliders)
+        out = out + _size.WEIGHT * _size.penalty(par, act, pose, *frame, bounds[0], sliders)
     return out
 
 
 @functools.partial(jax.jit, static_argnames=("steps", "sliders", "bounded"))
-def _refine(parents, active, traced, poses, arcs, target, lr, closed, u, lim=np.inf, *, steps: int,
+def _refine(parents, active, traced, poses, arcs, target, lr, closed, u, bounds=(np.inf, 0.0), *, steps: int,
             sliders: bool = False, bounded: bool = False):
     """Each candidate's pose and arc after `steps` Adam steps (`_adam`) on `_loss`: (poses, arcs, losses).
-    `bounded`: with the size penalty for the bound `lim` (`size`)."""
+    `bounded`: with the size penalty for the bound `bounds` (`size`)."""
     return jax.vmap(lambda par, act, tr, pose, arc: _adam(
-        _loss, (pose, arc), (par, act, tr, target, closed, u, sliders, lim, bounded), lr, steps))(
+        _loss, (pose, arc), (par, act, tr, target, closed, u, sliders, bounds, bounded), lr, steps))(
         parents, active, traced, poses, arcs)
 
 
@@ -415,7 +424,7 @@ def timed_samples(target: Target, n: int) -> tuple[np.ndarray, np.ndarray, np.nd
 
 
 @functools.partial(jax.jit, static_argnames=("sliders", "bounded"))
-def _screen_timed(key, parents, active, traced, target, w, u, span, lim=np.inf, *, sliders: bool = False,
+def _screen_timed(key, parents, active, traced, target, w, u, span, bounds=(np.inf, 0.0), *, sliders: bool = False,
                   bounded: bool = False):
     """A timed target's screen: random poses (B, J, 2), each traced from `_STARTS` starts over a turn
     at the target's inputs (start + span u), and the square of the ordered distance at each start
@@ -429,9 +438,10 @@ def _screen_timed(key, parents, active, traced, target, w, u, span, lim=np.inf, 
     def one(par, act, tr, pose):
         pos, marg = trace(par, act, pose, th, sliders)
         c = pos[:, tr].reshape(_STARTS, -1, 2)
-        ok = jnp.all((jnp.min(marg, axis=-1) > 0).reshape(_STARTS, -1) | (w[None, :] == 0), axis=1)
+        thr = _tm.thresholds(par, bounds[1], sliders) if bounded else 0.0
+        ok = jnp.all((jnp.min(marg - thr, axis=-1) > 0).reshape(_STARTS, -1) | (w[None, :] == 0), axis=1)
         if bounded:  # within the size (`size`) at each start
-            ok = ok & jax.vmap(lambda cc: _size.within(par, act, pose, *_size.weighted_frame(cc, w), lim,
+            ok = ok & jax.vmap(lambda cc: _size.within(par, act, pose, *_size.weighted_frame(cc, w), bounds[0],
                                                        sliders))(c)
         d = jax.vmap(lambda cc: _dist.ordered_sq(cc, target, w))(c)
         return jnp.where(ok, d, jnp.inf)
@@ -439,28 +449,29 @@ def _screen_timed(key, parents, active, traced, target, w, u, span, lim=np.inf, 
     return poses, jax.vmap(one)(parents, active, traced, poses)
 
 
-def _loss_timed(params, par, act, tr, target, w, u, sliders, lim=np.inf, bounded=False):
+def _loss_timed(params, par, act, tr, target, w, u, sliders, bounds=(np.inf, 0.0), bounded=False):
     pose, arc = params
     span = jax.lax.stop_gradient(arc[1])  # the target's: fixed
     um = jnp.asarray(np.linspace(0.0, 1.0, _TIMED_MARGIN_T), u.dtype)
     pos, marg = trace(par, act, pose, arc[0] + span * jnp.concatenate([u, um]), sliders)
     fit = _dist.ordered_sq(pos[:u.shape[0], tr], target, w)
-    pen = jnp.mean(jnp.sum(jax.nn.relu(MARGIN_FLOOR - marg) ** 2, axis=-1))
+    floor = jnp.maximum(MARGIN_FLOOR, _tm.AIM * _tm.thresholds(par, bounds[1], sliders)) if bounded else MARGIN_FLOOR
+    pen = jnp.mean(jnp.sum(jax.nn.relu(floor - marg) ** 2, axis=-1))
     out = fit + 100.0 * pen
     if bounded:  # the size penalty (`size`), the curve at the target's inputs with its weights
         frame = _size.weighted_frame(pos[:u.shape[0], tr], w)
-        out = out + _size.WEIGHT * _size.penalty(par, act, pose, *frame, lim, sliders)
+        out = out + _size.WEIGHT * _size.penalty(par, act, pose, *frame, bounds[0], sliders)
     return out
 
 
 @functools.partial(jax.jit, static_argnames=("steps", "sliders", "bounded"))
-def _refine_timed(parents, active, traced, poses, arcs, target, w, lr, u, lim=np.inf, *, steps: int,
+def _refine_timed(parents, active, traced, poses, arcs, target, w, lr, u, bounds=(np.inf, 0.0), *, steps: int,
                   sliders: bool = False, bounded: bool = False):
     """`_refine` for a timed target: Adam on the pose and the interval's start (its span the
     target's) against the square of the ordered distance at the target's inputs (`timed_samples`),
     plus the margin penalty at those and at `_TIMED_MARGIN_T` inputs across the interval."""
     return jax.vmap(lambda par, act, tr, pose, arc: _adam(
-        _loss_timed, (pose, arc), (par, act, tr, target, w, u, sliders, lim, bounded), lr, steps))(
+        _loss_timed, (pose, arc), (par, act, tr, target, w, u, sliders, bounds, bounded), lr, steps))(
         parents, active, traced, poses, arcs)
 
 
@@ -500,6 +511,22 @@ def score(topo: Topology, pose: np.ndarray, start: float, span: float, target: T
     return _dist.match(pos[:, topo.traced], target.points, closed=target.closed, n=n_points), asm
 
 
+def certified_interval(start: float, span: float, target: Target) -> tuple[float, float]:
+    """(start, span) of the interval a candidate is certified over (`score`): a closed target's whole
+    turn, a timed one's from its first input to its last (either way), an open one's sub-interval."""
+    if target.timed:
+        t = np.asarray(target.inputs, float)
+        sp = float(t[-1] - t[0])
+        return (start if sp >= 0 else start + sp), (2 * np.pi if target.closed else abs(sp))
+    return start, (2 * np.pi if target.closed else span)
+
+
+def keeps_transmission(topo: Topology, pose, start: float, span: float, target: Target, floor: float) -> bool:
+    """Whether a candidate's least transmission angle over its interval (`transmission.least`) has a
+    margin sin² of at least `floor`."""
+    return bool(_tm.least(topo, pose, *certified_interval(start, span, target)).margin >= floor)
+
+
 def size_of(topo: Topology, pose, m: _dist.Match, target: Target, n_points: int = _dist.N_POINTS,
             frame: tuple | None = None) -> float:
     """The size of a scored design (`size.design_size`), in the target's extents; nan without a match.
@@ -512,7 +539,7 @@ def size_of(topo: Topology, pose, m: _dist.Match, target: Target, n_points: int 
 
 
 def _full_slots(prog, key, arr, samples, screen_keep, refine, tdesc, trank, flag, arcs_all, closed, elites,
-                jitter, rng, lim):
+                jitter, rng, bounds):
     """A full round's refinement slots: screen, rank, the best `refine` per topology rotated to their
     best angle; the last half of each topology's slots restart from its best refined so far, jittered."""
     n_topos = arr.parents.shape[0]
@@ -522,7 +549,7 @@ def _full_slots(prog, key, arr, samples, screen_keep, refine, tdesc, trank, flag
         par = np.repeat(arr.parents[ti:ti + 1], samples, 0)
         act = np.repeat(arr.active[ti:ti + 1], samples, 0)
         trc = np.repeat(arr.traced[ti:ti + 1], samples, 0)
-        poses, d = prog.screen(sub, par, act, trc, tdesc, lim)
+        poses, d = prog.screen(sub, par, act, trc, tdesc, bounds)
         d = np.asarray(d)
         flat = np.argsort(d, axis=None)[:screen_keep]  # a fixed count: the same shapes every round
         ci, ai = np.unravel_index(flat, d.shape)
@@ -533,7 +560,7 @@ def _full_slots(prog, key, arr, samples, screen_keep, refine, tdesc, trank, flag
     arc = np.concatenate(picks_arc)
     tix = np.concatenate(picks_topo)
     val, phi = prog.rank(arr.parents[tix], arr.active[tix], arr.traced[tix], pose, arc, trank, flag,
-                         _u(RANK_T, closed), lim)
+                         _u(RANK_T, closed), bounds)
     val, phi = np.asarray(val), np.asarray(phi)
     # `refine` per topology (the same shapes every round); the inf ones are dropped after
     sel = np.concatenate([np.flatnonzero(tix == ti)[np.argsort(val[tix == ti], kind="stable")][:refine]
@@ -551,7 +578,7 @@ def _full_slots(prog, key, arr, samples, screen_keep, refine, tdesc, trank, flag
     return stix, poses0, arcs0, rank_ok
 
 
-def _full_slots_timed(prog, key, arr, refine, screen_target, elites, jitter, rng, lim):
+def _full_slots_timed(prog, key, arr, refine, screen_target, elites, jitter, rng, bounds):
     """A timed target's full round's slots: the screen's best `refine` (pose, start) per topology
     (its span the target's), the last half of each topology's slots its best refined so far, jittered."""
     n_topos = arr.parents.shape[0]
@@ -560,7 +587,7 @@ def _full_slots_timed(prog, key, arr, refine, screen_target, elites, jitter, rng
     for ti in range(n_topos):
         sub = jax.random.fold_in(key, ti)
         par, act, trc = (np.repeat(x[ti:ti + 1], prog.screen.n, 0) for x in (arr.parents, arr.active, arr.traced))
-        poses, d = prog.screen(sub, par, act, trc, tt, tw, tu, np.float32(span), lim)
+        poses, d = prog.screen(sub, par, act, trc, tt, tw, tu, np.float32(span), bounds)
         d = np.asarray(d)
         flat = np.argsort(d, axis=None)[:refine]
         ci, si = np.unravel_index(flat, d.shape)
@@ -606,7 +633,8 @@ def search(target: Target, topos: list[Topology], *, time_limit: float, seed: in
            rounds: int | None = None, samples: int = 8192, screen_keep: int = 128, refine: int = 8,
            steps: int = 300, n_trace: int = 1000, n_points: int = _dist.N_POINTS, per_topology: int = 2,
            lr: float = 0.01, jitter: float = 0.02, quick: bool | None = None, t0: float | None = None,
-           finish: int | None = None, max_size: float | None = None, log=None) -> list[Candidate]:
+           finish: int | None = None, max_size: float | None = None, min_transmission: float | None = None,
+           log=None) -> list[Candidate]:
     """Rounds of screen → rank → refine → score until `time_limit` seconds (at least one round).
     `quick` (`programs`; default: when `time_limit` ≤ 15 s) trades run time for compile time.
     After each full round, and whenever the time left is too short for another full round but not
@@ -623,8 +651,11 @@ def search(target: Target, topos: list[Topology], *, time_limit: float, seed: in
     `max_size` K: every answer's size (`size.design_size`) at most K — its links at most K times the
     target's extent, its frame pivots within K times it of the target's centre —, the screen, the
     rank, the refinements and the polish kept within it (`size`); default: no bound (each answer's
-    size is reported either way).
-    Returns every scored candidate that assembles (and is within `max_size`), best first."""
+    size is reported either way). `min_transmission` μ (degrees): every answer's least transmission
+    angle over its interval (`transmission.least`, located between samples) at least μ, the screen,
+    the rank, the refinements and the polish kept above it (`transmission`).
+    Returns every scored candidate that assembles (and is within `max_size`, and keeps
+    `min_transmission`), best first."""
     if rounds is not None and (isinstance(rounds, bool) or not isinstance(rounds, (int, np.integer)) or rounds < 1):
         raise ValueError(f"rounds = {rounds!r}: a whole number of rounds, at least 1")
     if finish is not None and (isinstance(finish, bool) or not isinstance(finish, (int, np.integer)) or finish < 0):
@@ -632,14 +663,20 @@ def search(target: Target, topos: list[Topology], *, time_limit: float, seed: in
     if max_size is not None and not (isinstance(max_size, (int, float, np.integer, np.floating))
                                      and not isinstance(max_size, bool) and max_size > 0):
         raise ValueError(f"max_size = {max_size!r}: a positive number of target extents")
+    if min_transmission is not None and not (isinstance(min_transmission, (int, float, np.integer, np.floating))
+                                             and not isinstance(min_transmission, bool)
+                                             and 0 < min_transmission < 90):
+        raise ValueError(f"min_transmission = {min_transmission!r}: an angle in degrees between 0 and 90")
     t0 = time.perf_counter() if t0 is None else t0
     closed = target.closed
     timed = target.timed
     arr = as_arrays(topos)
-    bounded = max_size is not None and bool(np.isfinite(max_size))
+    sized = max_size is not None and bool(np.isfinite(max_size))
+    bounded = sized or min_transmission is not None  # the programs that keep designs within bounds
     frame = _size.target_frame(target, n_points)
-    bound = float(max_size) if max_size is not None and bounded else np.inf  # in target extents
-    lim = np.float32(_size.limit(bound, frame[2], frame[1]))
+    bound = float(max_size) if max_size is not None and sized else np.inf  # in target extents
+    floor = _tm.floor_of(min_transmission)  # sin² μ of the least transmission angle (0: none)
+    bounds = np.array([_size.limit(bound, frame[2], frame[1]), floor], np.float32)
     quick = time_limit <= 15.0 if quick is None else quick
     finish = (0 if quick else 4) if finish is None else finish
     sliders = any(t.sliders or t.levers for t in topos)  # the programs that trace both kinds
@@ -679,7 +716,7 @@ def search(target: Target, topos: list[Topology], *, time_limit: float, seed: in
         origins.add(id(c))
         ti = topos.index(c.topology)
         new = _polished(c, arr.parents[ti], arr.active[ti], int(arr.traced[ti]), target, n_trace, n_points, t0,
-                        sliders, max_size if bounded else None)
+                        sliders, max_size if sized else None, min_transmission)
         if new is not None:
             found.append(new)
         t_polish = time.perf_counter() - t1  # the estimate of the next one
@@ -695,19 +732,19 @@ def search(target: Target, topos: list[Topology], *, time_limit: float, seed: in
             rank_ok = np.ones(len(stix), bool)
         elif timed:
             stix, poses0, arcs0, rank_ok = _full_slots_timed(prog, key, arr, nsl, screen_target, elites, jitter, rng,
-                                                             lim)
+                                                             bounds)
             key = jax.random.fold_in(key, rnd)
         else:
             stix, poses0, arcs0, rank_ok = _full_slots(prog, key, arr, samples, screen_keep, refine, tdesc,
-                                                       trank, flag, arcs_all, closed, elites, jitter, rng, lim)
+                                                       trank, flag, arcs_all, closed, elites, jitter, rng, bounds)
             key = jax.random.fold_in(key, rnd)
         t_ref = time.perf_counter()
         if timed:
             p, a, v = prog.refine(arr.parents[stix], arr.active[stix], arr.traced[stix], poses0, arcs0, rt, rw,
-                                  np.float32(lr), ru, lim)
+                                  np.float32(lr), ru, bounds)
         else:
             p, a, v = prog.refine(arr.parents[stix], arr.active[stix], arr.traced[stix], poses0,
-                                  arcs0, ttarget, np.float32(lr), flag, _u(REFINE_T, closed), lim)
+                                  arcs0, ttarget, np.float32(lr), flag, _u(REFINE_T, closed), bounds)
         p, a, v = np.asarray(p, float), np.asarray(a, float), np.asarray(v)
         for ti in range(len(topos)):
             idx = np.flatnonzero((stix == ti) & np.isfinite(v) & rank_ok)
@@ -726,7 +763,8 @@ def search(target: Target, topos: list[Topology], *, time_limit: float, seed: in
                         else 2 * np.pi if closed else float(a[i, 1]))
                 m, asm = score(topos[ti], p[i], start, span, target, n_trace=n_trace, n_points=n_points)
                 sz = size_of(topos[ti], p[i], m, target, n_points, frame)
-                if np.isfinite(m.distance) and asm.ok and (not bounded or sz <= bound):
+                if np.isfinite(m.distance) and asm.ok and (not sized or sz <= bound) and (
+                        floor == 0 or keeps_transmission(topos[ti], p[i], start, span, target, floor)):
                     found.append(Candidate(topos[ti], p[i], start, span, m, asm, time.perf_counter() - t0,
                                            size=sz))
         if log is not None:
@@ -792,16 +830,20 @@ def _to_polish(found: list[Candidate], origins: set[int], n: int, best: float | 
 
 
 def _polished(c: Candidate, parents, active, traced: int, target: Target, n_trace: int, n_points: int,
-              t0: float, sliders: bool = False, max_size: float | None = None) -> Candidate | None:
+              t0: float, sliders: bool = False, max_size: float | None = None,
+              min_transmission: float | None = None) -> Candidate | None:
     """`c` polished (`polish.polish`) and scored; if it does not assemble (or is larger than
-    `max_size`), the first point back towards `c` (`polish.BACK`) that does; None if none does."""
+    `max_size`, or its least transmission angle below `min_transmission`), the first point back
+    towards `c` (`polish.BACK`) that does; None if none does."""
     pose, start, span = _polish(parents, active, traced, c.pose, c.start, c.span, target, n_points=n_points,
-                                sliders=sliders, max_size=max_size)
+                                sliders=sliders, max_size=max_size, min_transmission=min_transmission)
+    floor = _tm.floor_of(min_transmission)
     for f in BACK:
         p = c.pose + f * (pose - c.pose)
         st, sp = c.start + f * (start - c.start), c.span + f * (span - c.span)
         m, asm = score(c.topology, p, st, sp, target, n_trace=n_trace, n_points=n_points)
         sz = size_of(c.topology, p, m, target, n_points)
-        if np.isfinite(m.distance) and asm.ok and (max_size is None or sz <= max_size):
+        if np.isfinite(m.distance) and asm.ok and (max_size is None or sz <= max_size) and (
+                floor == 0 or keeps_transmission(c.topology, p, st, sp, target, floor)):
             return Candidate(c.topology, p, st, sp, m, asm, time.perf_counter() - t0, True, sz)
     return None
