@@ -5,7 +5,7 @@ the built-in topologies (`jaxlink.synthesize`, seed 0), and the same points unti
 shape only, the chamfer distance) beside it.
 
     python experiments/synthesis_feed_timed.py [--time-limit 60] [--topologies NAMES] [--max-links 8]
-        [--max-size K] [--timed-only]
+        [--max-size K] [--min-transmission DEG] [--timed-only]
 
 Prints each search's best designs (topology, joints, distance, size in extents of the path:
 `jaxlink.synthesis.size`; `--max-size` bounds it) and, for the timed one, the RMS
@@ -43,6 +43,7 @@ def main() -> int:
     ap.add_argument("--topologies", default=None, help="comma-separated names (default: the built-ins)")
     ap.add_argument("--max-links", type=int, default=8)
     ap.add_argument("--max-size", type=float, default=None, help="the designs' size bound, in extents of the path")
+    ap.add_argument("--min-transmission", type=float, default=None, help="the designs' least transmission angle (deg)")
     ap.add_argument("--timed-only", action="store_true", help="skip the untimed search")
     args = ap.parse_args()
     pts, phis = feed_path()
@@ -54,11 +55,12 @@ def main() -> int:
         tgt = make_target(pts, inputs=phis if timed else None, closed=True, unit="mm", source="sewing-feed Z")
         t0 = time.perf_counter()
         res = jl.synthesize(tgt, time_limit=args.time_limit, topologies=names, max_links=args.max_links,
-                            max_size=args.max_size)
+                            max_size=args.max_size, min_transmission=args.min_transmission)
         wall = time.perf_counter() - t0
         print(f"\n{'timed (ordered distance)' if timed else 'untimed (chamfer distance)'}: {wall:.1f} s")
         for d in res.designs[:5]:
-            print(f"  {d.topology:<40}{d.joints:>4} joints  distance {d.distance:.5f}  size {d.size:.2f}")
+            print(f"  {d.topology:<40}{d.joints:>4} joints  distance {d.distance:.5f}  size {d.size:.2f}  "
+                  f"mu {d.transmission_deg:.1f} deg")
         if timed:
             b = res.best
             err = np.sqrt(np.sum((b.at_inputs - pts) ** 2, axis=1))

@@ -221,6 +221,13 @@ def test_rigid_points_and_the_sewing_feed_as_a_planted_target():
     with jax.enable_x64(True):
         jp, jm = trace(jnp.asarray(arr.parents[0]), jnp.asarray(arr.active[0]), jnp.asarray(pose), jnp.asarray(phis))
     assert np.max(np.abs(np.asarray(jp) - pos)) < 1e-11 and np.array_equal(np.asarray(jm) == 1.0, marg == 1.0)
+    # its least transmission angle (`synthesis.transmission`, located between samples) is the worst
+    # of the transmission angles `jaxlink check` reports for the scene's loops (`jl.motion`: 24.62°)
+    from jaxlink.synthesis import transmission as TM
+
+    with jax.enable_x64(True):
+        worst = min(np.degrees(t["worst"]) for t in jl.motion(mech).transmission)
+    assert abs(TM.angle_deg(TM.least(topo, pose, 0.0, 2 * np.pi).margin) - worst) < 1e-8 and abs(worst - 24.62) < 0.01
     # the float64 polish (`polish`, its tight tolerances) brings every joint 1 % of the size off back
     from jaxlink.synthesis.polish import polish
 

@@ -106,8 +106,8 @@ def plot(path, res) -> None:
     ax.set_xlabel(f"x [{unit}]")
     ax.set_ylabel(f"y [{unit}]")
     ax.set_aspect("equal")
-    ax.set_title(f"{d.topology}: distance {d.distance:.4f}, crank {d.start_deg:.1f}° to {d.stop_deg:.1f}°",
-                 fontsize=9)
+    ax.set_title(f"{d.topology}: distance {d.distance:.4f}, crank {d.start_deg:.1f}° to {d.stop_deg:.1f}°, "
+                 f"size {d.size:.2f}, least transmission angle {d.transmission_deg:.1f}°", fontsize=8)
     ax.legend(fontsize=8)
     fig.tight_layout()
     fig.savefig(path)
