@@ -54,6 +54,13 @@ def test_lever_against_its_closed_form():
         jp, jm = trace(jnp.asarray(arr.parents[0]), jnp.asarray(arr.active[0]), jnp.asarray(POSE), jnp.asarray(th),
                        sliders=True)
     assert np.max(np.abs(np.asarray(jp) - pos)) < 1e-13 and np.max(np.abs(np.asarray(jm) - marg)) < 1e-13
+    # the least transmission angle counts P's revolute dyad only: the lever's margin is no angle
+    from jaxlink.synthesis import transmission as TM
+
+    dense = trace_exact(LEVER, POSE, np.linspace(0, 2 * np.pi, 20001))[1]
+    mu = TM.least(LEVER, POSE, 0.0, 2 * np.pi)
+    assert mu.dyad == 1 and dense[:, 0].min() < dense[:, 1].min()  # the lever's is the smaller here
+    assert dense[:, 1].min() - 1e-9 < mu.margin <= dense[:, 1].min()
 
 
 def test_lever_topologies():
@@ -162,20 +169,12 @@ def test_planted_lever_design_is_recovered_and_replayed(tmp_path):
 def test_levers_option_adds_the_lever_topologies(tmp_path, monkeypatch):
     """`--levers` (`synthesize(levers=True)`) searches the built-ins and their lever variants; a lever
     topology is known by name without it; a non-bool is refused."""
+    from test_synthesis_sliders import searched
+
     import jaxlink.synthesis.api as api
     from jaxlink.errors import MechanismError
 
-    seen = []
-
-    def fake(tgt, topos, **kw):
-        seen.append([t.name for t in topos])
-        return []
-
-    monkeypatch.setattr(api, "search", fake)
-    f = tmp_path / "t.csv"
-    f.write_text("x_mm,y_mm\n0,0\n1,0\n1,1\n0,1\n")
-    for args in (["--levers", "--max-links", "6"], ["--topologies", "four-bar+lever-J4"]):
-        assert cli_main(["synthesize", str(f), *args]) == 1
+    seen = searched(tmp_path, monkeypatch, ["--levers", "--max-links", "6"], ["--topologies", "four-bar+lever-J4"])
     with pytest.raises(MechanismError, match="levers"):
         api.synthesize(np.array([[0, 0], [1, 0], [1, 1.0]]), levers="yes")
     assert seen[0] == [t.name for t in T.topologies(6, levers=True)] and "four-bar+lever-J4" in seen[0]

@@ -246,3 +246,32 @@ def test_a_stored_program_is_traced_again_under_another_jax_backend_or_x64_and_a
 
     assert stores_after_change(real) == 1  # traced and stored again under the changed part
     assert stores_after_change(blind) == 0  # a key blind to it hands out the old program: caught
+
+
+def test_the_bounded_polish_is_another_program_and_a_blind_key_is_caught():
+    """`polish.program` is kept per (dyads, points, sliders, bounded): the bounded polish (`size`,
+    `transmission`: the bounds a (2,) argument) is another program, whose value at a binding bound
+    differs from the unbounded one's and equals it where no bound binds. A memo keyed without
+    `bounded` hands out the first program: its value at the binding bound is wrong, and caught."""
+    import functools
+
+    from jaxlink.synthesis import polish
+
+    rng = np.random.default_rng(7)
+    arr = as_arrays(topologies(4))
+    nj = search.CRANK + 1 + N_DYADS
+    x = np.concatenate([rng.uniform(-1, 1, 2 * nj), [0.0, 2 * np.pi]])
+    args = (x, arr.parents[0], arr.active[0], arr.traced[0], rng.uniform(-1, 1, (9, 2)), np.float64(1.0),
+            np.linspace(0, 1, polish.POLISH_T), np.float64(0.003))
+    tight, loose = np.array([0.5, 0.0]), np.array([np.inf, 0.0])  # a size bound every pose exceeds; none
+    polish.program.cache_clear()
+    free, bound = polish.program(N_DYADS, 9, False, False), polish.program(N_DYADS, 9, False, True)
+    assert polish.program.cache_info().currsize == 2
+    v_free, v_tight, v_loose = (float(p(*args, b)[0]) for p, b in ((free, tight), (bound, tight), (bound, loose)))
+    assert v_tight > v_free and v_loose == pytest.approx(v_free, rel=1e-12)
+
+    @functools.lru_cache(maxsize=4)
+    def blind(n_dyads, n_points, sliders):
+        return polish.program(n_dyads, n_points, sliders, False)
+
+    assert float(blind(N_DYADS, 9, False)(*args, tight)[0]) != v_tight  # the bound ignored: caught

@@ -170,22 +170,32 @@ def test_planted_slider_crank_is_recovered_and_replayed(tmp_path):
     assert abs(D.match(curve, tgt.points, closed=True).distance - best["distance"]) < 1e-9
 
 
-def test_sliders_option_adds_the_slider_topologies(tmp_path, monkeypatch):
-    """`--sliders` (`synthesize(sliders=True)`) searches the built-ins and their slider variants up to
-    `--max-links`; without it, the revolute ones; a slider topology is known by name either way."""
+def searched(tmp_path, monkeypatch, *argsets) -> list[list[str]]:
+    """The topology names `jaxlink synthesize` hands to the search for each set of arguments (the
+    search replaced by one that finds nothing: the command says so and returns 1)."""
     import jaxlink.synthesis.api as api
 
     seen = []
 
     def fake(tgt, topos, **kw):
         seen.append([t.name for t in topos])
-        return []  # no design: the command says so and returns 1
+        return []
 
     monkeypatch.setattr(api, "search", fake)
     f = tmp_path / "t.csv"
     f.write_text("x_mm,y_mm\n0,0\n1,0\n1,1\n0,1\n")
-    for args in (["--sliders", "--max-links", "6"], ["--max-links", "6"], ["--topologies", "slider-crank"]):
+    for args in argsets:
         assert cli_main(["synthesize", str(f), *args]) == 1
+    return seen
+
+
+def test_sliders_option_adds_the_slider_topologies(tmp_path, monkeypatch):
+    """`--sliders` (`synthesize(sliders=True)`) searches the built-ins and their slider variants up to
+    `--max-links`; without it, the revolute ones; a slider topology is known by name either way."""
+    import jaxlink.synthesis.api as api
+
+    seen = searched(tmp_path, monkeypatch, ["--sliders", "--max-links", "6"], ["--max-links", "6"],
+                    ["--topologies", "slider-crank"])
     from jaxlink.errors import MechanismError
 
     with pytest.raises(MechanismError, match="sliders"):

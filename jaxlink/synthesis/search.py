@@ -494,18 +494,15 @@ def score(topo: Topology, pose: np.ndarray, start: float, span: float, target: T
     """The exact distance and the assembly check of one candidate (float64). A timed target: the
     ordered distance (`distance.match_ordered`) of the traced point at start + (t_i − t_0) to point
     i, the check over that interval (a closed target: the whole turn)."""
+    asm = certify(topo, pose, *certified_interval(start, span, target))
     if target.timed:
         t = np.asarray(target.inputs, float)
         pos, marg = trace_exact(topo, pose, start + (t - t[0]))
-        span = float(t[-1] - t[0])
-        lo = start if span >= 0 else start + span
-        asm = certify(topo, pose, lo, 2 * np.pi if target.closed else abs(span))
         if not np.all(marg > 0):
             return _dist.Match(np.inf, 0.0, 1.0, np.zeros(2)), asm
         return _dist.match_ordered(pos[:, topo.traced], target.points), asm
     th = interval_offsets(start, span, n_trace, target.closed)
     pos, marg = trace_exact(topo, pose, th)
-    asm = certify(topo, pose, start, 2 * np.pi if target.closed else span)
     if not np.all(marg > 0):
         return _dist.Match(np.inf, 0.0, 1.0, np.zeros(2)), asm
     return _dist.match(pos[:, topo.traced], target.points, closed=target.closed, n=n_points), asm
@@ -534,8 +531,7 @@ def size_of(topo: Topology, pose, m: _dist.Match, target: Target, n_points: int 
     if not np.isfinite(m.distance):
         return float("nan")
     centre, _, ext = _size.target_frame(target, n_points) if frame is None else frame
-    _, pivots = _size.terms(topo, pose)
-    return _size.design_size(topo, pose, m.scale, _dist.place(pivots, m), centre, ext)
+    return _size.design_size(topo, pose, m, centre, ext)
 
 
 def _full_slots(prog, key, arr, samples, screen_keep, refine, tdesc, trank, flag, arcs_all, closed, elites,
@@ -838,11 +834,12 @@ def _polished(c: Candidate, parents, active, traced: int, target: Target, n_trac
     pose, start, span = _polish(parents, active, traced, c.pose, c.start, c.span, target, n_points=n_points,
                                 sliders=sliders, max_size=max_size, min_transmission=min_transmission)
     floor = _tm.floor_of(min_transmission)
+    frame = _size.target_frame(target, n_points)
     for f in BACK:
         p = c.pose + f * (pose - c.pose)
         st, sp = c.start + f * (start - c.start), c.span + f * (span - c.span)
         m, asm = score(c.topology, p, st, sp, target, n_trace=n_trace, n_points=n_points)
-        sz = size_of(c.topology, p, m, target, n_points)
+        sz = size_of(c.topology, p, m, target, n_points, frame)
         if np.isfinite(m.distance) and asm.ok and (max_size is None or sz <= max_size) and (
                 floor == 0 or keeps_transmission(c.topology, p, st, sp, target, floor)):
             return Candidate(c.topology, p, st, sp, m, asm, time.perf_counter() - t0, True, sz)

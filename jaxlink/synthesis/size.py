@@ -83,13 +83,12 @@ def terms(topo: Topology, pose) -> tuple[np.ndarray, np.ndarray]:
     return np.asarray(lengths), pose[sorted(used)]
 
 
-def design_size(topo: Topology, pose, scale: float, placed_pivots: np.ndarray, centre: np.ndarray,
-                target_extent: float) -> float:
-    """S of a design (module doc): its pose's links times the placement's `scale`, its frame pivots
-    already placed onto the target (`placed_pivots`), the target's `centre` and extent."""
-    lengths, _ = terms(topo, pose)
-    reach = np.hypot(*(np.asarray(placed_pivots, float) - np.asarray(centre, float)).T)
-    return float(max(scale * np.max(lengths), np.max(reach)) / target_extent)
+def design_size(topo: Topology, pose, m: _dist.Match, centre: np.ndarray, target_extent: float) -> float:
+    """S of a design (module doc): its pose's links times the placement's scale, its frame pivots
+    placed onto the target by the match `m` (`distance.place`), the target's `centre` and extent."""
+    lengths, pivots = terms(topo, pose)
+    reach = np.hypot(*(_dist.place(pivots, m) - np.asarray(centre, float)).T)
+    return float(max(m.scale * np.max(lengths), np.max(reach)) / target_extent)
 
 
 def limit(max_size: float | None, target_extent: float, target_rms: float) -> float:

@@ -88,21 +88,25 @@ def grow(topo: Topology, p1: int, p2: int, *, name: str | None = None, trace: bo
                     topo.levers)
 
 
-def slidable(topo: Topology) -> list[int]:
-    """The dyads that may become sliders (`slide`): not sliders yet, on one frame joint and a joint of
-    another body (their frame link a rocker), the frame joint used by no other dyad."""
+def _rockers(topo: Topology) -> list[tuple[int, int]]:
+    """(dyad k, its frame joint) of every dyad that is a rocker: neither a slider nor a lever yet, on
+    one frame joint other than the crank's pivot and a moving joint of another body (not a point of a
+    body already holding both) — what `slidable` and `leverable` may replace."""
     out = []
     for k, (p1, p2) in enumerate(topo.dyads):
         if k in topo.sliders or k in topo.levers or (p1 < N_FRAME) == (p2 < N_FRAME):
             continue
-        f = p1 if p1 < N_FRAME else p2
-        other = p2 if f == p1 else p1
-        if f == 0 or any(f in d for i, d in enumerate(topo.dyads) if i != k):
+        f, other = (p1, p2) if p1 < N_FRAME else (p2, p1)
+        if f == 0 or any(f in b and other in b for b in bodies(_prefix(topo, k))):
             continue
-        if any(f in b and other in b for b in bodies(_prefix(topo, k))):
-            continue  # a point of a body already holding both: no rocker to replace
-        out.append(k)
+        out.append((k, f))
     return out
+
+
+def slidable(topo: Topology) -> list[int]:
+    """The dyads that may become sliders (`slide`): rockers (`_rockers`) whose frame joint no other
+    dyad uses."""
+    return [k for k, f in _rockers(topo) if not any(f in d for i, d in enumerate(topo.dyads) if i != k)]
 
 
 def slide(topo: Topology, k: int, *, name: str | None = None) -> Topology:
@@ -129,18 +133,8 @@ def _prefix(topo: Topology, k: int) -> Topology:
 
 
 def leverable(topo: Topology) -> list[int]:
-    """The dyads that may become slotted levers (`lever`): neither sliders nor levers yet, on one frame
-    joint other than the crank's pivot and a moving joint of another body (not a point of a body
-    holding both)."""
-    out = []
-    for k, (p1, p2) in enumerate(topo.dyads):
-        if k in topo.sliders or k in topo.levers or (p1 < N_FRAME) == (p2 < N_FRAME):
-            continue
-        f, other = (p1, p2) if p1 < N_FRAME else (p2, p1)
-        if f == 0 or any(f in b and other in b for b in bodies(_prefix(topo, k))):
-            continue
-        out.append(k)
-    return out
+    """The dyads that may become slotted levers (`lever`): the rockers (`_rockers`)."""
+    return [k for k, _ in _rockers(topo)]
 
 
 def lever(topo: Topology, k: int, *, name: str | None = None) -> Topology:
