@@ -30,7 +30,9 @@ METHODS = [("montecarlo", 2000)] + ([("gradient", 600)] if os.environ.get("JAXLI
 
 @pytest.mark.parametrize("method,budget", METHODS)
 def test_two_processes_give_the_result_of_one(tmp_path, method, budget):
-    env = dict(os.environ, JAXLINK_CACHE_DIR="")
+    # a compilation cache of this test's own: the two processes load what the one compiled (the
+    # cache changes no answer: tests/test_cache_differential.py)
+    env = dict(os.environ, JAXLINK_CACHE_DIR=str(tmp_path / "xla"))
     one = subprocess.run(_cmd(tmp_path / "one.json", method, budget), env=env, cwd=ROOT,
                          capture_output=True, text=True, timeout=600)
     assert one.returncode == 0, one.stderr

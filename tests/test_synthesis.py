@@ -264,11 +264,12 @@ def test_certify_side_by_side_is_one_bracket_at_a_time_bit_for_bit():
     """`certify` runs the golden-section searches of all brackets side by side; the reference
     `_certify_one` runs them one at a time (the shipped code before): the same margin, place and
     dyad to the last bit, on random assemblable poses of every topology and random intervals,
-    including ones that fail between samples (the planted test above)."""
+    including ones that fail between samples (the planted test above). (20 draws per topology:
+    45 poses, every topology 1-5 times, one failing; 60 draws took 24 s of the suite.)"""
     rng = np.random.default_rng(3)
     n = failing = 0
     for topo in T.topologies(8):
-        for _ in range(60):
+        for _ in range(20):
             pose = rng.uniform(-1, 1, (T.CRANK + 1 + len(topo.dyads), 2))
             st, sp = rng.uniform(0, 6), rng.uniform(0.5, 6.3)
             if trace_exact(topo, pose, np.linspace(st, st + sp, 40))[1].min() <= 0:
@@ -277,7 +278,7 @@ def test_certify_side_by_side_is_one_bracket_at_a_time_bit_for_bit():
             assert a == b, (topo.name, a, b)
             n += 1
             failing += not a.ok
-    assert n >= 100 and failing >= 1
+    assert n >= 40 and failing >= 1
 
 
 @pytest.mark.parametrize("d, closed", [("M 0 0 L 10 0 C 10 5 5 10 0 10 Z", True), ("M 0 0 q 5 5 10 0 h 5", False)])

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import sys
+from pathlib import Path
 
 
 def register(sub) -> None:
@@ -71,6 +72,12 @@ def register(sub) -> None:
     p.add_argument("--out", metavar="DIR", default="synthesis",
                    help="write the files into this folder (default synthesis)")
     p.add_argument("--no-plot", action="store_true", help="do not draw the plot")
+    p.add_argument("--resume", action="store_true",
+                   help="continue the interrupted search of --out: the search writes its whole state to "
+                        "DIR/synthesis.state after every round (one process), so Ctrl-C or a kill loses at most "
+                        "a round; with --rounds the resumed search ends with exactly the uninterrupted one's "
+                        "designs, with a time limit the time spent before counts. The same target and options "
+                        "as the interrupted run (another search's state is refused)")
     add_distributed_arguments(p, "spread every round's candidates over N processes (hosts, or several on one "
                                  "host) with jax.distributed: start the same command N times, with --process-id "
                                  "0 … N-1 and the same --coordinator; process 0 decides the rounds and writes the "
@@ -96,11 +103,29 @@ def cmd_synthesize(args) -> int:
         raise MechanismError("--points and --count must be >= 8, --samples >= 1")
     tgt = load_target(args.target, closed=args.closed, flip_y=args.flip_y)
     names = [n.strip() for n in args.topologies.split(",") if n.strip()] if args.topologies else None
-    res = synthesize(tgt, time_limit=args.time_limit, seed=args.seed, rounds=args.rounds, max_links=args.max_links,
-                     topologies=names, n_points=args.points, count=args.count, samples=args.samples,
-                     sliders=args.sliders, levers=args.levers, max_size=args.max_size,
-                     min_transmission=args.min_transmission,
-                     log=(lambda s: print(s, file=sys.stderr)) if printer else None)
+    state = None
+    if jax.process_count() == 1:
+        state = Path(args.out) / "synthesis.state"
+        if args.resume and not state.exists():
+            raise MechanismError(f"--resume: {state} does not exist (no interrupted search in --out {args.out})")
+        state.parent.mkdir(parents=True, exist_ok=True)
+        if not args.resume:
+            state.unlink(missing_ok=True)  # another search's state: never taken for this one's
+    elif args.resume:
+        raise MechanismError("--resume is for a search in one process")
+    try:
+        res = synthesize(tgt, time_limit=args.time_limit, seed=args.seed, rounds=args.rounds,
+                         max_links=args.max_links, topologies=names, n_points=args.points, count=args.count,
+                         samples=args.samples, sliders=args.sliders, levers=args.levers,
+                         max_size=args.max_size,
+                         min_transmission=args.min_transmission, checkpoint=state, resume=args.resume,
+                         log=(lambda s: print(s, file=sys.stderr)) if printer else None)
+    except KeyboardInterrupt:
+        if state is not None and state.exists():
+            print(f"synthesize: interrupted; the search's state after its last round is in {state}: the same "
+                  "command with --resume continues it", file=sys.stderr)
+            return 130
+        raise
     if not printer:
         return 0 if res.designs else 1
     if not res.designs:

@@ -7,10 +7,12 @@ import time
 from pathlib import Path
 from typing import Any, Callable, NamedTuple
 
+import jax
 import numpy as np
 
 from ..errors import MechanismError
 from ..model.sketch import Sketch
+from . import checkpoint as _checkpoint
 from . import distance as _dist
 from . import size as _size
 from . import transmission as _tm
@@ -128,8 +130,8 @@ def synthesize(target: Any, *, closed: bool | None = None, time_limit: float = 6
                topologies: list[str | Topology] | None = None,
                n_points: int = _dist.N_POINTS, count: int = 1000, samples: int = 8192, name: str = "synthesized",
                max_size: float | None = None, min_transmission: float | None = None,
-               log: Callable[[str], None] | None = None,
-               **search_options) -> Synthesis:
+               log: Callable[[str], None] | None = None, checkpoint: str | Path | None = None,
+               resume: bool = False, **search_options) -> Synthesis:
     """Find linkages whose traced point follows `target` (a path to a .csv/.npy/.svg file, an
     (N, 2) array or a `Target`), up to `max_links` links, within about `time_limit` seconds.
     `closed`: match a closed loop over a whole crank turn, or an open path over a sub-interval
@@ -153,6 +155,11 @@ def synthesize(target: Any, *, closed: bool | None = None, time_limit: float = 6
     `min_transmission` μ (degrees): only designs whose transmission angle stays at least μ over
     their interval (`jaxlink.synthesis.transmission`; each design's `transmission_deg` is reported
     either way).
+    `checkpoint` (a file path): the search's whole state written there after every round, so that
+    an interrupted search loses at most a round; `resume`: continue the search whose state is
+    there (`jaxlink.synthesis.checkpoint`: refused if it belongs to another target, topologies, seed
+    or options). With `rounds` a resumed search returns exactly the uninterrupted one's designs; with
+    a time limit the time spent before counts against it. One process only.
     Computes in float64 for the answers (NumPy) whatever JAX's x64 setting."""
     if rounds is not None and (isinstance(rounds, bool) or not isinstance(rounds, (int, np.integer)) or rounds < 1):
         raise MechanismError(f"rounds = {rounds!r}: the number of rounds must be a whole number, at least 1")
@@ -197,10 +204,21 @@ def synthesize(target: Any, *, closed: bool | None = None, time_limit: float = 6
         if len(set(names)) < len(names):
             raise MechanismError(f"two topologies named {next(n for n in names if names.count(n) > 1)!r}: "
                                  "name each (`grow(..., name=...)`); the answers are keyed by name")
+    if not isinstance(resume, (bool, np.bool_)):
+        raise MechanismError(f"resume = {resume!r}: True (continue the search saved at `checkpoint`) or False")
+    if resume and checkpoint is None:
+        raise MechanismError("resume = True needs the `checkpoint` file of the search to continue")
+    if checkpoint is not None and jax.process_count() > 1:
+        raise MechanismError("a checkpoint (and --resume) is for a search in one process; with several "
+                             "processes run without it")
+    fp = _checkpoint.fingerprint(tgt, topos, seed=seed, rounds=rounds, samples=samples, count=count,
+                                 n_points=n_points, max_size=max_size, min_transmission=min_transmission,
+                                 time_limit=time_limit if rounds is None else bool(time_limit <= 15.0),
+                                 options=sorted(search_options.items())) if checkpoint is not None else ""
     found = search(tgt, topos, time_limit=time_limit, seed=seed, rounds=rounds, samples=samples, n_trace=count,
                    n_points=n_points, t0=t0, log=log, max_size=None if max_size is None else float(max_size),
                    min_transmission=None if min_transmission is None else float(min_transmission),
-                   **search_options)
+                   checkpoint=checkpoint, resume=bool(resume), fingerprint=fp, **search_options)
     best: dict[str, Candidate] = {}
     for c in found:
         if c.topology.name not in best:

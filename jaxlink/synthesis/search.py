@@ -37,6 +37,7 @@ from __future__ import annotations
 import functools
 import time
 from concurrent.futures import ThreadPoolExecutor
+from pathlib import Path
 from typing import Any, Callable, NamedTuple
 
 import jax
@@ -45,6 +46,7 @@ import numpy as np
 import optax
 
 from ..cache import compiled
+from . import checkpoint as _ckpt
 from . import distance as _dist
 from . import size as _size
 from . import spread as _spread
@@ -630,7 +632,7 @@ def search(target: Target, topos: list[Topology], *, time_limit: float, seed: in
            steps: int = 300, n_trace: int = 1000, n_points: int = _dist.N_POINTS, per_topology: int = 2,
            lr: float = 0.01, jitter: float = 0.02, quick: bool | None = None, t0: float | None = None,
            finish: int | None = None, max_size: float | None = None, min_transmission: float | None = None,
-           log=None) -> list[Candidate]:
+           log=None, checkpoint=None, resume: bool = False, fingerprint: str = "") -> list[Candidate]:
     """Rounds of screen → rank → refine → score until `time_limit` seconds (at least one round).
     `quick` (`programs`; default: when `time_limit` ≤ 15 s) trades run time for compile time.
     After each full round, and whenever the time left is too short for another full round but not
@@ -650,6 +652,10 @@ def search(target: Target, topos: list[Topology], *, time_limit: float, seed: in
     size is reported either way). `min_transmission` μ (degrees): every answer's least transmission
     angle over its interval (`transmission.least`, located between samples) at least μ, the screen,
     the rank, the refinements and the polish kept above it (`transmission`).
+    `checkpoint` (a path): the whole state written there after every round and every final polish
+    (`checkpoint.save`, with `fingerprint`); `resume`: continue from the state saved there
+    (`checkpoint.load`; none: from the start). With `rounds` a resumed search ends with exactly the
+    uninterrupted one's candidates; with a time limit the time spent before counts against it.
     Returns every scored candidate that assembles (and is within `max_size`, and keeps
     `min_transmission`), best first."""
     if rounds is not None and (isinstance(rounds, bool) or not isinstance(rounds, (int, np.integer)) or rounds < 1):
@@ -663,7 +669,9 @@ def search(target: Target, topos: list[Topology], *, time_limit: float, seed: in
                                              and not isinstance(min_transmission, bool)
                                              and 0 < min_transmission < 90):
         raise ValueError(f"min_transmission = {min_transmission!r}: an angle in degrees between 0 and 90")
-    t0 = time.perf_counter() if t0 is None else t0
+    began: float = time.perf_counter() if t0 is None else t0  # the search's clock starts
+    path = None if checkpoint is None else Path(checkpoint)
+    saved = _ckpt.load(path, fingerprint) if resume and path is not None else None  # before any compiling
     closed = target.closed
     timed = target.timed
     arr = as_arrays(topos)
@@ -706,21 +714,65 @@ def search(target: Target, topos: list[Topology], *, time_limit: float, seed: in
 
     origins: set[int] = set()  # the candidates polished (by id)
 
+    def save(stage: str, **extra) -> None:
+        if path is None:
+            return
+        index = {id(c): i for i, c in enumerate(found)}
+        _ckpt.save(path, fingerprint, dict(
+            stage=stage, rnd=rnd, key=np.asarray(key), rng=rng.bit_generator.state, elites=elites,
+            elite_vals=elite_vals, found=found, origins=sorted(index[i] for i in origins if i in index),
+            polish=polish, t_polish=t_polish, stix=stix, full_dur=full_dur, polish_dur=polish_dur,
+            elapsed=time.perf_counter() - began, **extra))
+
+    full_dur = polish_dur = 0.0
+    if saved is not None:
+        rnd, polish, t_polish, stix = saved["rnd"], saved["polish"], saved["t_polish"], saved["stix"]
+        key = jnp.asarray(saved["key"])
+        rng.bit_generator.state = saved["rng"]
+        elites, elite_vals, found = saved["elites"], saved["elite_vals"], saved["found"]
+        origins = {id(found[i]) for i in saved["origins"]}
+        full_dur, polish_dur = saved["full_dur"], saved["polish_dur"]
+        began = time.perf_counter() - saved["elapsed"]  # the time spent before counts
+        if log is not None:
+            log(f"resumed after round {rnd} ({saved['stage']}): {len(found)} candidates, "
+                f"{saved['elapsed']:.1f} s spent before")
+
     def polish_one(c: Candidate) -> None:
         nonlocal t_polish
         t1 = time.perf_counter()
         origins.add(id(c))
         ti = topos.index(c.topology)
-        new = _polished(c, arr.parents[ti], arr.active[ti], int(arr.traced[ti]), target, n_trace, n_points, t0,
+        new = _polished(c, arr.parents[ti], arr.active[ti], int(arr.traced[ti]), target, n_trace, n_points, began,
                         sliders, max_size if sized else None, min_transmission)
         if new is not None:
             found.append(new)
         t_polish = time.perf_counter() - t1  # the estimate of the next one
         if log is not None:
             log(f"polished {c.topology.name}: {c.match.distance:.4f} -> "
-                f"{new.match.distance if new is not None else float('nan'):.4f}, {time.perf_counter() - t0:.1f} s")
+                f"{new.match.distance if new is not None else float('nan'):.4f}, {time.perf_counter() - began:.1f} s")
 
-    while True:
+    def last_round(now: float) -> bool:
+        """After a round (at `now`): whether it was the last; else `polish` says what the next is."""
+        nonlocal polish
+        if rounds is not None:
+            polish = bool(elites) and not polish  # as below when time is no limit
+            return rnd >= rounds
+        can_polish = bool(elites) and now - began + polish_dur <= time_limit
+        if can_polish and not polish:
+            nxt = 1  # after each full round one polishing round: the best found refined again
+        elif now - began + full_dur <= time_limit:
+            nxt = 0  # another full round, if one as long as the last fits
+        elif not can_polish:
+            nxt = -1
+        else:
+            nxt = 1  # polishing again: a full round no longer fits
+        nxt = _spread.agreed(nxt)  # process 0's clock decides for all
+        polish = nxt == 1
+        return nxt < 0
+
+    done = saved is not None and (saved["stage"] != "rounds" or last_round(time.perf_counter()))
+    round_start = time.perf_counter()
+    while not done:
         rnd += 1
         n_before = len(found)
         if polish:
@@ -761,12 +813,12 @@ def search(target: Target, topos: list[Topology], *, time_limit: float, seed: in
                 sz = size_of(topos[ti], p[i], m, target, n_points, frame)
                 if np.isfinite(m.distance) and asm.ok and (not sized or sz <= bound) and (
                         floor == 0 or keeps_transmission(topos[ti], p[i], start, span, target, floor)):
-                    found.append(Candidate(topos[ti], p[i], start, span, m, asm, time.perf_counter() - t0,
+                    found.append(Candidate(topos[ti], p[i], start, span, m, asm, time.perf_counter() - began,
                                            size=sz))
         if log is not None:
             best = min((c.match.distance for c in found), default=float("inf"))
             log(f"round {rnd}{' (polish)' if polish else ''}: {len(found)} candidates, best distance {best:.4f}, "
-                f"{time.perf_counter() - t0:.1f} s")
+                f"{time.perf_counter() - began:.1f} s")
         now = time.perf_counter()
         dur = now - round_start
         if polish:
@@ -776,32 +828,24 @@ def search(target: Target, topos: list[Topology], *, time_limit: float, seed: in
         if finish > 0:  # this round's best, polished in float64, if one as long as the last fits
             mine = _to_polish(found[n_before:], origins, 1, min((c.match.distance for c in found), default=np.inf))
             guess = polish_dur if t_polish is None else t_polish  # before the first: the round's refinement
-            if mine and (rounds is not None or _spread.agreed(int(now - t0 + guess <= time_limit))):
+            if mine and (rounds is not None or _spread.agreed(int(now - began + guess <= time_limit))):
                 polish_one(mine[0])
+        save("rounds")
         now = round_start = time.perf_counter()
-        if rounds is not None:
-            if rnd >= rounds:
-                break
-            polish = bool(elites) and not polish  # as below when time is no limit
-            continue
-        can_polish = bool(elites) and now - t0 + polish_dur <= time_limit
-        if can_polish and not polish:
-            nxt = 1  # after each full round one polishing round: the best found refined again
-        elif now - t0 + full_dur <= time_limit:
-            nxt = 0  # another full round, if one as long as the last fits
-        elif not can_polish:
-            nxt = -1
-        else:
-            nxt = 1  # polishing again: a full round no longer fits
-        nxt = _spread.agreed(nxt)  # process 0's clock decides for all
-        if nxt < 0:
+        done = last_round(now)
+    if saved is not None and saved["stage"] != "rounds":  # resumed in the final polish (or after it)
+        last, n_done = saved["last"], saved["n_done"]
+    else:
+        where = {id(c): i for i, c in enumerate(found)}
+        last = [where[id(c)] for c in _to_polish(found, origins, finish)] if finish > 0 and t_polish is not None \
+            else []
+        n_done = 0
+        save("finish", last=last, n_done=0)
+    for k in range(n_done, len(last)):
+        if rounds is None and not _spread.agreed(int(time.perf_counter() - began + (t_polish or 0.0) <= time_limit)):
             break
-        polish = nxt == 1
-    if finish > 0 and t_polish is not None:
-        for c in _to_polish(found, origins, finish):
-            if rounds is None and not _spread.agreed(int(time.perf_counter() - t0 + t_polish <= time_limit)):
-                break
-            polish_one(c)
+        polish_one(found[last[k]])
+        save("finish", last=last, n_done=k + 1)
     found.sort(key=lambda c: c.match.distance)
     return found
 
