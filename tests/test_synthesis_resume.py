@@ -1,8 +1,9 @@
 """An interrupted synthesis loses at most a round (`jaxlink.synthesis.checkpoint`): the state saved
 after every round and every final polish, resumed, gives exactly the designs of the uninterrupted
-search (a fixed number of rounds), whether it stopped between rounds or in the final polish; writing
-the state changes nothing; a state with a deliberately wrong random key gives other designs (the
-comparison can fail); another search's state is refused."""
+search (a fixed number of rounds) and the same log on the way, whether it stopped between rounds
+(Ctrl-C: the designs so far returned) or in the final polish (killed); writing the state changes
+nothing; a state restored wrongly gives another search (the comparison can fail); another search's
+state is refused."""
 
 from __future__ import annotations
 
@@ -21,21 +22,21 @@ from jaxlink.synthesis.target import make_target
 
 pytestmark = pytest.mark.xdist_group("synthesis_resume")
 
-# a limaçon (a classic closed curve, no symmetry a wrong turn could match), four rounds (full,
-# polishing, full, polishing), each round's best and two more polished in float64 (the four-bar's
-# programs of tests/test_synthesis_size.py: compiled once)
+# a limaçon (a classic closed curve, no symmetry a wrong turn could match), three rounds (full,
+# polishing, full), each round's best and one more polished in float64 (the four-bar's programs of
+# tests/test_synthesis_size.py: compiled once)
 K = np.linspace(0, 2 * np.pi, 120, endpoint=False)
 TARGET = np.stack([(1 + 0.6 * np.cos(K)) * np.cos(K), (1 + 0.6 * np.cos(K)) * np.sin(K)], axis=1)
-OPTS = dict(topologies=["four-bar"], rounds=4, time_limit=3, samples=4096, count=300, finish=2, seed=5)
+OPTS = dict(topologies=["four-bar"], rounds=3, time_limit=3, samples=4096, count=300, finish=1, seed=5)
 
 
 class Stop(Exception):
     """The search "killed" from its log."""
 
 
-def _stop_at(prefix: str, after: str | None = None, nth: int = 1):
-    """A log that raises `Stop` at the `nth` line starting with `prefix` (after one starting with
-    `after`)."""
+def _stop_at(prefix: str, after: str | None = None, nth: int = 1, exc: type = Stop):
+    """A log that raises `exc` (default `Stop`: killed) at the `nth` line starting with `prefix`
+    (after one starting with `after`)."""
     seen = [after is None, 0]
 
     def log(line: str) -> None:
@@ -44,7 +45,7 @@ def _stop_at(prefix: str, after: str | None = None, nth: int = 1):
         elif seen[0] and line.startswith(prefix):
             seen[1] += 1
             if seen[1] == nth:
-                raise Stop(line)
+                raise exc(line)
     return log
 
 
@@ -52,6 +53,11 @@ def _bits(res) -> list:
     """Every design's numbers: its topology, distance, size, transmission, interval, lengths, curve."""
     return [(d.topology, d.distance, d.size, d.transmission_deg, d.start_deg, d.stop_deg,
              repr(d.lengths), np.asarray(d.curve).tobytes()) for d in res.designs]
+
+
+def _clean(lines: list[str]) -> list[str]:
+    """The search's log without its clock (what each round and polish found)."""
+    return [re.sub(r", [0-9.]+ s$", "", x) for x in lines]
 
 
 def _clean(lines: list[str]) -> list[str]:
@@ -67,42 +73,64 @@ def whole():
     return _bits(api.synthesize(make_target(TARGET, closed=True), log=lines.append, **OPTS)), _clean(lines)
 
 
-# the last round's best is polished, then the final polish's first: stopped at the second
-@pytest.mark.parametrize("where", [("round 3", None), ("polished", "round 4", 2)],
-                         ids=["between-rounds", "final-polish"])
-def test_an_interrupted_search_resumed_gives_the_uninterrupted_designs(whole, tmp_path, where):
-    state = tmp_path / "s.state"
-    tgt = make_target(TARGET, closed=True)
-    with pytest.raises(Stop):
-        api.synthesize(tgt, checkpoint=state, log=_stop_at(*where), **OPTS)
+@pytest.fixture(scope="module")
+def after_two(tmp_path_factory):
+    """Ctrl-C in the third round: the result returned and the state saved after the second."""
+    state = tmp_path_factory.mktemp("ctrl-c") / "s.state"
+    part = api.synthesize(make_target(TARGET, closed=True), checkpoint=state,
+                          log=_stop_at("round 3", exc=KeyboardInterrupt), **OPTS)
+    return part, state.read_bytes()
+
+
+def _resumed(state, whole, rnd: int, stage: str, first: str):
+    """Resume from `state`: the uninterrupted designs, and its log from there on."""
     saved = pickle.loads(state.read_bytes())
-    assert saved["stage"] == ("rounds" if where[1] is None else "finish")
-    assert saved["rnd"] == (2 if where[1] is None else 4) and saved["found"]
-    assert where[1] is None or saved["n_done"] == 0 and len(saved["last"]) == 2
+    assert saved["stage"] == stage and saved["rnd"] == rnd and saved["found"]
     lines: list[str] = []
-    resumed = api.synthesize(tgt, checkpoint=state, resume=True, log=lines.append, **OPTS)
-    assert lines[0].startswith(f"resumed after round {saved['rnd']}")
-    # the same designs, and the same way there: every round and polish after the resume as in the
-    # uninterrupted search
-    assert _bits(resumed) == whole[0]
+    resumed = api.synthesize(make_target(TARGET, closed=True), checkpoint=state, resume=True, log=lines.append,
+                             **OPTS)
+    assert lines[0].startswith(f"resumed after round {rnd} ({stage})")
+    assert not resumed.interrupted and _bits(resumed) == whole[0]
     rest = _clean(lines[1:])
-    assert rest and rest == whole[1][-len(rest):] and rest[0].startswith("round 3" if where[1] is None else "polished")
+    assert rest and rest == whole[1][-len(rest):] and rest[0].startswith(first)
     # the state of the finished search: resumed again, the same designs without another round
     lines.clear()
-    assert _bits(api.synthesize(tgt, checkpoint=state, resume=True, log=lines.append, **OPTS)) == whole[0]
-    assert not any(x.startswith(("round", "polished")) for x in lines)
+    again = api.synthesize(make_target(TARGET, closed=True), checkpoint=state, resume=True, log=lines.append, **OPTS)
+    assert _bits(again) == whole[0] and not any(x.startswith(("round", "polished")) for x in lines)
 
 
-def test_a_wrong_state_changes_the_search_and_another_search_is_refused(whole, tmp_path, monkeypatch):
+def test_ctrl_c_returns_the_designs_so_far_and_resume_ends_as_uninterrupted(whole, after_two, tmp_path):
+    """Ctrl-C (KeyboardInterrupt) in the third round: `synthesize` returns the designs of the two
+    rounds done, marked `interrupted` (none better than the whole search's: it found them too),
+    and keeps the state, from which the search resumes to the uninterrupted designs."""
+    part, good = after_two
+    assert part.interrupted and part.designs and part.best.distance >= whole[0][0][1]
+    state = tmp_path / "s.state"
+    state.write_bytes(good)
+    _resumed(state, whole, 2, "rounds", "round 3")
+    with pytest.raises(KeyboardInterrupt):  # without a checkpoint: nothing to return, the interrupt goes on
+        api.synthesize(make_target(TARGET, closed=True), log=_stop_at("round 1", exc=KeyboardInterrupt), **OPTS)
+
+
+def test_a_search_killed_in_the_final_polish_resumes_there(whole, tmp_path):
+    """Killed (another exception) at the final polish — after the last round's own polish — the
+    exception goes on, and the state after the rounds resumes with the final polish alone."""
+    state = tmp_path / "s.state"
+    with pytest.raises(Stop):
+        api.synthesize(make_target(TARGET, closed=True), checkpoint=state, log=_stop_at("polished", "round 3", 2),
+                       **OPTS)
+    saved = pickle.loads(state.read_bytes())
+    assert saved["n_done"] == 0 and len(saved["last"]) == 1
+    _resumed(state, whole, 3, "finish", "polished")
+
+
+def test_a_wrong_state_changes_the_search_and_another_search_is_refused(whole, after_two, tmp_path, monkeypatch):
     """A state restored wrongly — the random generator of another seed (the jitter of the
-    polishing rounds), or without the elites (the refinements' starts) — gives another search: the
+    refinements' starts), or without the elites (those starts) — gives another search: the
     comparison above can fail. (A wrong screen key is not visible in this small search: its third
     round's best come from the elites.)"""
     state = tmp_path / "s.state"
     tgt = make_target(TARGET, closed=True)
-    with pytest.raises(Stop):
-        api.synthesize(tgt, checkpoint=state, log=_stop_at("round 3"), **OPTS)
-    good = state.read_bytes()
     real = ckpt.load
     for part in ("rng", "elites"):
         def wrong(path, fp, part=part):
@@ -113,7 +141,7 @@ def test_a_wrong_state_changes_the_search_and_another_search_is_refused(whole, t
                 s["elites"], s["elite_vals"] = {}, {}
             return s
 
-        state.write_bytes(good)
+        state.write_bytes(after_two[1])
         monkeypatch.setattr(ckpt, "load", wrong)
         lines: list[str] = []
         got = _bits(api.synthesize(tgt, checkpoint=state, resume=True, log=lines.append, **OPTS))
@@ -139,14 +167,15 @@ def test_the_command_writes_its_state_and_resumes(whole, tmp_path, monkeypatch, 
     csv = tmp_path / "t.csv"
     np.savetxt(csv, TARGET, delimiter=",", header="x,y", comments="")
     args = ["synthesize", str(csv), "--closed", "--topologies", "four-bar", "--rounds", "2", "--time-limit", "3",
-            "--samples", "256", "--count", "200", "--no-plot"]
+            "--samples", "4096", "--count", "300", "--no-plot"]
     out = tmp_path / "run"
     assert main([*args, "--out", str(out)]) == 0
     assert (out / "synthesis.state").exists()
     first = json.loads((out / "synthesis.json").read_text())["designs"]
     assert first
     assert main([*args, "--out", str(out), "--resume"]) == 0
-    assert json.loads((out / "synthesis.json").read_text())["designs"] == first
+    doc = json.loads((out / "synthesis.json").read_text())
+    assert doc["designs"] == first and doc["interrupted"] is False
     capsys.readouterr()
 
     def interrupted(*a, **k):
@@ -158,3 +187,4 @@ def test_the_command_writes_its_state_and_resumes(whole, tmp_path, monkeypatch, 
     monkeypatch.undo()
     assert main([*args, "--out", str(tmp_path / "none"), "--resume"]) == 2
     assert "does not exist" in capsys.readouterr().err
+

@@ -109,8 +109,6 @@ def cmd_synthesize(args) -> int:
         if args.resume and not state.exists():
             raise MechanismError(f"--resume: {state} does not exist (no interrupted search in --out {args.out})")
         state.parent.mkdir(parents=True, exist_ok=True)
-        if not args.resume:
-            state.unlink(missing_ok=True)  # another search's state: never taken for this one's
     elif args.resume:
         raise MechanismError("--resume is for a search in one process")
     try:
@@ -126,6 +124,9 @@ def cmd_synthesize(args) -> int:
                   "command with --resume continues it", file=sys.stderr)
             return 130
         raise
+    if res.interrupted:  # Ctrl-C after a round: the designs until then are written, and the state kept
+        print(f"synthesize: interrupted; writing the designs found until then. The search's state is in {state}: "
+              "the same command with --resume continues it", file=sys.stderr)
     if not printer:
         return 0 if res.designs else 1
     if not res.designs:
@@ -133,7 +134,7 @@ def cmd_synthesize(args) -> int:
             [f"--min-transmission {args.min_transmission:g}"] if args.min_transmission is not None else [])
         print("no design assembled over its interval" + (f" within {' and '.join(bounds)}" if bounds else "")
               + ": give more --time-limit or --samples" + (", or looser bounds" if bounds else ""), file=sys.stderr)
-        return 1
+        return 130 if res.interrupted else 1
     print(table(res))
     for f in write_all(args.out, res, plot_it=not args.no_plot):
         print(f"wrote {f}")
@@ -145,4 +146,4 @@ def cmd_synthesize(args) -> int:
         print(f"timed       the target's points are matched at the crank angles `inputs_deg` of {args.out}/"
               "synthesis.json")
     print(f"replay      jaxlink kinematics {args.out}/synthesized.toml {span} --outputs position")
-    return 0
+    return 130 if res.interrupted else 0

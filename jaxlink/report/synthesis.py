@@ -40,6 +40,7 @@ def to_json(res) -> dict:
         "max_size": res.max_size,
         "min_transmission_deg": res.min_transmission,
         "wall_s": res.wall_s,
+        "interrupted": res.interrupted,
         "designs": [{
             "rank": i, "topology": d.topology, "joints": d.joints, "links": d.links,
             "distance": d.distance, "start_deg": d.start_deg, "stop_deg": d.stop_deg, "count": d.n_inputs,

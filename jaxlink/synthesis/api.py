@@ -77,7 +77,8 @@ class Synthesis(NamedTuple):
     """`target`; `designs`: the best answer of each topology, best first; `wall_s`: the search's time;
     `max_size`: the bound on the designs' size (None: none); `extent`: the target's extent (its
     largest distance between two points, in its unit: the size's unit); `min_transmission`: the
-    least transmission angle asked for (degrees; None: none)."""
+    least transmission angle asked for (degrees; None: none); `interrupted`: the search was stopped
+    (Ctrl-C) and these are the designs of its rounds until then (`synthesize(checkpoint=...)`)."""
 
     target: Target
     designs: list[Design]
@@ -85,6 +86,7 @@ class Synthesis(NamedTuple):
     max_size: float | None = None
     extent: float = float("nan")
     min_transmission: float | None = None
+    interrupted: bool = False
 
     @property
     def best(self) -> Design:
@@ -156,7 +158,9 @@ def synthesize(target: Any, *, closed: bool | None = None, time_limit: float = 6
     their interval (`jaxlink.synthesis.transmission`; each design's `transmission_deg` is reported
     either way).
     `checkpoint` (a file path): the search's whole state written there after every round, so that
-    an interrupted search loses at most a round; `resume`: continue the search whose state is
+    an interrupted search loses at most a round (an earlier state there is removed first, unless
+    `resume`); stopped by Ctrl-C (KeyboardInterrupt) after a round, it returns the designs of the
+    rounds done (`Synthesis.interrupted`); `resume`: continue the search whose state is
     there (`jaxlink.synthesis.checkpoint`: refused if it belongs to another target, topologies, seed
     or options). With `rounds` a resumed search returns exactly the uninterrupted one's designs; with
     a time limit the time spent before counts against it. One process only.
@@ -215,10 +219,24 @@ def synthesize(target: Any, *, closed: bool | None = None, time_limit: float = 6
                                  n_points=n_points, max_size=max_size, min_transmission=min_transmission,
                                  time_limit=time_limit if rounds is None else bool(time_limit <= 15.0),
                                  options=sorted(search_options.items())) if checkpoint is not None else ""
-    found = search(tgt, topos, time_limit=time_limit, seed=seed, rounds=rounds, samples=samples, n_trace=count,
-                   n_points=n_points, t0=t0, log=log, max_size=None if max_size is None else float(max_size),
-                   min_transmission=None if min_transmission is None else float(min_transmission),
-                   checkpoint=checkpoint, resume=bool(resume), fingerprint=fp, **search_options)
+    if checkpoint is not None and not resume:
+        Path(checkpoint).unlink(missing_ok=True)  # an earlier search's state is never this one's
+    interrupted = False
+    try:
+        found = search(tgt, topos, time_limit=time_limit, seed=seed, rounds=rounds, samples=samples,
+                       n_trace=count, n_points=n_points, t0=t0, log=log,
+                       max_size=None if max_size is None else float(max_size),
+                       min_transmission=None if min_transmission is None else float(min_transmission),
+                       checkpoint=checkpoint, resume=bool(resume), fingerprint=fp, **search_options)
+    except KeyboardInterrupt:
+        # stopped: the candidates of the rounds done, as saved after the last one (none saved: stop)
+        saved = _checkpoint.load(Path(checkpoint), fp) if checkpoint is not None else None
+        if saved is None:
+            raise
+        found = sorted(saved["found"], key=lambda c: c.match.distance)
+        interrupted = True
+        if log is not None:
+            log(f"interrupted: the designs of the {saved['rnd']} rounds done")
     best: dict[str, Candidate] = {}
     for c in found:
         if c.topology.name not in best:
@@ -228,4 +246,5 @@ def synthesize(target: Any, *, closed: bool | None = None, time_limit: float = 6
     designs = [d._replace(pareto=not any(o.joints <= d.joints and o.distance < d.distance for o in designs))
                for d in designs]
     return Synthesis(tgt, designs, time.perf_counter() - t0, None if max_size is None else float(max_size),
-                     _size.extent(tgt.points), None if min_transmission is None else float(min_transmission))
+                     _size.extent(tgt.points), None if min_transmission is None else float(min_transmission),
+                     interrupted)

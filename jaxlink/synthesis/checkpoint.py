@@ -21,6 +21,7 @@ import json
 import os
 import pathlib
 import pickle
+from importlib import metadata
 from typing import Any
 
 import numpy as np
@@ -33,14 +34,16 @@ def fingerprint(target, topos, **options: Any) -> str:
     open, the topologies (their structure, not only their names), and `options`."""
     import jax
 
-    from .. import __version__
-
+    try:
+        jaxlink_version = metadata.version("jaxlink")
+    except metadata.PackageNotFoundError:  # pragma: no cover (run from a source tree)
+        jaxlink_version = "source"
     h = hashlib.sha256()
     h.update(np.ascontiguousarray(target.points, np.float64).tobytes())
     if target.inputs is not None:
         h.update(np.ascontiguousarray(target.inputs, np.float64).tobytes())
     h.update(repr([(t.name, tuple(t.dyads), t.traced, t.sliders, t.levers) for t in topos]).encode())
-    h.update(json.dumps({"closed": bool(target.closed), "jaxlink": __version__, "jax": jax.__version__,
+    h.update(json.dumps({"closed": bool(target.closed), "jaxlink": jaxlink_version, "jax": jax.__version__,
                          **options}, sort_keys=True, default=repr).encode())
     return h.hexdigest()[:16]
 
