@@ -152,19 +152,42 @@ def _advance(mech, opts, p, tol, kw, st: _Track, phi):
     check = last == RESULTS.converged
     zero = jnp.zeros((), jnp.int32)
     dtype = jnp.result_type(phi)
+    dyads = _dyads.classify(mech)
+    # every block a dyad: the re-assembly is one more Newton solve from the closed form (on the
+    # branches of the last converged position), made by the same call as the attempts' (an extra
+    # trip of their loop where one is needed) — one Newton in the program instead of two
+    merged = dyads is not None
+    if merged:
+        _, _, _, sigma = _dyads.solve_nearest(mech, dyads, hist_q[0], hist_phi[0], p)
+        q_cf = _dyads.solve(mech, dyads, sigma, hist_q[0], phi, p)[0]
+
+    def failing(code):
+        return (code != RESULTS.converged) & (code != RESULTS.singular)
+
+    def over(s):  # the attempts are over (for a lane that restarts: from the start)
+        return s[6] | (s[5] > REFINE_TRIES)
 
     def cond(s):
-        return (~s[6]) & (s[5] <= REFINE_TRIES)
+        if not merged:
+            return (~s[6]) & (s[5] <= REFINE_TRIES)
+        need = restart | (~restart & failing(s[7][2]))
+        return (~over(s)) | (need & ~s[10])
 
     def body(s):
-        hq, hph, ng, phi_cur, h, tries, done, out, ksum = s
+        hq, hph, ng, phi_cur, h, tries, done, out, ksum = s[:9]
         first_try = tries == 0
         last_sub = jnp.abs(phi - phi_cur) <= 1.000001 * jnp.abs(h)
         phi_try = jnp.where(first_try | last_sub, phi, phi_cur + h)
         guess = _extrapolate(hq, hph, ng, phi_try, opts.predictor_order)
-        q, rn, code, k, sg = newton(mech, guess, phi_try, p, tol=tol, limit_step=False,
-                                    max_steps=opts.max_steps, **kw)
-        ksum = ksum + k
+        if merged:
+            re_phase = over(s)
+            q, rn, code, k, sg = newton(mech, jnp.where(re_phase, q_cf, guess), jnp.where(re_phase, phi, phi_try), p,
+                                        tol=tol, limit_step=re_phase,
+                                        max_steps=jnp.where(re_phase, opts.max_steps_first, opts.max_steps), **kw)
+        else:
+            q, rn, code, k, sg = newton(mech, guess, phi_try, p, tol=tol, limit_step=False,
+                                        max_steps=opts.max_steps, **kw)
+        ksum_new = ksum + k
         conv = code == RESULTS.converged
         same = _same_circuit(sg, sign_ref)
         # first try: done unless it converged on another circuit; sub-steps: accepted when
@@ -173,21 +196,31 @@ def _advance(mech, opts, p, tol, kw, st: _Track, phi):
         ok = ~first_try & conv & same
         fin = (first_try & ~flipped) | (ok & last_sub)
         # (where the sub-steps fail: the first try's position, on the other circuit, `max_steps`)
-        code = jnp.where(flipped, jnp.asarray(RESULTS.max_steps, code.dtype), code)
-        out = jax.tree_util.tree_map(lambda a, b: jnp.where(fin | flipped, a, b), (q, rn, code, ksum, sg), out)
-        out = out[:3] + (ksum,) + out[4:]
+        code_c = jnp.where(flipped, jnp.asarray(RESULTS.max_steps, code.dtype), code)
+        out_n = jax.tree_util.tree_map(lambda a, b: jnp.where(fin | flipped, a, b), (q, rn, code_c, ksum_new, sg), out)
+        out_n = out_n[:3] + (ksum_new,) + out_n[4:]
         h = jnp.where(first_try, 0.5 * (phi - hph[0]), jnp.where(ok, h, 0.5 * h))
-        return (_push(hq, q, ok), _push(hph, phi_try, ok), ng + ok.astype(jnp.int32),
-                jnp.where(first_try, hph[0], jnp.where(ok, phi_try, phi_cur)), h, tries + 1, fin, out, ksum)
+        new = (_push(hq, q, ok), _push(hph, phi_try, ok), ng + ok.astype(jnp.int32),
+               jnp.where(first_try, hph[0], jnp.where(ok, phi_try, phi_cur)), h, tries + 1, fin, out_n, ksum_new)
+        if not merged:
+            return new
+        # the re-assembly's trip: its result on the circuit kept (another circuit: `max_steps`)
+        other = conv & ~_same_circuit(sg, st.sign_ref)
+        re = (q, rn, jnp.where(other, jnp.asarray(RESULTS.max_steps, jnp.int8), code), k, sg)
+        kept = jax.tree_util.tree_map(lambda a, b: jnp.where(re_phase, b, a), new, s[:9])
+        return kept + (jax.tree_util.tree_map(lambda a, b: jnp.where(re_phase, a, b), re, s[9]), s[10] | re_phase)
 
     out0 = (hist_q[0], jnp.asarray(jnp.inf, dtype), jnp.asarray(RESULTS.max_steps, jnp.int8), zero, sign_ref)
-    init = batched_like((hist_q, hist_phi, n_good, hist_phi[0], jnp.zeros((), dtype), zero, restart, out0, zero),
-                        st, phi, p, tol)
-    cont = jax.lax.while_loop(cond, body, init)[7]
+    state = (hist_q, hist_phi, n_good, hist_phi[0], jnp.zeros((), dtype), zero, restart, out0, zero)
+    if merged:
+        re0 = (hist_q[0], jnp.asarray(jnp.inf, dtype), jnp.asarray(RESULTS.nonfinite, jnp.int8), zero, sign_ref)
+        state = state + (re0, jnp.zeros((), bool))
+    final = jax.lax.while_loop(cond, body, batched_like(state, st, phi, p, tol))
+    cont = final[7]
     # where the continuation failed (next to a toggle the predictor can be far off) or after a
     # failed position: re-assemble
-    failed = ~restart & (cont[2] != RESULTS.converged) & (cont[2] != RESULTS.singular)
-    re = _reassemble(mech, opts, p, phi, st, tol, kw, restart | failed)
+    failed = ~restart & failing(cont[2])
+    re = final[9] if merged else _reassemble(mech, opts, p, phi, st, tol, kw, restart | failed)
     use = restart | (failed & ((re[2] == RESULTS.converged) | (re[2] == RESULTS.singular)))
     q, rn, code, k, sg = jax.tree_util.tree_map(lambda a, b: jnp.where(use, a, b), re, cont)
     k = jnp.where(failed, re[3] + cont[3], k)
