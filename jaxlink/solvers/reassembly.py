@@ -95,25 +95,14 @@ def _reassemble(mech, opts, p, phi, st: _Track, tol, kw, active):
     across the gap, on the circuit `st.sign_ref` (each block's sign of det Φ_q: for a dyad, the
     side of its known vector that its first link lies on, the branch σ of `_dyads`).
 
-    When every block is a dyad: the closed form on the branches of the last converged position,
-    polished by step-limited Newton. Otherwise the candidates are the last converged q and the
+    For a structure that is not all dyads (a dyadic one re-assembles from the closed form inside
+    the continuation step, `continuation._advance`): the candidates are the last converged q and the
     file's guess, each by step-limited Newton; a candidate that converges on another circuit is
     deflated (`_deflated_newton`) and the search goes on from the candidates with the roots found
     so far removed, up to twice the number of candidates in all. Returns `(q, rnorm, result,
     steps, signs)`; `max_steps` where only another circuit was found (the branch is kept, never
     switched). No iteration where not `active`."""
-    dyads = _dyads.classify(mech)
-    if dyads is not None:
-        # every block a dyad: the closed form on the branches of the last converged position is
-        # the position on its circuit (or there is none), so one Newton polish from it decides —
-        # no search, no deflation (half the code of a continuation solve was this loop)
-        _, _, _, sigma = _dyads.solve_nearest(mech, dyads, st.hq[0], st.hph[0], p)
-        q_cf, _, _, _ = _dyads.solve(mech, dyads, sigma, st.hq[0], phi, p)
-        q, rn, code, k, sg = newton(mech, q_cf, phi, p, tol=jnp.where(active, tol, jnp.nan), limit_step=True,
-                                    max_steps=opts.max_steps_first, **kw)
-        conv = code == RESULTS.converged
-        other = conv & ~_same_circuit(sg, st.sign_ref)
-        return q, rn, jnp.where(other, jnp.asarray(RESULTS.max_steps, jnp.int8), code), k, sg
+    assert _dyads.classify(mech) is None, "a dyadic linkage re-assembles inside the continuation step (_advance)"
     dtype = jnp.result_type(st.hq[0])
     scale = mech.length_scale(p)
     unit = _units(mech, scale, dtype)
