@@ -16,7 +16,6 @@ from jaxlink.cli import main as cli_main
 from jaxlink.synthesis import distance as D
 from jaxlink.synthesis import topology as T
 from jaxlink.synthesis.assembly import certify
-from jaxlink.synthesis.mechanism import placed_pose, to_sketch
 from jaxlink.synthesis.target import load_target
 from jaxlink.synthesis.tracer import trace, trace_exact
 
@@ -108,24 +107,13 @@ def test_pin_over_the_pivot_between_samples_is_rejected():
     assert trace_exact(LEVER, pose, np.array([h / 2]))[1][0, 0] < 1e-24  # d = 0: the pin on the pivot
 
 
-def _replay(tmp_path, topo, pose, m):
-    placed = placed_pose(topo, pose, 0.0, m)
-    f = tmp_path / f"{topo.name}.toml"
-    f.write_text(to_sketch(topo, placed, unit="mm").toml())
-    start = math.degrees(math.atan2(*(placed[T.CRANK] - placed[0])[::-1]))
-    out = tmp_path / f"{topo.name}.csv"
-    assert cli_main(["kinematics", str(f), "--start", repr(start), "--step", "5", "--outputs", "position",
-                     "--units", "file", "--csv", str(out)]) == 0
-    rows = list(csv.DictReader(out.open()))
-    return np.array([[float(x["P_x_mm"]), float(x["P_y_mm"])] for x in rows]), f.read_text()
-
-
 @pytest.mark.parametrize("name", ["four-bar+lever-J4", "watt-coupler-rocker+lever-J4"])
 def test_lever_sketch_replays_the_tracer(tmp_path, name):
     """A lever topology written as a sketch (the lever a link of its pivot and its point, the block's
     pin sliding on it `through` the pivot): `jaxlink kinematics` (an RPR dyad in closed form) traces
     the tracer's path."""
     from test_synthesis import _assemblable
+    from test_synthesis_sliders import _replay
 
     topo = next(t for t in T.topologies(8, levers=True) if t.name == name)
     pose = POSE if topo is LEVER or topo.name == LEVER.name else _assemblable(topo)

@@ -148,11 +148,18 @@ def test_a_wrong_state_changes_the_search_and_another_search_is_refused(whole, a
         rest = _clean(lines[1:])
         assert got != whole[0] and rest != whole[1][-len(rest):], part
     monkeypatch.undo()
-    for other in (dict(OPTS, seed=6), dict(OPTS, samples=256), dict(OPTS, topologies=["watt-coupler-rocker"])):
+    # every input that changes the answer is in the state's fingerprint: one changed, it is refused
+    # (before anything compiles); the compile level too (a time limit over 15 s: not `quick`)
+    for change in (dict(seed=6), dict(samples=256), dict(topologies=["watt-coupler-rocker"]), dict(rounds=5),
+                   dict(count=301), dict(n_points=150), dict(max_size=3.0), dict(min_transmission=20.0),
+                   dict(finish=0), dict(time_limit=20), dict(topologies=None, max_links=6)):
         with pytest.raises(MechanismError, match="another search"):
-            api.synthesize(tgt, checkpoint=state, resume=True, **other)
-    with pytest.raises(MechanismError, match="another search"):
-        api.synthesize(make_target(TARGET * 1.01, closed=True), checkpoint=state, resume=True, **OPTS)
+            api.synthesize(tgt, checkpoint=state, resume=True, **dict(OPTS, **change))
+    for moved in (TARGET * 1.01, TARGET[::-1]):  # another size, the other way round
+        with pytest.raises(MechanismError, match="another search"):
+            api.synthesize(make_target(moved, closed=True), checkpoint=state, resume=True, **OPTS)
+    with pytest.raises(MechanismError, match="another search"):  # the same points as an open path
+        api.synthesize(make_target(TARGET, closed=False), checkpoint=state, resume=True, **OPTS)
     state.write_bytes(b"not a pickle")
     with pytest.raises(MechanismError, match="not a saved synthesis state"):
         api.synthesize(tgt, checkpoint=state, resume=True, **OPTS)

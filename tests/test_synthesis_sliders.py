@@ -113,6 +113,9 @@ def test_slider_failing_between_samples_is_rejected():
 
 
 def _replay(tmp_path, topo, pose, m):
+    """The traced point of `topo` (its search pose `pose`, placed by the match `m`) written as a sketch
+    and replayed by `jaxlink kinematics` every 5°: (points in mm, the sketch's text). Also used by
+    tests/test_synthesis_levers.py."""
     placed = placed_pose(topo, pose, 0.0, m)
     f = tmp_path / f"{topo.name}.toml"
     f.write_text(to_sketch(topo, placed, unit="mm").toml())
@@ -121,7 +124,7 @@ def _replay(tmp_path, topo, pose, m):
     assert cli_main(["kinematics", str(f), "--start", repr(start), "--step", "5", "--outputs", "position",
                      "--units", "file", "--csv", str(out)]) == 0
     rows = list(csv.DictReader(out.open()))
-    return np.array([[float(x["P_x_mm"]), float(x["P_y_mm"])] for x in rows])
+    return np.array([[float(x["P_x_mm"]), float(x["P_y_mm"])] for x in rows]), f.read_text()
 
 
 @pytest.mark.parametrize("name", ["slider-crank", "watt-crank-frame+slider-J4+slider-J7",
@@ -136,7 +139,7 @@ def test_slider_sketch_replays_the_tracer(tmp_path, name):
     m = D.Match(0.0, 0.4, 25.0, np.array([3.0, -2.0]))
     text = to_sketch(topo, placed_pose(topo, pose, 0.0, m), unit="mm").toml()
     assert text.count("on = \"frame\"") == len(topo.sliders)
-    got = _replay(tmp_path, topo, pose, m)
+    got = _replay(tmp_path, topo, pose, m)[0]
     want = D.place(trace_exact(topo, pose, np.radians(5.0 * np.arange(72)))[0][:, topo.traced], m)
     assert np.max(np.abs(got - want)) < 1e-9 * 25
 

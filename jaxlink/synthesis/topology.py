@@ -116,14 +116,20 @@ def slide(topo: Topology, k: int, *, name: str | None = None) -> Topology:
     (the four-bar's: `slider-crank`)."""
     if k not in slidable(topo):
         raise ValueError(f"{topo.name}: dyad {k} cannot become a slider (`slidable`: {slidable(topo)})")
-    p1, p2 = topo.dyads[k]
-    if p1 < N_FRAME:
-        p1, p2 = p2, p1
-    dyads = topo.dyads[:k] + ((p1, p2),) + topo.dyads[k + 1:]
+    dyads = _frame_joint(topo, k, first=False)
     j = CRANK + 1 + k
     if name is None:
         name = "slider-crank" if topo.name == "four-bar" else f"{topo.name}+slider-J{j}"
     return Topology(name, dyads, topo.traced, tuple(sorted(topo.sliders + (k,))), topo.levers)
+
+
+def _frame_joint(topo: Topology, k: int, *, first: bool) -> tuple[tuple[int, int], ...]:
+    """`topo.dyads` with dyad `k`'s frame joint stored first (a lever's pivot) or second (a slider's
+    guide anchor)."""
+    p1, p2 = topo.dyads[k]
+    if (p1 < N_FRAME) != first:
+        p1, p2 = p2, p1
+    return topo.dyads[:k] + ((p1, p2),) + topo.dyads[k + 1:]
 
 
 def _prefix(topo: Topology, k: int) -> Topology:
@@ -143,12 +149,8 @@ def lever(topo: Topology, k: int, *, name: str | None = None) -> Topology:
     at the dyad's moving parent slides; the pivot stored first. Named `NAME+lever-J<j>` by default."""
     if k not in leverable(topo):
         raise ValueError(f"{topo.name}: dyad {k} cannot become a slotted lever (`leverable`: {leverable(topo)})")
-    p1, p2 = topo.dyads[k]
-    if p2 < N_FRAME:
-        p1, p2 = p2, p1
-    dyads = topo.dyads[:k] + ((p1, p2),) + topo.dyads[k + 1:]
-    return Topology(name or f"{topo.name}+lever-J{CRANK + 1 + k}", dyads, topo.traced, topo.sliders,
-                    tuple(sorted(topo.levers + (k,))))
+    return Topology(name or f"{topo.name}+lever-J{CRANK + 1 + k}", _frame_joint(topo, k, first=True), topo.traced,
+                    topo.sliders, tuple(sorted(topo.levers + (k,))))
 
 
 def with_levers(topo: Topology) -> list[Topology]:
