@@ -179,6 +179,36 @@ def test_float64_polish_recovers_a_planted_four_bar(closed):
     finally:
         jax.config.update("jax_enable_x64", True)
     assert off is not None and np.array_equal(off.pose, out.pose) and (off.start, off.span) == (out.start, out.span)
+    # a deadline (a time-limited search's): one that does not pass changes nothing; one already past
+    # returns the start itself; one 0.2 s away stops L-BFGS early, at a point of lower loss
+    import time
+
+    from jaxlink.synthesis.polish import polish
+
+    args = (arr.parents[0], arr.active[0], int(arr.traced[0]), pose, start, span, tgt)
+    whole = polish(*args)
+    late = polish(*args, deadline=time.perf_counter() + 3600.0)
+    assert np.array_equal(late[0], whole[0]) and late[1:] == whole[1:]
+    past = polish(*args, deadline=time.perf_counter() - 1.0)
+    assert np.array_equal(past[0], pose) and past[1:] == (start, span if not closed else 2 * np.pi)
+    t1 = time.perf_counter()
+    cut = polish(*args, deadline=t1 + 0.2)
+    assert time.perf_counter() - t1 < 0.2 + 0.5  # one evaluation past the deadline at most (~ms)
+    assert not np.array_equal(cut[0], pose) and not np.array_equal(cut[0], whole[0])
+    cut_d = score(FOUR_BAR, cut[0], cut[1], cut[2], tgt, n_trace=1000, n_points=D.N_POINTS)[0].distance
+    assert cut_d < m.distance, (cut_d, m.distance)
+
+
+def test_when_a_polish_starts():
+    """`search._polish_starts`: with `rounds` always; one process: while at least `POLISH_MIN_S`
+    of the time limit is left, however long the polish was expected to take (it stops at the
+    limit); the guess only decides where several processes must polish alike (not here)."""
+    from jaxlink.synthesis.search import POLISH_MIN_S, SCORE_RESERVE_S, _polish_starts
+
+    assert SCORE_RESERVE_S < POLISH_MIN_S
+    assert _polish_starts(-5.0, 100.0, True) and _polish_starts(0.0, 0.0, True)
+    assert _polish_starts(POLISH_MIN_S, 30.0, False) and _polish_starts(23.0, 30.0, False)
+    assert not _polish_starts(POLISH_MIN_S - 1e-3, 0.0, False) and not _polish_starts(-1.0, 0.0, False)
 
 
 def test_planted_open_arc_by_subinterval():

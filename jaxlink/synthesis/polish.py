@@ -22,6 +22,7 @@ polished and the original is nearer the target).
 from __future__ import annotations
 
 import functools
+import time
 
 import jax
 import jax.numpy as jnp
@@ -122,13 +123,20 @@ def program_timed(n_dyads: int, n_points: int, sliders: bool = False, bounded: b
         return compiled("synthesis-polish-timed", _value_and_grad_timed, avals, (sliders, bounded))
 
 
+class _PastDeadline(Exception):
+    """`polish`'s deadline passed (raised out of scipy's L-BFGS-B, caught by `polish`)."""
+
+
 def polish(parents: np.ndarray, active: np.ndarray, traced: int, pose: np.ndarray, start: float, span: float,
            target: Target, *, n_points: int = _dist.N_POINTS, sliders: bool = False,
-           max_size: float | None = None, min_transmission: float | None = None) -> tuple[np.ndarray, float, float]:
+           max_size: float | None = None, min_transmission: float | None = None,
+           deadline: float | None = None) -> tuple[np.ndarray, float, float]:
     """(pose, start, span) of one candidate (a row of `topology.as_arrays`, its pose padded like it)
     after L-BFGS at each τ of `TAUS` (module doc), with the size penalty for `max_size` (`size`) and
     the margin floor of `min_transmission` (degrees, `transmission`) if given; the caller scores it and
-    walks back (`BACK`)."""
+    walks back (`BACK`). `deadline` (a `time.perf_counter()` time): L-BFGS stops at the first
+    evaluation past it, and the point of least loss evaluated at the τ then reached is the result
+    (a deadline already past: the start itself); none: the whole polish."""
     from scipy.optimize import minimize
 
     closed = target.closed
@@ -154,16 +162,25 @@ def polish(parents: np.ndarray, active: np.ndarray, traced: int, pose: np.ndarra
         x = np.concatenate([np.asarray(pose, float).ravel(), [start, span]])
         for tau in TAUS[-1:] if timed else TAUS:  # the ordered distance is smooth: no continuation
             t = jnp.asarray(tau, jnp.float64)
+            least = [np.inf, x]  # the least loss evaluated at this τ, and where
 
-            def f(x, t=t):
+            def f(x, t=t, least=least):
                 v, g = prog(jnp.asarray(x, jnp.float64), par, act, tr, tgt, *args, t, jnp.asarray(bounds, jnp.float64))
                 v, g = float(v), np.asarray(g, float)
                 if not (np.isfinite(v) and np.all(np.isfinite(g))):
-                    return np.inf, np.zeros_like(x)
+                    v, g = np.inf, np.zeros_like(x)
+                if v < least[0]:
+                    least[:] = [v, np.array(x, float)]
+                if deadline is not None and time.perf_counter() >= deadline:
+                    raise _PastDeadline
                 return v, g
 
             opts = {"maxiter": ITERS, **(TIMED_TOL if timed else {})}
-            x = minimize(f, x, jac=True, method="L-BFGS-B", options=opts).x
+            try:
+                x = minimize(f, x, jac=True, method="L-BFGS-B", options=opts).x
+            except _PastDeadline:
+                x = np.asarray(least[1], float)
+                break
     if timed:
         return x[:2 * nj].reshape(nj, 2), float(x[2 * nj]), span
     return x[:2 * nj].reshape(nj, 2), float(x[2 * nj]), (2 * np.pi if closed else float(x[2 * nj + 1]))

@@ -643,8 +643,9 @@ def search(target: Target, topos: list[Topology], *, time_limit: float, seed: in
     every batch, all hold the same results, process 0's clock decides the rounds (`spread`).
     `finish` (default 4, 0 when `quick`: a short search has no time to compile the polish): after
     every round that round's best candidate, and after the last round up to `finish` more
-    (`_to_polish`), are polished in float64 (`polish`), each if a polish as long as the last one
-    (before the first: as the round's refinement) fits in the time left (with `rounds`: always).
+    (`_to_polish`), are polished in float64 (`polish`) while the time limit leaves room
+    (`_polish_starts`: in one process each polish stops at the limit, so the time a slow round
+    leaves is spent polishing; with `rounds`: always, each to its end).
     Each polished candidate is scored like the others and added beside its original.
     `max_size` K: every answer's size (`size.design_size`) at most K — its links at most K times the
     target's extent, its frame pivots within K times it of the target's centre —, the screen, the
@@ -742,8 +743,9 @@ def search(target: Target, topos: list[Topology], *, time_limit: float, seed: in
         t1 = time.perf_counter()
         origins.add(id(c))
         ti = topos.index(c.topology)
+        deadline = None if rounds is not None or jax.process_count() > 1 else began + time_limit - SCORE_RESERVE_S
         new = _polished(c, arr.parents[ti], arr.active[ti], int(arr.traced[ti]), target, n_trace, n_points, began,
-                        sliders, max_size if sized else None, min_transmission)
+                        sliders, max_size if sized else None, min_transmission, deadline)
         if new is not None:
             found.append(new)
         t_polish = time.perf_counter() - t1  # the estimate of the next one
@@ -828,7 +830,7 @@ def search(target: Target, topos: list[Topology], *, time_limit: float, seed: in
         if finish > 0:  # this round's best, polished in float64, if one as long as the last fits
             mine = _to_polish(found[n_before:], origins, 1, min((c.match.distance for c in found), default=np.inf))
             guess = polish_dur if t_polish is None else t_polish  # before the first: the round's refinement
-            if mine and (rounds is not None or _spread.agreed(int(now - began + guess <= time_limit))):
+            if mine and _polish_starts(time_limit - (now - began), guess, rounds is not None):
                 polish_one(mine[0])
         save("rounds")
         now = round_start = time.perf_counter()
@@ -842,12 +844,32 @@ def search(target: Target, topos: list[Topology], *, time_limit: float, seed: in
         n_done = 0
         save("finish", last=last, n_done=0)
     for k in range(n_done, len(last)):
-        if rounds is None and not _spread.agreed(int(time.perf_counter() - began + (t_polish or 0.0) <= time_limit)):
+        if not _polish_starts(time_limit - (time.perf_counter() - began), t_polish or 0.0, rounds is not None):
             break
         polish_one(found[last[k]])
         save("finish", last=last, n_done=k + 1)
     found.sort(key=lambda c: c.match.distance)
     return found
+
+
+#: the least time left (s) for which a time-limited search starts a float64 polish in one process
+POLISH_MIN_S = 1.0
+#: the time (s) a polish leaves before the time limit for its scoring (`_polished`: the trace, the
+#: certificate and up to `polish.BACK` points back)
+SCORE_RESERVE_S = 0.5
+
+
+def _polish_starts(left: float, guess: float, exact: bool) -> bool:
+    """Whether a float64 polish starts with `left` seconds of the time limit left: with `rounds`
+    (`exact`) always; in one process when at least `POLISH_MIN_S` is left (the polish stops at the
+    time limit less `SCORE_RESERVE_S`, `polish.polish`'s deadline, whatever it was expected to
+    take); in several processes, which must polish alike, when one as long as `guess` (the last
+    polish's time; before the first, the round's refinement) fits, as process 0's clock says."""
+    if exact:
+        return True
+    if jax.process_count() == 1:
+        return left >= POLISH_MIN_S
+    return bool(_spread.agreed(int(guess <= left)))
 
 
 def _to_polish(found: list[Candidate], origins: set[int], n: int, best: float | None = None) -> list[Candidate]:
@@ -871,12 +893,13 @@ def _to_polish(found: list[Candidate], origins: set[int], n: int, best: float | 
 
 def _polished(c: Candidate, parents, active, traced: int, target: Target, n_trace: int, n_points: int,
               t0: float, sliders: bool = False, max_size: float | None = None,
-              min_transmission: float | None = None) -> Candidate | None:
-    """`c` polished (`polish.polish`) and scored; if it does not assemble (or is larger than
-    `max_size`, or its least transmission angle below `min_transmission`), the first point back
-    towards `c` (`polish.BACK`) that does; None if none does."""
+              min_transmission: float | None = None, deadline: float | None = None) -> Candidate | None:
+    """`c` polished (`polish.polish`, stopped at `deadline` if given) and scored; if it does not
+    assemble (or is larger than `max_size`, or its least transmission angle below `min_transmission`),
+    the first point back towards `c` (`polish.BACK`) that does; None if none does."""
     pose, start, span = _polish(parents, active, traced, c.pose, c.start, c.span, target, n_points=n_points,
-                                sliders=sliders, max_size=max_size, min_transmission=min_transmission)
+                                sliders=sliders, max_size=max_size, min_transmission=min_transmission,
+                                deadline=deadline)
     floor = _tm.floor_of(min_transmission)
     frame = _size.target_frame(target, n_points)
     for f in BACK:
