@@ -199,6 +199,23 @@ def test_float64_polish_recovers_a_planted_four_bar(closed):
     assert cut_d < m.distance, (cut_d, m.distance)
 
 
+def test_which_round_is_next():
+    """`search._next_round` (a time-limited search): after a full round a polishing one, then full
+    ones while `ROUND_MARGIN` times the last full round fits, polishing ones while only they fit,
+    then none; the margin itself: a round whose last time just fits is not started."""
+    from jaxlink.synthesis.search import ROUND_MARGIN, _next_round
+
+    assert ROUND_MARGIN > 1
+    assert _next_round(100.0, 30.0, 10.0, True, False) == 1  # after a full round: polishing
+    assert _next_round(100.0, 30.0, 10.0, True, True) == 0  # after a polishing round: full
+    assert _next_round(100.0, 30.0, 10.0, False, False) == 0  # no elites: no polishing round
+    assert _next_round(30.0, 30.0, 10.0, True, True) == 1  # a full one no longer fits: polishing
+    assert _next_round(30.0 * ROUND_MARGIN, 30.0, 10.0, True, True) == 0
+    assert _next_round(10.0, 30.0, 10.0, True, True) == -1  # the polishing round just fits: not started
+    assert _next_round(10.0 * ROUND_MARGIN, 30.0, 10.0, True, True) == 1
+    assert _next_round(1e9, 30.0, 10.0, True, False) == 1 and _next_round(-1.0, 0.0, 0.0, True, True) == -1
+
+
 def test_when_a_polish_starts():
     """`search._polish_starts`: with `rounds` always; one process: while at least `POLISH_MIN_S`
     of the time limit is left, however long the polish was expected to take (it stops at the

@@ -645,7 +645,8 @@ def search(target: Target, topos: list[Topology], *, time_limit: float, seed: in
     every round that round's best candidate, and after the last round up to `finish` more
     (`_to_polish`), are polished in float64 (`polish`) while the time limit leaves room
     (`_polish_starts`: in one process each polish stops at the limit, so the time a slow round
-    leaves is spent polishing; with `rounds`: always, each to its end).
+    leaves is spent polishing; with `rounds`: always, each to its end); in one process, while time
+    is left after those, the next best (within twice the best unpolished distance) too.
     Each polished candidate is scored like the others and added beside its original.
     `max_size` K: every answer's size (`size.design_size`) at most K — its links at most K times the
     target's extent, its frame pivots within K times it of the target's centre —, the screen, the
@@ -759,16 +760,8 @@ def search(target: Target, topos: list[Topology], *, time_limit: float, seed: in
         if rounds is not None:
             polish = bool(elites) and not polish  # as below when time is no limit
             return rnd >= rounds
-        can_polish = bool(elites) and now - began + polish_dur <= time_limit
-        if can_polish and not polish:
-            nxt = 1  # after each full round one polishing round: the best found refined again
-        elif now - began + full_dur <= time_limit:
-            nxt = 0  # another full round, if one as long as the last fits
-        elif not can_polish:
-            nxt = -1
-        else:
-            nxt = 1  # polishing again: a full round no longer fits
-        nxt = _spread.agreed(nxt)  # process 0's clock decides for all
+        nxt = _spread.agreed(_next_round(time_limit - (now - began), full_dur, polish_dur, bool(elites), polish))
+        # process 0's clock decides for all
         polish = nxt == 1
         return nxt < 0
 
@@ -848,8 +841,36 @@ def search(target: Target, topos: list[Topology], *, time_limit: float, seed: in
             break
         polish_one(found[last[k]])
         save("finish", last=last, n_done=k + 1)
+    while finish > 0 and rounds is None and jax.process_count() == 1 and _polish_starts(
+            time_limit - (time.perf_counter() - began), 0.0, False):  # time left: the next candidates too
+        more = _to_polish(found, origins, 1, min((c.match.distance for c in found if not c.polished), default=np.inf))
+        if not more:
+            break
+        polish_one(more[0])
+        save("finish", last=last, n_done=len(last))
     found.sort(key=lambda c: c.match.distance)
     return found
+
+
+#: a time-limited search starts another round only if this many times the last one of its kind
+#: fits in the time left: a round's time varies (the slots grow with the elites; on a GPU shared by
+#: 5 processes a round took up to 2x the one before it, and three letters of 26 passed their limit
+#: of 58 s by 0.6-9 s)
+ROUND_MARGIN = 1.25
+
+
+def _next_round(left: float, full_dur: float, polish_dur: float, elites: bool, after_polish: bool) -> int:
+    """A time-limited search's next round with `left` seconds of its limit left, after a full round
+    of `full_dur` s and a polishing one of `polish_dur` s (before any: the first round's refinement),
+    `after_polish` when the round just done was a polishing one: 1 a polishing round (after each full
+    one, and while a full one no longer fits), 0 a full round, -1 none (stop); a round starts only
+    if `ROUND_MARGIN` times its kind's last time fits."""
+    can_polish = elites and ROUND_MARGIN * polish_dur <= left
+    if can_polish and not after_polish:
+        return 1  # after each full round one polishing round: the best found refined again
+    if ROUND_MARGIN * full_dur <= left:
+        return 0  # another full round
+    return 1 if can_polish else -1  # polishing again: a full round no longer fits
 
 
 #: the least time left (s) for which a time-limited search starts a float64 polish in one process
