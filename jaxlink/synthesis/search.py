@@ -820,7 +820,7 @@ def search(target: Target, topos: list[Topology], *, time_limit: float, seed: in
             polish_dur = dur
         else:
             full_dur, polish_dur = dur, now - t_ref  # the compiling is done before the first round
-        if finish > 0:  # this round's best, polished in float64, if one as long as the last fits
+        if finish > 0:  # this round's best, polished in float64 if time is left (`_polish_starts`)
             mine = _to_polish(found[n_before:], origins, 1, min((c.match.distance for c in found), default=np.inf))
             guess = polish_dur if t_polish is None else t_polish  # before the first: the round's refinement
             if mine and _polish_starts(time_limit - (now - began), guess, rounds is not None):
