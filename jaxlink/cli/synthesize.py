@@ -31,7 +31,8 @@ def register(sub) -> None:
     g.add_argument("--open", dest="closed", action="store_const", const=False,
                    help="an open path, matched by a sub-interval of the crank turn")
     p.add_argument("--time-limit", type=float, default=60.0, metavar="S",
-                   help="seconds for the search (default 60; at least one round runs)")
+                   help="seconds for the search (default 60; at least one round runs, another only if 1.25 times "
+                        "the last one's time fits; the float64 polishes use the time left and stop at the limit)")
     p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
     p.add_argument("--rounds", type=int, default=None, metavar="N",
                    help="run exactly N rounds (polishing rounds counted) whatever the time: a result that does "
