@@ -155,6 +155,13 @@ def test_a_wrong_state_changes_the_search_and_another_search_is_refused(whole, a
                    dict(finish=0), dict(time_limit=20), dict(topologies=None, max_links=6)):
         with pytest.raises(MechanismError, match="another search"):
             api.synthesize(tgt, checkpoint=state, resume=True, **dict(OPTS, **change))
+    # another jaxlink (its source changed, the version number not): refused
+    import jaxlink.cache as cache
+
+    monkeypatch.setattr(cache, "_SOURCE_DIGEST", ["another source"])
+    with pytest.raises(MechanismError, match="another search"):
+        api.synthesize(tgt, checkpoint=state, resume=True, **OPTS)
+    monkeypatch.undo()
     for moved in (TARGET * 1.01, TARGET[::-1]):  # another size, the other way round
         with pytest.raises(MechanismError, match="another search"):
             api.synthesize(make_target(moved, closed=True), checkpoint=state, resume=True, **OPTS)

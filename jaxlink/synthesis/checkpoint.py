@@ -10,7 +10,7 @@ spent before counts against it.
 
 The file is a Python pickle (candidates hold topologies, matches and certificates): resume only a
 search of your own. It carries a fingerprint of everything the result depends on (the target,
-the topologies, the seed, the options, the versions of jaxlink and JAX): a state of another search
+the topologies, the seed, the options, jaxlink's source and JAX's version): a state of another search
 is refused, never continued.
 """
 
@@ -21,7 +21,6 @@ import json
 import os
 import pathlib
 import pickle
-from importlib import metadata
 from typing import Any
 
 import numpy as np
@@ -31,19 +30,20 @@ VERSION = 1
 
 def fingerprint(target, topos, **options: Any) -> str:
     """What a saved state must match to be resumed: the target's points (and inputs), closed or
-    open, the topologies (their structure, not only their names), and `options`."""
+    open, the topologies (their structure, not only their names), `options`, jaxlink's own code
+    (`cache.source_digest`: a state is resumed only by the code that wrote it, as a stored trace is
+    loaded only by it — the package's version number stays the same across changes) and the JAX
+    version."""
     import jax
 
-    try:
-        jaxlink_version = metadata.version("jaxlink")
-    except metadata.PackageNotFoundError:  # pragma: no cover (run from a source tree)
-        jaxlink_version = "source"
+    from ..cache import source_digest
+
     h = hashlib.sha256()
     h.update(np.ascontiguousarray(target.points, np.float64).tobytes())
     if target.inputs is not None:
         h.update(np.ascontiguousarray(target.inputs, np.float64).tobytes())
     h.update(repr([(t.name, tuple(t.dyads), t.traced, t.sliders, t.levers) for t in topos]).encode())
-    h.update(json.dumps({"closed": bool(target.closed), "jaxlink": jaxlink_version, "jax": jax.__version__,
+    h.update(json.dumps({"closed": bool(target.closed), "jaxlink": source_digest(), "jax": jax.__version__,
                          **options}, sort_keys=True, default=repr).encode())
     return h.hexdigest()[:16]
 

@@ -715,6 +715,9 @@ def search(target: Target, topos: list[Topology], *, time_limit: float, seed: in
     t_polish = None  # the seconds one float64 polish took (the time kept free for the last ones)
 
     origins: set[int] = set()  # the candidates polished (by id)
+    # a time-limited search in one process: its polishes stop at the limit, and the time left after
+    # the final ones polishes further candidates (several processes must polish alike: `_polish_starts`)
+    cut = rounds is None and jax.process_count() == 1
 
     def save(stage: str, **extra) -> None:
         if path is None:
@@ -744,7 +747,7 @@ def search(target: Target, topos: list[Topology], *, time_limit: float, seed: in
         t1 = time.perf_counter()
         origins.add(id(c))
         ti = topos.index(c.topology)
-        deadline = None if rounds is not None or jax.process_count() > 1 else began + time_limit - SCORE_RESERVE_S
+        deadline = began + time_limit - SCORE_RESERVE_S if cut else None
         new = _polished(c, arr.parents[ti], arr.active[ti], int(arr.traced[ti]), target, n_trace, n_points, began,
                         sliders, max_size if sized else None, min_transmission, deadline)
         if new is not None:
@@ -841,7 +844,7 @@ def search(target: Target, topos: list[Topology], *, time_limit: float, seed: in
             break
         polish_one(found[last[k]])
         save("finish", last=last, n_done=k + 1)
-    while finish > 0 and rounds is None and jax.process_count() == 1 and _polish_starts(
+    while finish > 0 and cut and _polish_starts(
             time_limit - (time.perf_counter() - began), 0.0, False):  # time left: the next candidates too
         more = _to_polish(found, origins, 1, min((c.match.distance for c in found if not c.polished), default=np.inf))
         if not more:
