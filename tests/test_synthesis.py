@@ -419,6 +419,9 @@ def test_topology_objects_are_searched():
         synthesize(target, topologies=[big], time_limit=1)
     with pytest.raises(MechanismError, match="two topologies named"):
         synthesize(target, topologies=[mine, T.grow(mine, 4, 5)], time_limit=1)
+    for bad in (0, -5.0, float("nan"), float("inf"), "60", True):  # inf: a search that never ends
+        with pytest.raises(MechanismError, match="time_limit"):
+            synthesize(target, time_limit=bad)
 
 
 def test_builtin_topologies_by_links():

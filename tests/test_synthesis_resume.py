@@ -201,4 +201,8 @@ def test_the_command_writes_its_state_and_resumes(whole, tmp_path, monkeypatch, 
     monkeypatch.undo()
     assert main([*args, "--out", str(tmp_path / "none"), "--resume"]) == 2
     assert "does not exist" in capsys.readouterr().err
+    for bad in ("nan", "inf", "0", "-3"):  # a time limit the search could not keep, or never reach
+        assert main(["synthesize", str(csv), "--time-limit", bad, "--out", str(tmp_path / "bad")]) == 2
+        assert "--time-limit" in capsys.readouterr().err
+    assert not (tmp_path / "bad").exists()
 

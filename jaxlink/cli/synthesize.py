@@ -102,6 +102,9 @@ def cmd_synthesize(args) -> int:
 
     if args.points < 8 or args.count < 8 or args.samples < 1:
         raise MechanismError("--points and --count must be >= 8, --samples >= 1")
+    if not 0 < args.time_limit < float("inf"):  # nan too
+        raise MechanismError(f"--time-limit {args.time_limit:g}: a finite number of seconds above 0 (--rounds N "
+                             "for a search independent of the time)")
     tgt = load_target(args.target, closed=args.closed, flip_y=args.flip_y)
     names = [n.strip() for n in args.topologies.split(",") if n.strip()] if args.topologies else None
     state = None

@@ -167,6 +167,10 @@ def synthesize(target: Any, *, closed: bool | None = None, time_limit: float = 6
     Computes in float64 for the answers (NumPy) whatever JAX's x64 setting."""
     if rounds is not None and (isinstance(rounds, bool) or not isinstance(rounds, (int, np.integer)) or rounds < 1):
         raise MechanismError(f"rounds = {rounds!r}: the number of rounds must be a whole number, at least 1")
+    if isinstance(time_limit, bool) or not isinstance(time_limit, (int, float, np.integer, np.floating)) or not (
+            0 < time_limit < np.inf):
+        raise MechanismError(f"time_limit = {time_limit!r}: a finite number of seconds above 0 (an infinite one "
+                             "would never end the search; use `rounds` for a search independent of the time)")
     if isinstance(max_links, bool) or not isinstance(max_links, (int, np.integer)) or max_links < 4:
         raise MechanismError(f"max_links = {max_links!r}: a whole number of links, at least 4 (the four-bar, "
                              "the frame counted)")
