@@ -195,6 +195,12 @@ def traced(name: str, fun, args: tuple, static: tuple = ()):
     # a call like one made before in this process (a search's many small calls) skips the key text
     fast = _fast_key(name, fun, treedef, static, leaves)
     call = _LOADED.get(fast)
+    if call is None and fast in _PENDING:  # being compiled ahead (`prepare`): wait for it
+        try:
+            _PENDING.pop(fast).result()
+        except Exception:  # noqa: BLE001 (it failed there: here it is traced again, and fails or not as it will)
+            pass
+        call = _LOADED.get(fast)
     if call is None:
         key = key_text(name, fun, treedef, static, leaves)
         call = _LOADED.get(key)
@@ -210,6 +216,62 @@ def traced(name: str, fun, args: tuple, static: tuple = ()):
                     return call(*leaves)
         _remember(fast, call)
     return call(*leaves)
+
+
+# compilations started ahead (`prepare`), by the in-process key of the call they are for
+_PENDING: dict = {}
+_POOL: list = []
+
+
+def prepare(name: str, fun, args: tuple, static: tuple = ()):
+    """Start compiling, in a background thread, the program that `traced(name, fun, args, static)`
+    will run, and return its `concurrent.futures.Future` (None where it is compiled already).
+
+    Only the shapes, dtypes and tree structure of `args` matter (the program is the same for any
+    values: every number is an argument), so a caller that knows them before it has the values
+    passes placeholders of the same shapes and dtypes. A later `traced` call of the same key waits
+    for this compilation and runs what it made: the same program as without `prepare`, traced,
+    stored and compiled the same way (tests/test_cache.py). XLA compiles without holding the GIL,
+    so on a cold start the programs of one command compile side by side on the cores there are
+    instead of one after the other. An error in the background is not raised here: the `traced`
+    call traces again and raises it (or not) as it would have."""
+    import jax
+
+    if getattr(fun, "__closure__", None) or not hasattr(fun, "__qualname__") or "<locals>" in fun.__qualname__:
+        raise TypeError(f"prepare({name!r}): {fun!r} must be a module-level function without a closure")
+    leaves, treedef = jax.tree_util.tree_flatten(args)
+    static = tuple(static)
+    fast = _fast_key(name, fun, treedef, static, leaves)
+    if fast in _LOADED or (fast in _PENDING and not _PENDING[fast].done()):
+        return None
+    if not _POOL:
+        from concurrent.futures import ThreadPoolExecutor
+
+        _POOL.append(ThreadPoolExecutor(max_workers=4, thread_name_prefix="jaxlink-prepare"))
+    future = _POOL[0].submit(_prepare_one, name, fun, treedef, static, leaves, fast)
+    _PENDING[fast] = future
+    return future
+
+
+def _prepare_one(name: str, fun, treedef, static: tuple, leaves, fast) -> None:
+    """`prepare`'s work in its thread: what `traced` does before its first call, then the
+    program lowered and compiled for `leaves`' shapes (the jitted callable keeps the executable,
+    so the call runs it without compiling again)."""
+    import contextlib
+
+    import jax
+
+    key = key_text(name, fun, treedef, static, leaves)
+    call = _LOADED.get(key)
+    if call is None:
+        def flat(*xs):
+            return fun(*jax.tree_util.tree_unflatten(treedef, xs), *static)
+
+        call, lapack = _load_or_store(flat, leaves, key, _trace_path(key))
+        with contextlib.nullcontext() if lapack else _without_lapack_setup():
+            call.lower(*leaves).compile()
+        _remember(key, call)
+    _remember(fast, call)
 
 
 def compiled(name: str, fun, avals: tuple, static: tuple = (), options: dict | None = None):
@@ -321,8 +383,13 @@ def _remember(key, call) -> None:
 _LAPACK_NAME = b"lapack"
 
 
+_SKIP_LAPACK = __import__("threading").local()
+
+
 @__import__("contextlib").contextmanager
 def _without_lapack_setup():
+    """In this thread only (programs lower side by side: `prepare`), lower without JAX's LAPACK
+    set-up: JAX's own function is wrapped once by one that skips it where this is in force."""
     try:
         from jax._src.export import _export
     except ImportError:  # another JAX: nothing to skip
@@ -332,11 +399,20 @@ def _without_lapack_setup():
     if ensure is None:
         yield
         return
-    _export._ensure_backends_initialized = lambda platforms: None
+    if not getattr(ensure, "_jaxlink_wrapper", False):
+        def wrapper(*a, _ensure=ensure, **k):
+            if getattr(_SKIP_LAPACK, "on", False):
+                return None
+            return _ensure(*a, **k)
+
+        wrapper._jaxlink_wrapper = True  # type: ignore[attr-defined]
+        _export._ensure_backends_initialized = wrapper
+    before = getattr(_SKIP_LAPACK, "on", False)
+    _SKIP_LAPACK.on = True
     try:
         yield
     finally:
-        _export._ensure_backends_initialized = ensure
+        _SKIP_LAPACK.on = before
 
 
 def _pack(key: str, data: bytes | bytearray) -> bytes:

@@ -59,6 +59,17 @@ def _names(node) -> set:
     return {n.name for n in _expr.names_in(node)}
 
 
+def _frame_vector(mech: Mechanism, t, env) -> tuple:
+    """(x, y) of a term that does not move, in numpy float64 (`Mechanism.term_vector` without
+    JAX: an eager JAX operation compiles on a cold start, 0.1–0.2 s each)."""
+    if t.polar:
+        length = float(_expr.evaluate(t.length, env, mech.kinds, mech.units, _expr.LENGTH))
+        angle = float(_expr.evaluate(t.angle, env, mech.kinds, mech.units, _expr.ANGLE))
+        return t.sign * length * np.cos(angle), t.sign * length * np.sin(angle)
+    return (t.sign * float(_expr.evaluate(t.x, env, mech.kinds, mech.units, _expr.LENGTH)),
+            t.sign * float(_expr.evaluate(t.y, env, mech.kinds, mech.units, _expr.LENGTH)))
+
+
 def four_bars(mech: Mechanism, p=None) -> list:
     """Every four-bar loop of `mech` with the design `p` (SI, default the file's), in file order."""
     p = np.asarray(mech.parameters if p is None else p, dtype=float)
@@ -88,8 +99,8 @@ def four_bars(mech: Mechanism, p=None) -> list:
         for kind, ts in groups:
             if kind == "frame":
                 roles.append("frame")
-                x = sum(float(mech.term_vector(t, env)[0]) for t in ts)
-                y = sum(float(mech.term_vector(t, env)[1]) for t in ts)
+                x = sum(_frame_vector(mech, t, env)[0] for t in ts)
+                y = sum(_frame_vector(mech, t, env)[1] for t in ts)
                 lengths.append(float(np.hypot(x, y)))
                 continue
             t = ts[0]

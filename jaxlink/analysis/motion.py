@@ -35,6 +35,7 @@ from ..results import RESULTS
 from ..solvers import dyads as _dyads
 from ..solvers.assemble import solve
 from ..solvers.branch_points import TOGGLE, branch_points
+from .stroke import BLOCK
 from .whole_curve import _arg
 
 _GOLD = 0.6180339887498949
@@ -77,23 +78,41 @@ def _cos_mu(mech, dyads, j, sigma, q_ref, phi, p):
 
 
 def _turn_arrays(mech, phis, p):
-    """The turn's closed-form solve (`solve`, from the guesses), the dyads' branches σ at its first
-    sample and the certificate of the turn between its samples (`phis[:-1]`, a whole turn; used
-    only where every sample assembled): `(q, result, sigma, certified, where)`."""
+    """The turn's closed-form solve (`solve`, from the guesses), the dyads' branches σ at its
+    first sample and that sample's residual and Newton steps: `(q, result, sigma, residual,
+    steps)`."""
+    sol = solve(mech, phis, p, points=False)
+    dyads = _dyads.classify(mech)
+    sigma = _dyads.solve_nearest(mech, dyads, sol.q[0], phis[0], p)[3]
+    return sol.q, sol.result, sigma, sol.residual[0], sol.steps[0]
+
+
+def _certificate(mech, sigma, q_ref, phis, p):
+    """The certificate of the turn between its samples `phis` (a whole turn) on the branches σ:
+    `(certified, where)` (`jaxlink.analysis.feasibility.certify`). A program of its own, so that
+    it compiles beside the turn's (`prepare`)."""
     from .feasibility import certify
 
-    sol = solve(mech, phis, p)
-    dyads = _dyads.classify(mech)
-    q0 = sol.q[0]
-    sigma = _dyads.solve_nearest(mech, dyads, q0, phis[0], p)[3]
-    cert = certify(mech, dyads, sigma, q0, phis[:-1], p)
-    return sol.q, sol.result, sigma, cert.certified, cert.where
+    cert = certify(mech, _dyads.classify(mech), sigma, q_ref, phis, p)
+    return cert.certified, cert.where
 
 
 def _cos_mus(mech, sigma, q_ref, phis, p, js):
     """cos μ of the RRR dyads `js` (static) at the inputs `phis` (M,): (len(js), M)."""
     dyads = _dyads.classify(mech)
     return jnp.stack([jax.vmap(lambda ph, j=j: _cos_mu(mech, dyads, j, sigma, q_ref, ph, p))(phis) for j in js])
+
+
+def _cos_mus_blocked(mech, js, sigma, q_ref, x, p):
+    """`_cos_mus` at the inputs `x` (M,) through a stored trace, in blocks of `BLOCK` inputs (the
+    last one padded; one program for the samples and the refinement): numpy (len(js), M)."""
+    x = np.asarray(x, p.dtype)
+    n = x.shape[0]
+    m = max(BLOCK, -(-n // BLOCK) * BLOCK)
+    xs = np.concatenate([x, np.full(m - n, x[0] if n else 0.0, dtype=x.dtype)])
+    parts = [np.asarray(traced("motion_cos_mu", _cos_mus, (_arg(mech, p), sigma, q_ref, xs[i:i + BLOCK], p), (js,)))
+             for i in range(0, m, BLOCK)]
+    return np.concatenate(parts, axis=1)[:, :n]
 
 
 def _margin_root(mech, sigma, q_ref, lo, hi, p, j):
@@ -171,6 +190,58 @@ def _golden(f, a, b, c0, x0, sign, iterations: int = 60):
     return np.asarray(best), np.asarray(best_x)
 
 
+def _turn_inputs(mech, p, samples: int):
+    """The turn's inputs (one turn from `start`, the start again at the end) and the design in
+    float64 where JAX computes in it (the command line), JAX's float (float32) otherwise."""
+    p = np.asarray(mech.parameters if p is None else p, dtype=jax.dtypes.canonicalize_dtype(np.float64))
+    h = 2 * np.pi / samples
+    return float(mech.input_start) + h * np.arange(samples + 1), p
+
+
+def prepare(mech: Mechanism, p=None, *, samples: int = 3600) -> None:
+    """Start compiling the programs `motion(mech, p, samples=samples)` runs on a linkage whose input
+    turns fully (the turn, its certificate, the transmission angles and the outputs' jets) and the
+    Jacobian of `start`, each in a background thread (`jaxlink.cache.prepare`): on a cold start
+    they compile side by side instead of one after the other. Nothing where `motion` gives None."""
+    from ..cache import prepare as _prepare
+    from . import stroke
+
+    dyads = _dyads.classify(mech)
+    if dyads is None or mech.input_kind != "angle":
+        return
+    phis, p = _turn_inputs(mech, p, samples)
+    arg = _arg(mech, p)
+    _prepare("motion_turn", _turn_arrays, (arg, phis, p))
+    sigma = np.zeros(len(dyads), p.dtype)  # placeholders: the shapes and dtypes `motion_turn` gives
+    q0 = np.zeros(len(mech.unknown_names), p.dtype)
+    _prepare("motion_certificate", _certificate, (arg, sigma, q0, phis[:-1], p))
+    js = tuple(j for j, d in enumerate(dyads) if d.kind == "RRR")
+    if js:
+        _prepare("motion_cos_mu", _cos_mus, (arg, sigma, q0, np.zeros(BLOCK, p.dtype), p), (js,))
+    stroke.prepare(mech, sigma, q0, p)
+    _prepare("motion_jacobian", _jacobian, (arg, q0, phis[0], p))
+
+
+def _jacobian(mech, q, phi, p):
+    """Φ_q at (q, φ)."""
+    return jax.jacfwd(mech.residual)(q, phi, p)
+
+
+def start(mech: Mechanism, p=None, *, samples: int = 3600):
+    """What `jaxlink check` reports at `[input] start`, from the programs of `motion` (the first
+    input of its turn is the start, solved from the guesses as a solve of the start alone: the
+    same closed form, number for number — tests/test_check_start.py): `(q, result, residual,
+    steps, jacobian)` as numpy arrays, or None where `motion` gives None."""
+    dyads = _dyads.classify(mech)
+    if dyads is None or mech.input_kind != "angle":
+        return None
+    phis, p = _turn_inputs(mech, p, samples)
+    arg = _arg(mech, p)
+    q, res, _, resid0, steps0 = (np.asarray(x) for x in traced("motion_turn", _turn_arrays, (arg, phis, p)))
+    jac = np.asarray(traced("motion_jacobian", _jacobian, (arg, q[0], phis[0], p)))
+    return q[0], res[0], resid0, steps0, jac
+
+
 def motion(mech: Mechanism, p=None, *, samples: int = 3600) -> Motion | None:
     """The range of motion and the dyads' transmission angles of `mech` (design `p`, SI, default
     the file's) on the branch of its guesses; None unless the input is an angle and every block
@@ -179,12 +250,9 @@ def motion(mech: Mechanism, p=None, *, samples: int = 3600) -> Motion | None:
     dyads = _dyads.classify(mech)
     if dyads is None or mech.input_kind != "angle":
         return None
-    # float64 where JAX computes in it (the command line); JAX's float (float32) otherwise
-    p = np.asarray(mech.parameters if p is None else p, dtype=jax.dtypes.canonicalize_dtype(np.float64))
+    phis, p = _turn_inputs(mech, p, samples)
     start = float(mech.input_start)
-    h = 2 * np.pi / samples
-    phis = start + h * np.arange(samples + 1)  # one turn, the start again at the end
-    q_all, res, sigma, *cert = (np.asarray(x) for x in traced("motion_turn", _turn_arrays, (_arg(mech, p), phis, p)))
+    q_all, res, sigma, _, _ = (np.asarray(x) for x in traced("motion_turn", _turn_arrays, (_arg(mech, p), phis, p)))
     ok = (res == RESULTS.converged) | (res == RESULTS.singular)
     lower = upper = None
     full = bool(ok.all())
@@ -204,7 +272,9 @@ def motion(mech: Mechanism, p=None, *, samples: int = 3600) -> Motion | None:
         upper = upper if up is None else up[0]
         lower = lower if down is None else down[0]
     if full:  # every sample assembled: certify the whole turn between them too
-        window = _window_between_samples(mech, sigma, q0, phis[:-1], p, cert)
+        cert = (np.asarray(x) for x in traced("motion_certificate", _certificate, (_arg(mech, p), sigma, q0,
+                                                                                   phis[:-1], p)))
+        window = _window_between_samples(mech, sigma, q0, phis[:-1], p, tuple(cert))
         if window is not None:
             full, upper, lower = False, window[0], window[1] - 2 * np.pi
     lo_end = start if full or lower is None else lower
@@ -213,7 +283,7 @@ def motion(mech: Mechanism, p=None, *, samples: int = 3600) -> Motion | None:
     js = tuple(j for j, d in enumerate(dyads) if d.kind == "RRR")
     if js:
         def f(x):  # (len(js), len(x)), numpy (indexing a JAX array would dispatch an operation)
-            return np.asarray(traced("motion_cos_mu", _cos_mus, (_arg(mech, p), sigma, q0, np.asarray(x), p), (js,)))
+            return _cos_mus_blocked(mech, js, sigma, q0, x, p)
 
         grid = np.linspace(lo_end, hi_end, samples + 1)
         c = f(grid)  # (len(js), samples + 1)

@@ -36,7 +36,10 @@ from ..model.mechanism import Mechanism
 from ..solvers import dyads as _dyads
 
 _GOLD = 0.6180339887498949
-_PAD = 8  # refinement batches are padded to a multiple of this (few shapes, few compiles)
+#: every evaluation of the jets runs on blocks of this many inputs (the last one padded): the
+#: samples of the turn and every refinement step are one compiled program, and `prepare` can
+#: compile it before the samples are known (the same numbers: each input is computed alone)
+BLOCK = 128
 
 
 def rockers(mech: Mechanism) -> tuple:
@@ -74,17 +77,45 @@ def _jets_of(mech, sigma, q_ref, phis, p, idx):
     return jax.vmap(one)(phis)
 
 
-def _jets(mech, idx, sigma, q_ref, phis, p):
-    """`_jets_of` through a stored trace (`jaxlink.cache.traced`; the mechanism an argument)."""
+def _jets_args(mech, sigma, q_ref, phis, p):
     from .whole_curve import _arg
 
     p = np.asarray(p)
-    return traced("stroke_jets", _jets_of, (_arg(mech, p), np.asarray(sigma, p.dtype), np.asarray(q_ref, p.dtype),
-                                            np.asarray(phis, p.dtype), p), (tuple(idx),))
+    return (_arg(mech, p), np.asarray(sigma, p.dtype), np.asarray(q_ref, p.dtype), np.asarray(phis, p.dtype), p)
+
+
+def _jets(mech, idx, sigma, q_ref, phis, p):
+    """`_jets_of` at the inputs `phis` (M,) through a stored trace (`jaxlink.cache.traced`; the
+    mechanism an argument), in blocks of `BLOCK` inputs: numpy arrays (M, len(idx))."""
+    phis = np.asarray(phis)
+    n = phis.shape[0]
+    m = max(BLOCK, -(-n // BLOCK) * BLOCK)
+    xs = np.concatenate([phis, np.full(m - n, phis[0] if n else 0.0, dtype=phis.dtype)])
+    parts = [[np.asarray(a) for a in traced("stroke_jets", _jets_of, _jets_args(mech, sigma, q_ref, xs[i:i + BLOCK], p),
+                                            (tuple(idx),))] for i in range(0, m, BLOCK)]
+    return tuple(np.concatenate([part[k] for part in parts])[:n] for k in range(3))
+
+
+def prepare(mech: Mechanism, sigma, q_ref, p) -> None:
+    """Compile ahead (`jaxlink.cache.prepare`) the jets `outputs` evaluates; `sigma` and `q_ref`
+    only for their shapes and dtypes."""
+    from ..cache import prepare as _prepare
+
+    idx = output_columns(mech)[1]
+    if idx:
+        _prepare("stroke_jets", _jets_of, _jets_args(mech, sigma, q_ref, np.zeros(BLOCK), p), (idx,))
+
+
+def output_columns(mech: Mechanism) -> tuple:
+    """`(names, idx)`: the candidate outputs (every length unknown and every rocker) and their
+    unknowns' indices."""
+    rock = rockers(mech)
+    names = [n for n, k in zip(mech.unknown_names, mech.unknown_kinds) if k != "angle" or n in rock]
+    return names, tuple(mech.unknown_names.index(n) for n in names)
 
 
 class _Eval:
-    """The jets at batches of inputs, one column per (output, point), padded to few shapes."""
+    """The jets at batches of inputs, one column per (output, point)."""
 
     def __init__(self, mech, idx, sigma, q_ref, p):
         self.args = (mech, idx, sigma, q_ref)
@@ -92,11 +123,8 @@ class _Eval:
 
     def __call__(self, x, col):
         """(q, q′, q″) of output column `col[i]` at input `x[i]`."""
-        n = x.shape[0]
-        m = max(_PAD, -(-n // _PAD) * _PAD)
-        xs = np.concatenate([x, np.full(m - n, x[0] if n else 0.0)])
-        q, d1, d2 = (np.asarray(a)[:n] for a in _jets(*self.args, xs, self.p))
-        r = np.arange(n)
+        q, d1, d2 = _jets(*self.args, x, self.p)
+        r = np.arange(x.shape[0])
         return q[r, col], d1[r, col], d2[r, col]
 
 
@@ -156,16 +184,14 @@ def outputs(mech: Mechanism, dyads, sigma, q0, phis, p) -> list:
     centres of the least and largest value), `rise`, `fall` (input angles, rad), `time_ratio`,
     `velocity_min`, `velocity_min_at`, `velocity_max`, `velocity_max_at`."""
     del dyads  # unused (the jets classify the structure themselves)
-    rock = rockers(mech)
-    names = [n for n, k in zip(mech.unknown_names, mech.unknown_kinds) if k != "angle" or n in rock]
+    names, idx = output_columns(mech)
     if not names:
         return []
-    idx = tuple(mech.unknown_names.index(n) for n in names)
     ev = _Eval(mech, idx, sigma, q0, p)
     grid = np.asarray(phis, float)
     m = len(idx)
     cols = np.arange(m)
-    q, v, _ = (np.asarray(a) for a in _jets(mech, idx, sigma, q0, grid, p))
+    q, v, _ = _jets(mech, idx, sigma, q0, grid, p)
     angle = np.array([mech.unknown_kinds[i] == "angle" for i in idx])
     q = np.where(angle, np.unwrap(q, axis=0), q)
     keep = ~angle | (np.abs(q[-1] - q[0]) < np.pi)  # a rocker comes back; a crank turns

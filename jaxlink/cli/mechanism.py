@@ -459,12 +459,17 @@ def _sum_text(terms) -> str:
 
 def _start_arrays(mech, phi, p):
     """What `check` computes at `[input] start` (a stored trace: `jaxlink.cache.traced`): the
-    solve from the guesses (`q`, result code, residual, Newton steps) and the Jacobian Φ_q there."""
+    solve from the guesses (`q`, result code, residual, Newton steps) and the Jacobian Φ_q there.
+    The start is solved as the first of two equal inputs: XLA compiles a solve of one input
+    (degenerate shapes) to other instructions, whose last bits can differ from the same input in
+    a batch (three of the built-in scenes); as one of two, the numbers are those of every batched
+    solve, the first input of `jaxlink.analysis.motion`'s turn included (tests/test_check_start.py)."""
     import jax
+    import jax.numpy as jnp
 
     from ..solvers.assemble import solve
 
-    sol = solve(mech, phi[None], p)
+    sol = solve(mech, jnp.stack([phi, phi]), p, points=False)
     q = sol.q[0]
     return q, sol.result[0], sol.residual[0], sol.steps[0], jax.jacfwd(mech.residual)(q, phi, p)
 
@@ -481,6 +486,9 @@ def cmd_check(args) -> int:
         from ..model import bodies as _bodies
 
         _bodies.model(mech)
+    from ..analysis import motion as _motion
+
+    _motion.prepare(mech)  # the designer's numbers' programs compile side by side (cold: 2 cores)
     print(f"mechanism   {mech.name}  ({mech.file})")
     if mech.description:
         print(f"            {mech.description}")
@@ -539,11 +547,17 @@ def cmd_check(args) -> int:
         print(f"            {g['mobility']} by Grübler: u = {g['members']} members, s = {g['joint_count']} "
               f"joint count, n = 3(u−1) − 2s; independent loops k = s − u + 1 = {g['loops']}")
     p = np.asarray(mech.parameters, dtype)  # the solve in the asked dtype
+    import jax
+
     from ..cache import traced
 
-    q, result, resid, steps, jac = (np.asarray(x) for x in traced(
-        "check_start", _start_arrays, (mech.replace(parameters=p, guess=np.asarray(mech.guess, dtype)),
-                                       np.asarray(mech.input_start, dtype), p)))
+    # a linkage of dyads driven by an angle: the start is the first input of the designer's numbers'
+    # turn (in their dtype; the same numbers as the start solved alone); else the start alone
+    at_start = _motion.start(mech) if p.dtype == jax.dtypes.canonicalize_dtype(np.float64) else None
+    if at_start is None:
+        at_start = traced("check_start", _start_arrays, (
+            mech.replace(parameters=p, guess=np.asarray(mech.guess, dtype)), np.asarray(mech.input_start, dtype), p))
+    q, result, resid, steps, jac = (np.asarray(x) for x in at_start)
     code = int(result)
     cond = np.linalg.cond(jac)
     how = ("closed-form dyads" if method_for(mech, NewtonOptions()) == "closed_form"
@@ -579,6 +593,10 @@ def cmd_kinematics(args) -> int:
     phis, values = input_grid(mech, args)
     omega = omega_from_args(args, mech)
     units = units_from_args(mech, args)
+    if args.numbers:  # their programs compile beside the table's
+        from ..analysis import motion as _motion
+
+        _motion.prepare(mech)
     from ..report import kinematics as _report
 
     table = _report.kinematics_table(mech, phis, omega=omega, outputs=outputs, dtype=dtype, input_values=values,

@@ -43,7 +43,6 @@ from typing import Any, Callable, NamedTuple
 import jax
 import jax.numpy as jnp
 import numpy as np
-import optax
 
 from ..cache import compiled
 from . import checkpoint as _ckpt
@@ -392,6 +391,8 @@ def _adam(loss, params, args, lr, steps: int):
     """(pose, arc, the last loss) after `steps` Adam steps on `loss(params, *args)` from `params`
     = (pose, arc): the step size falls from lr to lr / 10 along a half cosine (long strides first, a
     fine fit at the end); a non-finite gradient component counts as 0."""
+    import optax  # here: importing it costs every command 0.05 s
+
     opt = optax.adam(lambda k: lr * (0.55 + 0.45 * jnp.cos(np.pi * jnp.minimum(k, steps) / steps)))
     g = jax.value_and_grad(loss)
 
