@@ -105,7 +105,8 @@ def _cos_mus(mech, sigma, q_ref, phis, p, js):
 
 def _cos_mus_blocked(mech, js, sigma, q_ref, x, p):
     """`_cos_mus` at the inputs `x` (M,) through a stored trace, in blocks of `BLOCK` inputs (the
-    last one padded; one program for the samples and the refinement): numpy (len(js), M)."""
+    last one padded; one program for the samples and the refinement, so that an input's value is
+    the same whichever inputs are beside it: `jaxlink.analysis.stroke.BLOCK`): numpy (len(js), M)."""
     x = np.asarray(x, p.dtype)
     n = x.shape[0]
     m = max(BLOCK, -(-n // BLOCK) * BLOCK)

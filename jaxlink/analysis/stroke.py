@@ -37,8 +37,10 @@ from ..solvers import dyads as _dyads
 
 _GOLD = 0.6180339887498949
 #: every evaluation of the jets runs on blocks of this many inputs (the last one padded): the
-#: samples of the turn and every refinement step are one compiled program, and `prepare` can
-#: compile it before the samples are known (the same numbers: each input is computed alone)
+#: samples of the turn and every refinement step are one compiled program, which `prepare` can
+#: compile before the samples are known, and an input's numbers do not depend on the inputs
+#: beside it (XLA's code for another batch shape can differ in the last bits: a sample and the
+#: same input in a refinement step did, when each had its own shape; tests/test_check_start.py)
 BLOCK = 128
 
 
