@@ -212,15 +212,16 @@ def prepare(mech: Mechanism, p=None, *, samples: int = 3600) -> None:
         return
     phis, p = _turn_inputs(mech, p, samples)
     arg = _arg(mech, p)
+    # in the order they are needed (traced one at a time: `jaxlink.cache.prepare`)
     _prepare("motion_turn", _turn_arrays, (arg, phis, p))
     sigma = np.zeros(len(dyads), p.dtype)  # placeholders: the shapes and dtypes `motion_turn` gives
     q0 = np.zeros(len(mech.unknown_names), p.dtype)
+    _prepare("motion_jacobian", _jacobian, (arg, q0, phis[0], p))
     _prepare("motion_certificate", _certificate, (arg, sigma, q0, phis[:-1], p))
     js = tuple(j for j, d in enumerate(dyads) if d.kind == "RRR")
     if js:
         _prepare("motion_cos_mu", _cos_mus, (arg, sigma, q0, np.zeros(BLOCK, p.dtype), p), (js,))
     stroke.prepare(mech, sigma, q0, p)
-    _prepare("motion_jacobian", _jacobian, (arg, q0, phis[0], p))
 
 
 def _jacobian(mech, q, phi, p):
