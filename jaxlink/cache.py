@@ -236,10 +236,12 @@ def prepare(name: str, fun, args: tuple, static: tuple = ()):
     values: every number is an argument), so a caller that knows them before it has the values
     passes placeholders of the same shapes and dtypes. A later `traced` call of the same key waits
     for this compilation and runs what it made: the same program as without `prepare`, traced,
-    stored and compiled the same way (tests/test_cache.py). XLA compiles without holding the GIL,
-    so on a cold start the programs of one command compile side by side on the cores there are
-    instead of one after the other. An error in the background is not raised here: the `traced`
-    call traces again and raises it (or not) as it would have."""
+    stored and compiled the same way (tests/test_check_start.py). The programs are traced one at a
+    time in the order asked, and while one compiles (XLA, without Python's lock, on two threads of
+    its own) the next is traced and the command goes on: on a cold start the tracing, the
+    compiling and the command's own work overlap. An error in the background is not raised here:
+    the `traced` call traces again and raises it (or not) as it would have. `cancel_prepared` (at
+    the end of a command) drops those that have not started."""
     import jax
 
     if getattr(fun, "__closure__", None) or not hasattr(fun, "__qualname__") or "<locals>" in fun.__qualname__:
@@ -253,12 +255,24 @@ def prepare(name: str, fun, args: tuple, static: tuple = ()):
         from concurrent.futures import ThreadPoolExecutor
 
         _POOL.append(ThreadPoolExecutor(max_workers=4, thread_name_prefix="jaxlink-prepare"))
-    future = _POOL[0].submit(_prepare_one, name, fun, treedef, static, leaves, fast)
+    future = _POOL[0].submit(_prepare_one, name, fun, treedef, static, leaves, fast, _GENERATION[0])
     _PENDING[fast] = future
     return future
 
 
-def _prepare_one(name: str, fun, treedef, static: tuple, leaves, fast) -> None:
+def cancel_prepared() -> None:
+    """Cancel the compilations `prepare` queued that have not started (at the end of a command:
+    one that stops early does not wait for programs it will not run; those under way finish)."""
+    _GENERATION[0] += 1  # those waiting for their turn to trace give up
+    for fast, future in list(_PENDING.items()):
+        if future.cancel():
+            _PENDING.pop(fast, None)
+
+
+_GENERATION = [0]
+
+
+def _prepare_one(name: str, fun, treedef, static: tuple, leaves, fast, generation: int = 0) -> None:
     """`prepare`'s work in its thread: what `traced` does before its first call, then the
     program lowered and compiled for `leaves`' shapes (the jitted callable keeps the executable,
     so the call runs it without compiling again)."""
@@ -273,6 +287,8 @@ def _prepare_one(name: str, fun, treedef, static: tuple, leaves, fast) -> None:
             return fun(*jax.tree_util.tree_unflatten(treedef, xs), *static)
 
         with _TRACING:
+            if generation != _GENERATION[0]:  # cancelled while it waited
+                return
             call, lapack = _load_or_store(flat, leaves, key, _trace_path(key))
             with contextlib.nullcontext() if lapack else _without_lapack_setup():
                 lowered = call.lower(*leaves)
@@ -376,10 +392,14 @@ def _fast_key(name: str, fun, treedef, static: tuple, leaves) -> tuple:
             bool(jax.config.read("jax_enable_x64")))
 
 
+_LOADED_LOCK = __import__("threading").Lock()
+
+
 def _remember(key, call) -> None:
-    if len(_LOADED) >= _LOADED_MAX:
-        _LOADED.pop(next(iter(_LOADED)))
-    _LOADED[key] = call
+    with _LOADED_LOCK:  # `prepare`'s threads remember too
+        if len(_LOADED) >= _LOADED_MAX:
+            _LOADED.pop(next(iter(_LOADED)))
+        _LOADED[key] = call
 
 
 # JAX sets up its LAPACK kernels (importing scipy.linalg: 0.2–0.4 s, a third of a warm `check`)

@@ -10,6 +10,7 @@
   that call runs what was prepared (no compilation of its own), with the numbers of a plain
   `jax.jit`; a program prepared for other static options is not taken for it."""
 
+import concurrent.futures
 import os
 import subprocess
 import sys
@@ -165,4 +166,17 @@ def test_a_call_waits_for_a_compilation_still_under_way():
     future = cache.prepare("test_prepare_wait", _power, (np.zeros(43),), (int(k),))
     out = np.asarray(cache.traced("test_prepare_wait", _power, (x,), (int(k),)))  # at once: waits
     assert future.done()
+    assert out.tobytes() == np.asarray(jax.jit(_power, static_argnums=1)(x, int(k))).tobytes()
+
+
+def test_a_cancelled_preparation_compiles_nothing_and_the_call_still_runs():
+    x = np.linspace(0.1, 2.0, 47)
+    k = 3 + np.random.default_rng().integers(1000)
+    with cache._TRACING:  # the preparation waits for its turn to trace
+        future = cache.prepare("test_prepare_cancel", _power, (np.zeros(47),), (int(k),))
+        cache.cancel_prepared()
+    concurrent.futures.wait([future])  # done without tracing, or cancelled before it started
+    assert future.cancelled() or future.exception() is None
+    assert not any(key[0] == "test_prepare_cancel" for key in list(cache._LOADED) if isinstance(key, tuple))
+    out = np.asarray(cache.traced("test_prepare_cancel", _power, (x,), (int(k),)))
     assert out.tobytes() == np.asarray(jax.jit(_power, static_argnums=1)(x, int(k))).tobytes()

@@ -75,12 +75,15 @@ def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     name = f"jaxlink {args.command}"
-    from ..cache import enable_compilation_cache, one_command
+    from ..cache import cancel_prepared, enable_compilation_cache, one_command
 
     enable_compilation_cache()  # JAXLINK_CACHE_DIR: a repeated command loads its compiled code
     try:
         with one_command():
-            return int(args.func(args) or 0)
+            try:
+                return int(args.func(args) or 0)
+            finally:
+                cancel_prepared()  # programs compiled ahead that the command did not get to
     except MechanismError as exc:
         print(f"{name}: error: {exc}", file=sys.stderr)
         return 2
