@@ -20,34 +20,30 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-import jaxlink
 from jaxlink import cache
-from jaxlink.solvers import dyads as _dyads
 
-
-def _dyadic(name):
-    try:
-        mech = jaxlink.load(name)
-    except jaxlink.MechanismError:  # a cam-follower scene
-        pytest.skip(f"{name}: not a linkage")
-    if mech.input_kind != "angle" or _dyads.classify(mech) is None:
-        pytest.skip(f"{name}: not a linkage of dyads driven by an angle (check solves its start alone)")
-    return mech
-
-
-# At XLA's default optimization level (the tests compile at LLVM's level 0, where the difference
-# below does not arise): for every built-in scene that applies, the start from the turn against the
-# start solved alone as `check` does (one of two equal inputs), and against a solve of the one input
-# (a program for degenerate shapes, whose last bits differ on some scenes: the padding is needed).
-STARTS = """
-import pathlib, sys
+# At XLA's default optimization level (the tests compile at LLVM's level 0, where the differences
+# below do not arise), in one subprocess:
+# - START: for every built-in scene that applies, the start from the turn against the start solved
+#   alone as `check` does (one of two equal inputs), and against a solve of the one input (a
+#   program for degenerate shapes, whose last bits differ on some scenes: the padding is needed);
+# - BLOCK: the jets and cos μ of inputs picked at random, evaluated in blocks, against the same
+#   inputs within the whole turn evaluated in blocks (the same bits: an input's numbers do not
+#   depend on the others evaluated with it), and the turn in blocks against one program of all its
+#   inputs (whose vectorized code differs in the last bits on some scenes: the reason every
+#   evaluation has the one block shape).
+SCRIPT = """
+import pathlib
 import jax
 jax.config.update("jax_enable_x64", True)
 import numpy as np
 import jaxlink
-from jaxlink.analysis import motion
+from jaxlink.analysis import motion, stroke
+from jaxlink.analysis.whole_curve import _arg
+from jaxlink.cache import traced
 from jaxlink.cli.mechanism import _start_arrays
 from jaxlink.solvers import dyads
+rng = np.random.default_rng(3)
 for path in sorted((pathlib.Path(jaxlink.__file__).parent / "scenes").glob("*.toml")):
     try:
         mech = jaxlink.load(path)
@@ -55,6 +51,7 @@ for path in sorted((pathlib.Path(jaxlink.__file__).parent / "scenes").glob("*.to
         continue
     if mech.input_kind != "angle" or dyads.classify(mech) is None:
         continue
+    name = path.stem
     p = np.asarray(mech.parameters, np.float64)
     phi = np.asarray(mech.input_start)
     alone = [np.asarray(x) for x in jax.jit(_start_arrays)(mech.replace(parameters=p), phi, p)]
@@ -63,66 +60,53 @@ for path in sorted((pathlib.Path(jaxlink.__file__).parent / "scenes").glob("*.to
                for a, b in zip(alone, shared))
     one = np.asarray(jaxlink.solve(mech, phi[None], p, points=False).q)[0]
     one_same = one.tobytes() == shared[0].tobytes()
-    print(path.stem, "SAME" if same else "DIFFERENT", "ONE-SAME" if one_same else "ONE-DIFFERENT")
-"""
-
-
-def test_the_start_from_the_turn_is_the_start_solved_alone():
-    env = {k: v for k, v in os.environ.items() if k != "XLA_FLAGS"}
-    r = subprocess.run([sys.executable, "-c", STARTS], env=env, capture_output=True, text=True, timeout=600)
-    assert r.returncode == 0, r.stderr
-    rows = dict((w[0], w[1:]) for w in (line.split() for line in r.stdout.splitlines()))
-    assert {"four-bar", "whitworth", "sewing-feed", "needle-dwell", "slider-crank"} <= set(rows), r.stdout
-    assert all(v[0] == "SAME" for v in rows.values()), r.stdout
-    # the check has teeth: a start solved as one input alone differs from the turn's somewhere
-    assert any(v[1] == "ONE-DIFFERENT" for v in rows.values()), r.stdout
-
-
-# At XLA's default optimization level: the jets and cos μ of inputs picked at random, evaluated in
-# blocks, against the same inputs within the whole turn evaluated in blocks (the same bits: an
-# input's numbers do not depend on the others evaluated with it), and the turn in blocks against
-# one program of all its inputs (whose vectorized code differs in the last bits on some scenes:
-# the reason every evaluation has the one block shape).
-BLOCKS = """
-import jax
-jax.config.update("jax_enable_x64", True)
-import numpy as np
-import jaxlink
-from jaxlink.analysis import motion, stroke
-from jaxlink.analysis.whole_curve import _arg
-from jaxlink.solvers import dyads
-rng = np.random.default_rng(3)
-for name in ["four-bar", "whitworth", "sewing-feed", "needle-dwell", "slider-crank", "needle-arachne"]:
-    mech = jaxlink.load(name)
+    print("START", name, "SAME" if same else "DIFFERENT", "ONE-SAME" if one_same else "ONE-DIFFERENT")
+    if name not in ("four-bar", "whitworth", "sewing-feed", "needle-dwell", "slider-crank", "needle-arachne"):
+        continue
     phis, p = motion._turn_inputs(mech, None, 3600)
     arg = _arg(mech, p)
-    q, _, sigma, _, _ = (np.asarray(x) for x in jax.jit(motion._turn_arrays)(arg, phis, p))
+    q, _, sigma, _, _ = (np.asarray(x) for x in traced("motion_turn", motion._turn_arrays, (arg, phis, p)))
     pick = rng.choice(phis.size, 37, replace=False)
     idx = stroke.output_columns(mech)[1]
     if idx:
         turn = stroke._jets(mech, idx, sigma, q[0], phis, p)
         few = stroke._jets(mech, idx, sigma, q[0], phis[pick], p)
         whole = jax.jit(stroke._jets_of, static_argnums=5)(arg, sigma, q[0], phis, p, idx)
-        print(name, "jets", all(t[pick].tobytes() == f.tobytes() for t, f in zip(turn, few)),
+        print("BLOCK", name, "jets", all(t[pick].tobytes() == f.tobytes() for t, f in zip(turn, few)),
               all(t.tobytes() == np.asarray(w).tobytes() for t, w in zip(turn, whole)))
     js = tuple(j for j, d in enumerate(dyads.classify(mech)) if d.kind == "RRR")
     if js:
         turn = motion._cos_mus_blocked(mech, js, sigma, q[0], phis, p)
         few = motion._cos_mus_blocked(mech, js, sigma, q[0], phis[pick], p)
         whole = np.asarray(jax.jit(motion._cos_mus, static_argnums=5)(arg, sigma, q[0], phis, p, js))
-        print(name, "cos", turn[:, pick].tobytes() == few.tobytes(), turn.tobytes() == whole.tobytes())
+        print("BLOCK", name, "cos", turn[:, pick].tobytes() == few.tobytes(), turn.tobytes() == whole.tobytes())
 """
 
 
-def test_jets_and_transmission_angles_of_an_input_do_not_depend_on_the_inputs_beside_it():
+@pytest.fixture(scope="module")
+def default_level():
     env = {k: v for k, v in os.environ.items() if k != "XLA_FLAGS"}
-    r = subprocess.run([sys.executable, "-c", BLOCKS], env=env, capture_output=True, text=True, timeout=600)
+    r = subprocess.run([sys.executable, "-c", SCRIPT], env=env, capture_output=True, text=True, timeout=600)
     assert r.returncode == 0, r.stderr
     rows = [line.split() for line in r.stdout.splitlines()]
-    assert len(rows) >= 8 and {w[1] for w in rows} == {"jets", "cos"}, r.stdout
-    assert all(w[2] == "True" for w in rows), r.stdout
+    return [w[1:] for w in rows if w[0] == "START"], [w[1:] for w in rows if w[0] == "BLOCK"], r.stdout
+
+
+def test_the_start_from_the_turn_is_the_start_solved_alone(default_level):
+    starts, _, out = default_level
+    rows = {w[0]: w[1:] for w in starts}
+    assert {"four-bar", "whitworth", "sewing-feed", "needle-dwell", "slider-crank"} <= set(rows), out
+    assert all(v[0] == "SAME" for v in rows.values()), out
+    # the check has teeth: a start solved as one input alone differs from the turn's somewhere
+    assert any(v[1] == "ONE-DIFFERENT" for v in rows.values()), out
+
+
+def test_jets_and_transmission_angles_of_an_input_do_not_depend_on_the_inputs_beside_it(default_level):
+    _, rows, out = default_level
+    assert len(rows) >= 8 and {w[1] for w in rows} == {"jets", "cos"}, out
+    assert all(w[2] == "True" for w in rows), out
     # the check has teeth: one program of a whole turn gives other last bits than its blocks somewhere
-    assert any(w[3] == "False" for w in rows), r.stdout
+    assert any(w[3] == "False" for w in rows), out
 
 
 def _power(x, k):
