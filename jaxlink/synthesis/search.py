@@ -15,8 +15,10 @@ One **round** (repeated with fresh candidates until the time limit):
    Adam (optax) on the pose (and the sub-interval's start and length for an open
    target) against the surrogate `distance.soft_chamfer`, plus a penalty keeping every dyad's
    margin above `MARGIN_FLOOR` at the samples; all candidates of all topologies in one batch;
-4. **score**: each refined candidate traced exactly (`tracer.trace_exact`, float64) at `n_trace`
-   inputs, checked over its whole interval (`assembly.certify`) and matched (`distance.match`).
+4. **score**: the refined candidates of each topology, best by the surrogate first, traced exactly
+   (`tracer.trace_exact`, float64) at `n_trace` inputs, checked over their whole interval
+   (`assembly.certify`) and matched (`distance.match`), until `per_topology` pass (at most
+   `SCORE_TRIES` × `per_topology` tried).
 
 After each full round, and while a full round would not fit in the time left, a **polishing
 round**: refine and score only, every slot on the best three topologies' best refined so far
@@ -66,6 +68,9 @@ RANK_T = 64
 REFINE_T = 128
 TARGET_N = 100
 MARGIN_FLOOR = 0.02
+#: a round scores a topology's refined candidates in the surrogate's order until `per_topology`
+#: pass the exact check, at most this many times `per_topology` of them
+SCORE_TRIES = 4
 _STARTS = 16
 #: a timed target's points in the screen (subsampled or padded to it, `timed_samples`); the refinement
 #: takes `REFINE_T`
@@ -804,7 +809,13 @@ def search(target: Target, topos: list[Topology], *, time_limit: float, seed: in
         for ti in range(len(topos)):
             idx = np.flatnonzero(stix == ti)
             idx = idx[np.isfinite(v[idx]) & rank_ok[idx]]
-            for i in idx[np.argsort(v[idx])][:per_topology]:
+            kept = 0
+            # in the surrogate's order until `per_topology` pass, trying at most SCORE_TRIES times as
+            # many: the best by the surrogate can all fail the exact check (a four-bar pushed to a
+            # dead centre on letter R's corners), the next ones not
+            for i in idx[np.argsort(v[idx])][:SCORE_TRIES * per_topology]:
+                if kept >= per_topology:
+                    break
                 start = float(a[i, 0])
                 span = (float(target.inputs[-1] - target.inputs[0]) if target.inputs is not None
                         else 2 * np.pi if closed else float(a[i, 1]))
@@ -814,6 +825,7 @@ def search(target: Target, topos: list[Topology], *, time_limit: float, seed: in
                         floor == 0 or keeps_transmission(topos[ti], p[i], start, span, target, floor)):
                     found.append(Candidate(topos[ti], p[i], start, span, m, asm, time.perf_counter() - began,
                                            size=sz))
+                    kept += 1
         if log is not None:
             best = min((c.match.distance for c in found), default=float("inf"))
             log(f"round {rnd}{' (polish)' if polish else ''}: {len(found)} candidates, best distance {best:.4f}, "
