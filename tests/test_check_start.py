@@ -20,6 +20,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
+import jaxlink
 from jaxlink import cache
 
 # At XLA's default optimization level (the tests compile at LLVM's level 0, where the differences
@@ -160,3 +161,40 @@ def test_a_cancelled_preparation_compiles_nothing_and_the_call_still_runs():
     assert not any(key[0] == "test_prepare_cancel" for key in list(cache._LOADED) if isinstance(key, tuple))
     out = np.asarray(cache.traced("test_prepare_cancel", _power, (x,), (int(k),)))
     assert out.tobytes() == np.asarray(jax.jit(_power, static_argnums=1)(x, int(k))).tobytes()
+
+
+def test_a_prepared_program_serves_any_design_start_and_guesses_and_other_shapes_compile_anew():
+    """The key of a prepared program holds what the program is compiled for (structure, shapes,
+    dtypes, static options); the design, the start and the guesses are its arguments. Prepared
+    from the file's four-bar, the turn of a design with one parameter changed, of another start
+    and of other guesses is the plain `jax.jit` of the same function, bit for bit, and differs from
+    the file's; placeholders of another shape or dtype do not stand in (the call compiles anew)."""
+    from jaxlink.analysis import motion
+    from jaxlink.analysis.whole_curve import _arg
+
+    mech = jaxlink.load("four-bar")
+    rng = np.random.default_rng()
+    samples = 3600 + int(rng.integers(1, 500))  # shapes this process has not compiled
+    phis, p = motion._turn_inputs(mech, None, samples)
+    cache.prepare("motion_turn", motion._turn_arrays, (_arg(mech, p), np.zeros_like(phis), np.zeros_like(p))).result()
+    plain = jax.jit(motion._turn_arrays)
+    base = [np.asarray(x) for x in plain(_arg(mech, p), phis, p)]
+    p2 = p.copy()
+    p2[mech.parameter_names.index("b")] *= 1.01  # one parameter
+    guess = -np.asarray(mech.guess)  # φ3 = −30°, φ4 = −80°: the other assembly (test_cache_differential)
+    variants = [(mech, phis, p2), (mech, phis + 0.3, p), (mech.replace(guess=guess), phis, p)]
+    for m, ph, pp in variants:
+        out, compiled = _compiles(lambda: [np.asarray(x) for x in cache.traced(
+            "motion_turn", motion._turn_arrays, (_arg(m, pp), ph, pp))])
+        assert compiled == 0
+        want = [np.asarray(x) for x in plain(_arg(m, pp), ph, pp)]
+        assert all(a.tobytes() == b.tobytes() for a, b in zip(out, want))
+        assert out[0].tobytes() != base[0].tobytes()
+    x = np.linspace(0.1, 2.0, 53)
+    k = 3 + int(rng.integers(1000))
+    cache.prepare("test_prepare_shapes", _power, (np.zeros(52),), (k,)).result()  # another length
+    cache.prepare("test_prepare_shapes", _power, (np.zeros(53, np.float32),), (k,)).result()  # another dtype
+    out, compiled = _compiles(lambda: np.asarray(cache.traced("test_prepare_shapes", _power, (x,), (k,))))
+    assert compiled > 0
+    assert out.dtype == np.float64
+    assert out.tobytes() == np.asarray(jax.jit(_power, static_argnums=1)(x, k)).tobytes()

@@ -412,6 +412,9 @@ def test_topology_objects_are_searched():
     for bad in (-1, 1.5, True, "4"):
         with pytest.raises(MechanismError, match="finish"):
             synthesize(target, finish=bad, time_limit=1)
+    for bad in (0, -2, 1.5, True, "2"):
+        with pytest.raises(MechanismError, match="per_topology"):
+            synthesize(target, per_topology=bad, time_limit=1)
     with pytest.raises(MechanismError, match="unknown topology"):
         synthesize(target, topologies=["no-such-bar"], time_limit=1)
     big = T.Topology("seventeen", tuple([(T.CRANK, 1)] * 17), 20)

@@ -104,16 +104,13 @@ def _cos_mus(mech, sigma, q_ref, phis, p, js):
 
 
 def _cos_mus_blocked(mech, js, sigma, q_ref, x, p):
-    """`_cos_mus` at the inputs `x` (M,) through a stored trace, in blocks of `BLOCK` inputs (the
-    last one padded; one program for the samples and the refinement, so that an input's value is
-    the same whichever inputs are beside it: `jaxlink.analysis.stroke.BLOCK`): numpy (len(js), M)."""
-    x = np.asarray(x, p.dtype)
-    n = x.shape[0]
-    m = max(BLOCK, -(-n // BLOCK) * BLOCK)
-    xs = np.concatenate([x, np.full(m - n, x[0] if n else 0.0, dtype=x.dtype)])
-    parts = [np.asarray(traced("motion_cos_mu", _cos_mus, (_arg(mech, p), sigma, q_ref, xs[i:i + BLOCK], p), (js,)))
-             for i in range(0, m, BLOCK)]
-    return np.concatenate(parts, axis=1)[:, :n]
+    """`_cos_mus` at the inputs `x` (M,) through a stored trace, in blocks (`stroke.in_blocks`: one
+    program for the samples and the refinement, so that an input's value is the same whichever
+    inputs are beside it): numpy (len(js), M)."""
+    from .stroke import in_blocks
+
+    return in_blocks(np.asarray(x, p.dtype), lambda xs: (traced(
+        "motion_cos_mu", _cos_mus, (_arg(mech, p), sigma, q_ref, xs, p), (js,)),), axis=1)[0]
 
 
 def _margin_root(mech, sigma, q_ref, lo, hi, p, j):
@@ -202,8 +199,10 @@ def _turn_inputs(mech, p, samples: int):
 def prepare(mech: Mechanism, p=None, *, samples: int = 3600) -> None:
     """Start compiling the programs `motion(mech, p, samples=samples)` runs on a linkage whose input
     turns fully (the turn, its certificate, the transmission angles and the outputs' jets) and the
-    Jacobian of `start`, each in a background thread (`jaxlink.cache.prepare`): on a cold start
-    they compile side by side instead of one after the other. Nothing where `motion` gives None."""
+    Jacobian of `start`, in background threads (`jaxlink.cache.prepare`: traced one after the
+    other, each compiling while the next is traced and the command goes on). Only the shapes
+    matter: the programs serve any design, start and guesses of this structure. Nothing where
+    `motion` gives None."""
     from ..cache import prepare as _prepare
     from . import stroke
 

@@ -86,16 +86,23 @@ def _jets_args(mech, sigma, q_ref, phis, p):
     return (_arg(mech, p), np.asarray(sigma, p.dtype), np.asarray(q_ref, p.dtype), np.asarray(phis, p.dtype), p)
 
 
+def in_blocks(x, call, axis: int = 0) -> list:
+    """`call` on the inputs `x` (M,) in blocks of `BLOCK` (the last one padded with x[0]; one
+    compiled shape): each array `call` returns, its blocks joined along `axis` and cut to M, numpy."""
+    x = np.asarray(x)
+    n = x.shape[0]
+    m = max(BLOCK, -(-n // BLOCK) * BLOCK)
+    xs = np.concatenate([x, np.full(m - n, x[0] if n else 0.0, dtype=x.dtype)])
+    parts = [[np.asarray(a) for a in call(xs[i:i + BLOCK])] for i in range(0, m, BLOCK)]
+    return [np.take(np.concatenate([part[k] for part in parts], axis=axis), np.arange(n), axis=axis)
+            for k in range(len(parts[0]))]
+
+
 def _jets(mech, idx, sigma, q_ref, phis, p):
     """`_jets_of` at the inputs `phis` (M,) through a stored trace (`jaxlink.cache.traced`; the
-    mechanism an argument), in blocks of `BLOCK` inputs: numpy arrays (M, len(idx))."""
-    phis = np.asarray(phis)
-    n = phis.shape[0]
-    m = max(BLOCK, -(-n // BLOCK) * BLOCK)
-    xs = np.concatenate([phis, np.full(m - n, phis[0] if n else 0.0, dtype=phis.dtype)])
-    parts = [[np.asarray(a) for a in traced("stroke_jets", _jets_of, _jets_args(mech, sigma, q_ref, xs[i:i + BLOCK], p),
-                                            (tuple(idx),))] for i in range(0, m, BLOCK)]
-    return tuple(np.concatenate([part[k] for part in parts])[:n] for k in range(3))
+    mechanism an argument), in blocks (`in_blocks`): numpy arrays (M, len(idx))."""
+    return tuple(in_blocks(np.asarray(phis, np.asarray(p).dtype), lambda xs: traced(
+        "stroke_jets", _jets_of, _jets_args(mech, sigma, q_ref, xs, p), (tuple(idx),))))
 
 
 def prepare(mech: Mechanism, sigma, q_ref, p) -> None:

@@ -191,6 +191,10 @@ def synthesize(target: Any, *, closed: bool | None = None, time_limit: float = 6
     if fin is not None and (isinstance(fin, bool) or not isinstance(fin, (int, np.integer)) or fin < 0):
         raise MechanismError(f"finish = {fin!r}: the number of candidates polished at the end must be a whole "
                              "number, at least 0 (0: no polish)")
+    per = search_options.get("per_topology")
+    if per is not None and (isinstance(per, bool) or not isinstance(per, (int, np.integer)) or per < 1):
+        raise MechanismError(f"per_topology = {per!r}: the number of candidates of a topology kept by a round must "
+                             "be a whole number, at least 1")
     t0 = time.perf_counter()
     if isinstance(target, Target):
         tgt = target if closed is None else target._replace(closed=bool(closed))

@@ -670,6 +670,9 @@ def search(target: Target, topos: list[Topology], *, time_limit: float, seed: in
         raise ValueError(f"rounds = {rounds!r}: a whole number of rounds, at least 1")
     if finish is not None and (isinstance(finish, bool) or not isinstance(finish, (int, np.integer)) or finish < 0):
         raise ValueError(f"finish = {finish!r}: a whole number of candidates to polish, at least 0")
+    if isinstance(per_topology, bool) or not isinstance(per_topology, (int, np.integer)) or per_topology < 1:
+        raise ValueError(f"per_topology = {per_topology!r}: a whole number of candidates scored per topology "
+                         "and round, at least 1")
     if max_size is not None and not (isinstance(max_size, (int, float, np.integer, np.floating))
                                      and not isinstance(max_size, bool) and max_size > 0):
         raise ValueError(f"max_size = {max_size!r}: a positive number of target extents")
