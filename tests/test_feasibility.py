@@ -128,6 +128,45 @@ def test_the_certificate_finds_the_window_that_72_samples_miss():
     assert bool(np.all(solve(full, DENSE).converged))
 
 
+def test_the_host_certificate_is_the_jitted_one():
+    """`certify_host` (what `check` runs: the margins from a program of its own, the steps in numpy)
+    takes the same steps as `certify`: on the design with a window between two of 72 samples and
+    on two that turn fully, the same verdict, the same minimum to rounding and its place to the
+    golden section's resolution; numpy's interval estimates are the jitted ones, number for
+    number. Fewer golden-section steps move the minimum's place (the comparison has teeth), and
+    with one refined interval the window, the smallest estimate, is still found."""
+    phis = jnp.asarray(np.radians(2.5 + 5.0 * np.arange(72)))
+    mech = loads(text(GAP_L3))  # the designs differ in l3 only: one structure, one compilation
+    dyads = _dyads.classify(mech)
+    q = jnp.asarray(mech.guess)
+    certify = jax.jit(lambda s, pp: feasibility.certify(mech, dyads, s, q, phis, pp))
+    margins_at = jax.jit(lambda s, xs, pp: feasibility.margins_at(mech, dyads, s, q, xs, pp))
+    for l3, windowed in ((GAP_L3, True), (65.5, False), (80.0, False)):
+        p = jnp.asarray(loads(text(l3)).parameters)
+        sigma = _dyads.solve_nearest(mech, dyads, q, phis[0], p)[3]
+        ref = certify(sigma, p)
+        calls = []
+
+        def margins(x, sigma=sigma, p=p, calls=calls):
+            calls.append(len(x))
+            return np.asarray(margins_at(sigma, jnp.asarray(x), p))
+
+        host = feasibility.certify_host(margins, np.asarray(phis))
+        assert bool(host.certified) == bool(ref.certified) == (not windowed)
+        assert float(host.sampled) == float(ref.sampled)
+        assert float(host.margin) == pytest.approx(float(ref.margin), rel=1e-12, abs=1e-15)
+        assert float(host.where) == pytest.approx(float(ref.where), abs=1e-9)
+        assert calls == [72, 64, 16] + [8] * 40  # the samples, 8 × 8 interior points, then each step's 8
+        m = margins(np.asarray(phis))
+        for mine, jitted in zip(feasibility.interval_minima(m, np), jax.jit(feasibility.interval_minima)(m)):
+            np.testing.assert_array_equal(mine, np.asarray(jitted))
+        if windowed:
+            short = feasibility.certify_host(margins, np.asarray(phis), steps=5)
+            assert abs(float(short.where) - float(ref.where)) > 1e-6
+            one = feasibility.certify_host(margins, np.asarray(phis), refine=1)
+            assert not bool(one.certified) and abs(math.degrees(float(one.where)) - 180.0) < 1e-4
+
+
 def test_the_screen_s_fast_form_gives_the_same_estimates():
     """`interval_lower` (the screen: minima of the candidates, no argmin/gather) equals the third
     output of `interval_minima` exactly, on margins with negative stretches, flat (non-convex)

@@ -34,6 +34,7 @@ from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
+import numpy as np
 
 from ..solvers import dyads as _dyads
 
@@ -52,12 +53,14 @@ class Certificate(NamedTuple):
     - `where`: the input value at which it was found (SI: rad);
     - `sampled`: the smallest margin at the checked inputs alone;
     - `certified`: `margin ≥ −MARGIN_SLACK`: the design assembles over the whole revolution.
+
+    JAX arrays from `certify`, numpy from `certify_host`.
     """
 
-    margin: jax.Array
-    where: jax.Array
-    sampled: jax.Array
-    certified: jax.Array
+    margin: jax.Array | np.ndarray
+    where: jax.Array | np.ndarray
+    sampled: jax.Array | np.ndarray
+    certified: jax.Array | np.ndarray
 
 
 def margins_at(mech, dyads, sigma, q_ref, phis, p):
@@ -69,28 +72,29 @@ def margins_at(mech, dyads, sigma, q_ref, phis, p):
         phis, trig_in)
 
 
-def _parabola(ma, mb, mc, lo, hi):
+def _parabola(ma, mb, mc, lo, hi, xp=jnp):
     """The parabola through (−1, ma), (0, mb), (1, mc) as a function `val(t)`, and the three
-    candidates of its minimum over t ∈ [lo, hi]: lo, hi and its vertex (lo where it is not convex)."""
+    candidates of its minimum over t ∈ [lo, hi]: lo, hi and its vertex (lo where it is not convex).
+    `xp`: `jax.numpy`, or `numpy` on the host (`certify_host`)."""
     a = 0.5 * (ma + mc) - mb
     b = 0.5 * (mc - ma)
     convex = a > 0
-    t_star = jnp.clip(-b / jnp.where(convex, 2.0 * a, 1.0), lo, hi)
+    t_star = xp.clip(-b / xp.where(convex, 2.0 * a, 1.0), lo, hi)
 
     def val(t):
         return a * t * t + b * t + mb
 
-    lo_, hi_ = jnp.broadcast_to(lo, a.shape), jnp.broadcast_to(hi, a.shape)
-    return val, (lo_, hi_, jnp.where(convex, t_star, lo_))
+    lo_, hi_ = xp.broadcast_to(lo, a.shape), xp.broadcast_to(hi, a.shape)
+    return val, (lo_, hi_, xp.where(convex, t_star, lo_))
 
 
-def _parabola_min(ma, mb, mc, lo, hi):
+def _parabola_min(ma, mb, mc, lo, hi, xp=jnp):
     """Minimum over t ∈ [lo, hi] of the parabola through (−1, ma), (0, mb), (1, mc), and its t."""
-    val, cands = _parabola(ma, mb, mc, lo, hi)
-    cands = jnp.stack(cands)
+    val, cands = _parabola(ma, mb, mc, lo, hi, xp)
+    cands = xp.stack(cands)
     vals = val(cands)
-    i = jnp.argmin(vals, axis=0)
-    return jnp.take_along_axis(vals, i[None], 0)[0], jnp.take_along_axis(cands, i[None], 0)[0]
+    i = xp.argmin(vals, axis=0)
+    return xp.take_along_axis(vals, i[None], 0)[0], xp.take_along_axis(cands, i[None], 0)[0]
 
 
 def _parabola_low(ma, mb, mc, lo, hi):
@@ -120,7 +124,7 @@ def least(v):
     return v[jnp.argmin(v)]
 
 
-def interval_minima(m):
+def interval_minima(m, xp=jnp):
     """Estimated minimum of the margin on every interval between samples, from the samples.
 
     **Arguments:** `m` (N, D) margins of D dyads at N equally spaced inputs of a revolution.
@@ -133,17 +137,18 @@ def interval_minima(m):
     margin lies between the two parabolas to that order) and |δ⁴m| / 16, the fourth difference
     δ⁴m = m_k−1 − 4 m_k + 6 m_k+1 − 4 m_k+2 + m_k+3 ≈ h⁴ m⁗ (the quartic term, which dominates
     where the margin is symmetric about its minimum: for m = b x⁴ sampled at ±h/2, ±3h/2 the
-    parabola's minimum misses by 9/16 |b| h⁴ = |δ⁴m| × 9/384, 2.7 times less than |δ⁴m| / 16)."""
-    prev, nxt, nxt2, nxt3 = jnp.roll(m, 1, 0), jnp.roll(m, -1, 0), jnp.roll(m, -2, 0), jnp.roll(m, -3, 0)
-    v1, t1 = _parabola_min(prev, m, nxt, 0.0, 1.0)  # centred on k: t ∈ [0, 1]
-    v2, t2 = _parabola_min(m, nxt, nxt2, -1.0, 0.0)  # centred on k+1: t − 1 ∈ [−1, 0]
+    parabola's minimum misses by 9/16 |b| h⁴ = |δ⁴m| × 9/384, 2.7 times less than |δ⁴m| / 16).
+    `xp`: `jax.numpy`, or `numpy` on the host (`certify_host`)."""
+    prev, nxt, nxt2, nxt3 = xp.roll(m, 1, 0), xp.roll(m, -1, 0), xp.roll(m, -2, 0), xp.roll(m, -3, 0)
+    v1, t1 = _parabola_min(prev, m, nxt, 0.0, 1.0, xp)  # centred on k: t ∈ [0, 1]
+    v2, t2 = _parabola_min(m, nxt, nxt2, -1.0, 0.0, xp)  # centred on k+1: t − 1 ∈ [−1, 0]
     t2 = t2 + 1.0
-    v = jnp.minimum(v1, v2)
-    t = jnp.where(v1 <= v2, t1, t2)
-    d4 = jnp.abs(prev - 4.0 * m + 6.0 * nxt - 4.0 * nxt2 + nxt3)
-    lower = jnp.min(v - jnp.abs(v1 - v2) - d4 / 16.0, axis=1)
-    j = jnp.argmin(v, axis=1)
-    return jnp.take_along_axis(v, j[:, None], 1)[:, 0], jnp.take_along_axis(t, j[:, None], 1)[:, 0], lower
+    v = xp.minimum(v1, v2)
+    t = xp.where(v1 <= v2, t1, t2)
+    d4 = xp.abs(prev - 4.0 * m + 6.0 * nxt - 4.0 * nxt2 + nxt3)
+    lower = xp.min(v - xp.abs(v1 - v2) - d4 / 16.0, axis=1)
+    j = xp.argmin(v, axis=1)
+    return xp.take_along_axis(v, j[:, None], 1)[:, 0], xp.take_along_axis(t, j[:, None], 1)[:, 0], lower
 
 
 def screen(mech, dyads, sigma, q_ref, phis, p):
@@ -200,3 +205,58 @@ def certify(mech, dyads, sigma, q_ref, phis, p, *, refine: int = 8, steps: int =
     best = jnp.where(better, vals[r], sampled)
     where = jnp.where(better, wheres[r], phis[ks])
     return Certificate(best, where, sampled, best >= -MARGIN_SLACK)
+
+
+def certify_host(margins, phis, *, refine: int = 8, steps: int = 40) -> Certificate:
+    """`certify` on the host: the same steps (the margins at the samples, the `refine` intervals
+    with the smallest estimates, 8 interior points each, `steps` golden-section reductions), with
+    the margins from `margins(x)` (numpy (M,) inputs → (M, n_dyads) margins, e.g. one small
+    compiled program called in fixed blocks: `jaxlink.analysis.motion`), every evaluation of a
+    step batched over the intervals. For one design whose program is compiled for this alone (a
+    command's `check`) it compiles only `margins`: `certify`'s program traced and compiled five
+    instances of the margins. Returns numpy scalars."""
+    phis = np.asarray(phis)
+    n = phis.shape[0]
+    h = 2.0 * np.pi / n
+
+    def margin(x):
+        return np.min(np.asarray(margins(x)), axis=1)
+
+    m = np.asarray(margins(phis))
+    sampled = np.min(m)
+    est = interval_minima(m, np)[0]
+    k = min(int(refine), n)
+    idx = _smallest(est, k)
+    inner = phis[idx][:, None] + h * np.arange(1, 9)[None, :] / 9.0  # (k, 8)
+    vals = margin(inner.ravel()).reshape(inner.shape)
+    j = np.argmin(vals, axis=1)
+    rows = np.arange(k)
+    vj, xj = vals[rows, j], inner[rows, j]
+    lo, hi = xj - h / 9.0, xj + h / 9.0
+    x1, x2 = hi - _GOLD * (hi - lo), lo + _GOLD * (hi - lo)
+    f12 = margin(np.concatenate([x1, x2]))
+    f1, f2 = f12[:k], f12[k:]
+    for _ in range(int(steps)):
+        left = f1 <= f2  # the minimum is in [lo, x2]
+        nlo, nhi = np.where(left, lo, x1), np.where(left, x2, hi)
+        nx1 = np.where(left, nhi - _GOLD * (nhi - nlo), x2)
+        nx2 = np.where(left, x1, nlo + _GOLD * (nhi - nlo))
+        fnew = margin(np.where(left, nx1, nx2))
+        f1, f2 = np.where(left, fnew, f2), np.where(left, f1, fnew)
+        lo, hi, x1, x2 = nlo, nhi, nx1, nx2
+    cand = np.stack([vj, f1, f2])  # (3, k)
+    where = np.stack([xj, x1, x2])
+    c = np.argmin(cand, axis=0)
+    vals_r, wheres_r = cand[c, rows], where[c, rows]
+    r = np.argmin(vals_r)
+    ks = np.argmin(np.min(m, axis=1))
+    better = vals_r[r] < sampled
+    best = vals_r[r] if better else sampled
+    at = wheres_r[r] if better else phis[ks]
+    return Certificate(np.asarray(best), np.asarray(at), np.asarray(sampled), np.asarray(best >= -MARGIN_SLACK))
+
+
+def _smallest(est, k: int):
+    """The indices of the `k` smallest of `est`, least first (`jax.lax.top_k` of −est: of equal
+    values the first)."""
+    return np.argsort(est, kind="stable")[:k]

@@ -87,13 +87,24 @@ def _turn_arrays(mech, phis, p):
     return sol.q, sol.result, sigma, sol.residual[0], sol.steps[0]
 
 
+def _margins_blocked(mech, sigma, q_ref, x, p):
+    """Every dyad's reach margin at the inputs `x` (M,) through one stored program in blocks
+    (`stroke.in_blocks`, `whole_curve._margins`): numpy (M, n_dyads)."""
+    from .stroke import in_blocks
+    from .whole_curve import _margins
+
+    return in_blocks(np.asarray(x, p.dtype), lambda xs: (traced(
+        "reach_margins", _margins, (_arg(mech, p), sigma, q_ref, xs, p)),))[0]
+
+
 def _certificate(mech, sigma, q_ref, phis, p):
     """The certificate of the turn between its samples `phis` (a whole turn) on the branches σ:
-    `(certified, where)` (`jaxlink.analysis.feasibility.certify`). A program of its own, so that
-    it compiles beside the turn's (`prepare`)."""
-    from .feasibility import certify
+    `(certified, where)` (`jaxlink.analysis.feasibility.certify_host`: the margins from one small
+    program, compiled beside the turn's — `prepare` — where `certify`'s own program, which traces
+    five instances of the margins, took 0.5–0.8 s to compile)."""
+    from .feasibility import certify_host
 
-    cert = certify(mech, _dyads.classify(mech), sigma, q_ref, phis, p)
+    cert = certify_host(lambda x: _margins_blocked(mech, sigma, q_ref, x, p), phis)
     return cert.certified, cert.where
 
 
@@ -136,14 +147,11 @@ def _window_between_samples(mech, sigma, q_ref, phis, p, cert):
     where it is negative, the two toggles on either side of it in its interval, the roots of that
     dyad's margin by the bracketed Newton iteration of the branch points (`(first, second)`,
     turning forward)."""
-    from .whole_curve import _margins
-
     certified, where = cert
     if bool(certified):
         return None
     where = float(where)
-    m = traced("reach_margins", _margins, (_arg(mech, p), sigma, q_ref, np.asarray([where, where]), p))
-    j = int(np.argmin(np.asarray(m)[0]))
+    j = int(np.argmin(_margins_blocked(mech, sigma, q_ref, [where], p)[0]))
 
     def root(lo, hi):
         return float(traced("motion_margin_root", _margin_root,
@@ -216,7 +224,9 @@ def prepare(mech: Mechanism, p=None, *, samples: int = 3600) -> None:
     sigma = np.zeros(len(dyads), p.dtype)  # placeholders: the shapes and dtypes `motion_turn` gives
     q0 = np.zeros(len(mech.unknown_names), p.dtype)
     _prepare("motion_jacobian", _jacobian, (arg, q0, phis[0], p))
-    _prepare("motion_certificate", _certificate, (arg, sigma, q0, phis[:-1], p))
+    from .whole_curve import _margins
+
+    _prepare("reach_margins", _margins, (arg, sigma, q0, np.zeros(BLOCK, p.dtype), p))
     js = tuple(j for j, d in enumerate(dyads) if d.kind == "RRR")
     if js:
         _prepare("motion_cos_mu", _cos_mus, (arg, sigma, q0, np.zeros(BLOCK, p.dtype), p), (js,))
@@ -273,9 +283,8 @@ def motion(mech: Mechanism, p=None, *, samples: int = 3600) -> Motion | None:
         upper = upper if up is None else up[0]
         lower = lower if down is None else down[0]
     if full:  # every sample assembled: certify the whole turn between them too
-        cert = (np.asarray(x) for x in traced("motion_certificate", _certificate, (_arg(mech, p), sigma, q0,
-                                                                                   phis[:-1], p)))
-        window = _window_between_samples(mech, sigma, q0, phis[:-1], p, tuple(cert))
+        cert = _certificate(mech, sigma, q0, phis[:-1], p)
+        window = _window_between_samples(mech, sigma, q0, phis[:-1], p, cert)
         if window is not None:
             full, upper, lower = False, window[0], window[1] - 2 * np.pi
     lo_end = start if full or lower is None else lower

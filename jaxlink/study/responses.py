@@ -186,7 +186,7 @@ class Responses:
             if check == "certify":
                 cert = _feasibility.certify(mech, self.dyads, sig, q0, phis, ps)
                 feasible = feasible & cert.certified
-                margin = cert.margin
+                margin = jnp.asarray(cert.margin)
             else:
                 margin = _feasibility.least(_feasibility.screen(mech, self.dyads, sig, q0, phis, ps))
         parts = []
