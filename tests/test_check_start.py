@@ -23,6 +23,10 @@ import pytest
 import jaxlink
 from jaxlink import cache
 
+# one worker runs the module: its subprocess at XLA's default level (`default_level`, about 20 s)
+# runs once, not once per pytest-xdist worker that picks one of its two tests
+pytestmark = pytest.mark.xdist_group("check_start")
+
 # At XLA's default optimization level (the tests compile at LLVM's level 0, where the differences
 # below do not arise), in one subprocess:
 # - START: for seven built-in scenes, the start from the turn against the start solved
