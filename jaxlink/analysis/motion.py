@@ -3,11 +3,12 @@ the file's guesses choose (a mechanism made of dyads: `jaxlink.solvers.dyads`).
 
 **Range of motion.** The positions of one revolution from `[input] start` (`samples` of them)
 are solved in closed form on the file's branches; where some are not assembled, the limit
-positions between an assembled and a not assembled sample are toggles of a dyad, found by
-`jaxlink.branch_points` and located by bisection on that dyad's reach margin to the last input
-where it still assembles, the float next to the root (`jaxlink.analysis.whole_curve.limit`: the
-bisection uses only the margin's sign). Where every sample is assembled, the reach margins are
-still minimized between them (`jaxlink.analysis.feasibility.certify`): a window narrower than
+positions on either side of the start are toggles of a dyad: the first sample, going forward and
+back from the start, where a dyad's reach margin is not positive, then bisection on that dyad's
+margin to the last input where it still assembles, the float next to the root
+(`jaxlink.analysis.whole_curve.limit`: the bisection uses only the margin's sign; where it finds
+none on a side, or the start is not assembled, the toggles of `jaxlink.branch_points`). Where every sample is assembled, the reach margins are
+still minimized between them (`jaxlink.analysis.feasibility.certify_host`): a window narrower than
 the samples' spacing is found, and its two toggles located. The result is the interval of inputs around
 `start` that the input can reach, or a full turn (certified between the samples).
 
@@ -36,7 +37,7 @@ from ..solvers import dyads as _dyads
 from ..solvers.assemble import solve
 from ..solvers.branch_points import TOGGLE, branch_points
 from .stroke import BLOCK
-from .whole_curve import _arg
+from .whole_curve import _arg, margins_blocked
 
 _GOLD = 0.6180339887498949
 
@@ -87,16 +88,6 @@ def _turn_arrays(mech, phis, p):
     return sol.q, sol.result, sigma, sol.residual[0], sol.steps[0]
 
 
-def _margins_blocked(mech, sigma, q_ref, x, p):
-    """Every dyad's reach margin at the inputs `x` (M,) through one stored program in blocks
-    (`stroke.in_blocks`, `whole_curve._margins`): numpy (M, n_dyads)."""
-    from .stroke import in_blocks
-    from .whole_curve import _margins
-
-    return in_blocks(np.asarray(x, p.dtype), lambda xs: (traced(
-        "reach_margins", _margins, (_arg(mech, p), sigma, q_ref, xs, p)),))[0]
-
-
 def _certificate(mech, sigma, q_ref, phis, p):
     """The certificate of the turn between its samples `phis` (a whole turn) on the branches σ:
     `(certified, where)` (`jaxlink.analysis.feasibility.certify_host`: the margins from one small
@@ -104,7 +95,7 @@ def _certificate(mech, sigma, q_ref, phis, p):
     five instances of the margins, took 0.5–0.8 s to compile)."""
     from .feasibility import certify_host
 
-    cert = certify_host(lambda x: _margins_blocked(mech, sigma, q_ref, x, p), phis)
+    cert = certify_host(lambda x: margins_blocked(mech, sigma, q_ref, x, p), phis)
     return cert.certified, cert.where
 
 
@@ -143,7 +134,7 @@ def _margin_root(mech, sigma, q_ref, lo, hi, p, j):
 def _window_between_samples(mech, sigma, q_ref, phis, p, cert):
     """A window where the linkage cannot assemble that lies wholly between two of the equally
     spaced inputs `phis` of a turn (all assembled), or None: the reach margin's minimum refined
-    between the samples (`cert = (certified, where)`: `jaxlink.analysis.feasibility.certify`);
+    between the samples (`cert = (certified, where)`: `jaxlink.analysis.feasibility.certify_host`);
     where it is negative, the two toggles on either side of it in its interval, the roots of that
     dyad's margin by the bracketed Newton iteration of the branch points (`(first, second)`,
     turning forward)."""
@@ -151,7 +142,7 @@ def _window_between_samples(mech, sigma, q_ref, phis, p, cert):
     if bool(certified):
         return None
     where = float(where)
-    j = int(np.argmin(_margins_blocked(mech, sigma, q_ref, [where], p)[0]))
+    j = int(np.argmin(margins_blocked(mech, sigma, q_ref, [where], p)[0]))
 
     def root(lo, hi):
         return float(traced("motion_margin_root", _margin_root,
@@ -269,21 +260,29 @@ def motion(mech: Mechanism, p=None, *, samples: int = 3600) -> Motion | None:
     ok = (res == RESULTS.converged) | (res == RESULTS.singular)
     lower = upper = None
     full = bool(ok.all())
-    if not full:
-        bp = branch_points(mech, phis, _Path(q_all, res), p)
-        toggles = np.sort(bp.input[np.asarray(bp.kind) == TOGGLE])
-        ahead, behind = toggles[toggles > start], toggles[toggles < start + 2 * np.pi]
-        upper = float(ahead[0]) if ahead.size else None
-        lower = float(behind[-1] - 2 * np.pi) if behind.size else None
-        if not ok[0] or upper is None or lower is None:
-            return Motion(False, lower, upper, [])
     q0 = q_all[0]
-    if not full:  # each limit to adjacent floats by bisection on the toggling dyad's margin
+    if not full:
         from .whole_curve import limit
 
-        up, down = (limit(mech, dyads, sigma, q0, p, start, d, samples) for d in (1.0, -1.0))
-        upper = upper if up is None else up[0]
-        lower = lower if down is None else down[0]
+        # each limit to adjacent floats by bisection on the toggling dyad's reach margin, found by
+        # scanning the samples from the start (`whole_curve.limit`: the margins' program, compiled
+        # ahead by `prepare`); the branch points (programs of their own: 1.5–2 s of a cold `check`)
+        # only where that finds no toggle on a side or the start is not assembled
+        up = down = None
+        if ok[0]:
+            up, down = (limit(mech, dyads, sigma, q0, p, start, d, samples) for d in (1.0, -1.0))
+        if up is not None and down is not None:
+            upper, lower = up[0], down[0]
+        else:
+            bp = branch_points(mech, phis, _Path(q_all, res), p)
+            toggles = np.sort(bp.input[np.asarray(bp.kind) == TOGGLE])
+            ahead, behind = toggles[toggles > start], toggles[toggles < start + 2 * np.pi]
+            upper = float(ahead[0]) if ahead.size else None
+            lower = float(behind[-1] - 2 * np.pi) if behind.size else None
+            if not ok[0] or upper is None or lower is None:
+                return Motion(False, lower, upper, [])
+            upper = upper if up is None else up[0]
+            lower = lower if down is None else down[0]
     if full:  # every sample assembled: certify the whole turn between them too
         cert = _certificate(mech, sigma, q0, phis[:-1], p)
         window = _window_between_samples(mech, sigma, q0, phis[:-1], p, cert)

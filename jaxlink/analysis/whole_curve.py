@@ -59,6 +59,19 @@ def _margins(mech, sigma, q_ref, phis, p):
     return jax.vmap(lambda ph: _dyads.reach_margins(mech, dyads, sigma, q_ref, ph, p))(phis)
 
 
+def margins_blocked(mech, sigma, q_ref, x, p):
+    """Every dyad's reach margin at the inputs `x` (M,) on the branches σ, through one stored
+    program (`_margins`) in blocks of `stroke.BLOCK` (`stroke.in_blocks`: one compiled shape for
+    the limits' grid and bisection, the certificate's steps and a window's dyad — the program
+    `check` compiles ahead): numpy (M, n_dyads)."""
+    from .stroke import in_blocks
+
+    pj = np.asarray(p)
+    arg = _arg(mech, pj)
+    sig, q_ref = np.asarray(sigma, dtype=pj.dtype), np.asarray(q_ref, dtype=pj.dtype)
+    return in_blocks(np.asarray(x, pj.dtype), lambda xs: (traced("reach_margins", _margins, (arg, sig, q_ref, xs, pj)),))[0]
+
+
 def _arg(mech, p):
     """The mechanism as a stored program's argument: its numbers `p`, its guesses in p's dtype."""
     return mech.replace(parameters=p, guess=np.asarray(mech.guess, dtype=np.asarray(p).dtype))
@@ -83,13 +96,9 @@ def limit(mech: Mechanism, dyads, sigma, q_ref, p, phi0: float, direction: float
     floats whatever the compiler does with the arithmetic around it."""
     h = 2 * np.pi / samples
     del dyads  # (classified again inside the stored program)
-    pj = np.asarray(p)
-    sig = np.asarray(sigma, dtype=pj.dtype)
-    q_ref = np.asarray(q_ref, dtype=pj.dtype)
-    arg = _arg(mech, pj)
 
     def margins(phis):
-        return np.asarray(traced("reach_margins", _margins, (arg, sig, q_ref, np.asarray(phis, dtype=pj.dtype), pj)))
+        return margins_blocked(mech, sigma, q_ref, phis, p)
 
     grid = phi0 + direction * h * np.arange(1, samples + 1)
     m = margins(grid)
@@ -104,7 +113,7 @@ def limit(mech: Mechanism, dyads, sigma, q_ref, p, phi0: float, direction: float
         mid = 0.5 * (a + b)
         if mid in (a, b):
             break
-        if margins(np.asarray([mid, mid]))[0, j] > 0:
+        if margins([mid])[0, j] > 0:
             a = mid
         else:
             b = mid
