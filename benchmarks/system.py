@@ -5,8 +5,9 @@ all in one run.
 1. **Latency.** `jaxlink kinematics sewing-feed --rpm 2500 --csv f.csv` twice with
    `JAXLINK_CACHE_DIR` set to a fresh directory (cold: compiles and fills the cache; warm: loads
    the compiled code), and once with the cache off (`JAXLINK_CACHE_DIR=""`).
-   **`check` latency** (issue 24: ≤ 2 s cold, ≤ 1 s warm on 2 cores): `jaxlink check four-bar`
-   and `jaxlink check whitworth`, each `--runs` times (default 5) with a fresh cache directory
+   **`check` latency** (issue 24: ≤ 2 s cold, ≤ 1 s warm on 2 cores): `jaxlink check four-bar`,
+   `jaxlink check whitworth` and a triple-rocker (`check four-bar --set b=40 --set c=30`: limit
+   positions), each `--runs` times (default 5) with a fresh cache directory
    (cold) and again with it filled (warm); the median and the range of each, with the load
    average (1 min) before and after, since the machine may be shared.
 2. **Search rate.** `jaxlink optimize sewing-feed-opt --method montecarlo --budget B --progress off
@@ -49,9 +50,16 @@ def timed(args, env, cwd):
     return wall, (peak[-1] / 1024 if peak else float("nan")), r
 
 
-def check_latency(cli, tmp, runs: int, scenes=("four-bar", "whitworth")) -> dict:
-    """`jaxlink check SCENE` cold (a fresh cache directory) then warm (the same again), `runs`
-    times per scene, alternating the scenes: the median and range of each, the load average, and
+#: the linkages of the `check` latency: a crank-rocker, the Whitworth quick return (RPR and RRP dyads,
+#: a slider's stroke) and a triple-rocker of the four-bar's structure (its input's limit positions:
+#: a = 20, b = 40, c = 30, d = 55 mm, s + l > p + q)
+CHECK_CASES = {"four-bar": ["four-bar"], "whitworth": ["whitworth"],
+               "triple-rocker": ["four-bar", "--set", "b=40", "--set", "c=30"]}
+
+
+def check_latency(cli, tmp, runs: int, scenes=tuple(CHECK_CASES)) -> dict:
+    """`jaxlink check SCENE` (`CHECK_CASES`) cold (a fresh cache directory) then warm (the same
+    again), `runs` times per scene, alternating the scenes: the median and range of each, the load average, and
     the CPU time (user + system) of each run: on a shared machine the wall time is that CPU time
     spread over the cores it got (a cold `check` compiles on two threads)."""
     times: dict = {s: {"cold": [], "warm": []} for s in scenes}
@@ -63,7 +71,7 @@ def check_latency(cli, tmp, runs: int, scenes=("four-bar", "whitworth")) -> dict
             env = dict(os.environ, JAXLINK_CACHE_DIR=os.path.join(tmp, f"check-{scene}-{i}"))
             for kind in ("cold", "warm"):
                 before = os.times()
-                wall, _, r = timed(cli + ["check", scene], env, tmp)
+                wall, _, r = timed(cli + ["check", *CHECK_CASES[scene]], env, tmp)
                 after = os.times()
                 times[scene][kind].append(wall)
                 cpu[scene][kind].append(after.children_user + after.children_system
