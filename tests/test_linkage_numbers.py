@@ -96,6 +96,24 @@ def test_non_grashof_input_limits_are_the_toggles():
     assert abs(r.transmission[0]["max"] - math.pi) < 1e-6  # in line at the limits
 
 
+def test_a_start_that_cannot_assemble_gives_the_toggles_around_the_gap():
+    """The same triple-rocker started at 180°, inside the gap it cannot reach: the limits' scan
+    from the start does not apply (the start is not assembled), so the toggles come from the
+    branch points — the two ends of the gap around the start, acos(…) and 2π − acos(…) — and no
+    transmission angles (there is no motion through the start to report)."""
+    import pathlib
+
+    a, b, c, d = 20.0, 40.0, 30.0, 55.0
+    src = (pathlib.Path(jl.__file__).parent / "scenes" / "four-bar.toml").read_text()
+    text = src.replace('name = "phi2"\n', 'name = "phi2"\nstart = 180.0\n')
+    text = text.replace("b = 60.0", f"b = {b}").replace("c = 45.0", f"c = {c}")
+    assert text.count("start = 180.0") == 1 and f"b = {b}" in text and f"c = {c}" in text
+    r = motion(jl.loads(text))
+    limit = math.acos((a * a + d * d - (b + c) ** 2) / (2 * a * d))
+    assert not r.full_turn and r.transmission == []
+    assert abs(r.lower - limit) < 1e-6 and abs(r.upper - (2 * math.pi - limit)) < 1e-6
+
+
 def test_check_prints_them(four_bar, capsys):
     assert main(["check", "four-bar"]) == 0
     out = capsys.readouterr().out
