@@ -7,10 +7,11 @@ positions on either side of the start are toggles of a dyad: the first sample, g
 back from the start, where a dyad's reach margin is not positive, then bisection on that dyad's
 margin to the last input where it still assembles, the float next to the root
 (`jaxlink.analysis.whole_curve.limit`: the bisection uses only the margin's sign; where it finds
-none on a side, or the start is not assembled, the toggles of `jaxlink.branch_points`). Where every sample is assembled, the reach margins are
-still minimized between them (`jaxlink.analysis.feasibility.certify_host`): a window narrower than
-the samples' spacing is found, and its two toggles located. The result is the interval of inputs around
-`start` that the input can reach, or a full turn (certified between the samples).
+none on a side, or the start is not assembled, the toggles of `jaxlink.branch_points`). Where
+every sample is assembled, the reach margins are still minimized between them
+(`jaxlink.analysis.feasibility.certify_host`): a window narrower than the samples' spacing is
+found, and its two toggles located. The result is the interval of inputs around `start` that the
+input can reach, or a full turn (certified between the samples).
 
 **Transmission angle** of a dyad of two links L_a, L_b (RRR) over its known diagonal w: the
 angle μ between the two links at their joint, cos μ = (L_a² + L_b² − |w|²) / (2 |L_a| |L_b|)

@@ -69,7 +69,8 @@ def margins_blocked(mech, sigma, q_ref, x, p):
     pj = np.asarray(p)
     arg = _arg(mech, pj)
     sig, q_ref = np.asarray(sigma, dtype=pj.dtype), np.asarray(q_ref, dtype=pj.dtype)
-    return in_blocks(np.asarray(x, pj.dtype), lambda xs: (traced("reach_margins", _margins, (arg, sig, q_ref, xs, pj)),))[0]
+    return in_blocks(np.asarray(x, pj.dtype),
+                     lambda xs: (traced("reach_margins", _margins, (arg, sig, q_ref, xs, pj)),))[0]
 
 
 def _arg(mech, p):
