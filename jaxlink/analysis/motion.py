@@ -37,7 +37,7 @@ from ..results import RESULTS
 from ..solvers import dyads as _dyads
 from ..solvers.assemble import solve
 from ..solvers.branch_points import TOGGLE, branch_points
-from .stroke import BLOCK
+from .blocks import BLOCK, in_blocks
 from .whole_curve import _arg, margins_blocked
 
 _GOLD = 0.6180339887498949
@@ -107,11 +107,9 @@ def _cos_mus(mech, sigma, q_ref, phis, p, js):
 
 
 def _cos_mus_blocked(mech, js, sigma, q_ref, x, p):
-    """`_cos_mus` at the inputs `x` (M,) through a stored trace, in blocks (`stroke.in_blocks`: one
+    """`_cos_mus` at the inputs `x` (M,) through a stored trace, in blocks (`blocks.in_blocks`: one
     program for the samples and the refinement, so that an input's value is the same whichever
     inputs are beside it): numpy (len(js), M)."""
-    from .stroke import in_blocks
-
     return in_blocks(np.asarray(x, p.dtype), lambda xs: (traced(
         "motion_cos_mu", _cos_mus, (_arg(mech, p), sigma, q_ref, xs, p), (js,)),), axis=1)[0]
 

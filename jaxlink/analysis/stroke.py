@@ -34,14 +34,9 @@ from ..cache import traced
 from ..files import expr as _expr
 from ..model.mechanism import Mechanism
 from ..solvers import dyads as _dyads
+from .blocks import BLOCK, in_blocks
 
 _GOLD = 0.6180339887498949
-#: every evaluation of the jets runs on blocks of this many inputs (the last one padded): the
-#: samples of the turn and every refinement step are one compiled program, which `prepare` can
-#: compile before the samples are known, and an input's numbers do not depend on the inputs
-#: beside it (XLA's code for another batch shape can differ in the last bits: a sample and the
-#: same input in a refinement step did, when each had its own shape; tests/test_check_start.py)
-BLOCK = 128
 
 
 def rockers(mech: Mechanism) -> tuple:
@@ -84,18 +79,6 @@ def _jets_args(mech, sigma, q_ref, phis, p):
 
     p = np.asarray(p)
     return (_arg(mech, p), np.asarray(sigma, p.dtype), np.asarray(q_ref, p.dtype), np.asarray(phis, p.dtype), p)
-
-
-def in_blocks(x, call, axis: int = 0) -> list:
-    """`call` on the inputs `x` (M,) in blocks of `BLOCK` (the last one padded with x[0]; one
-    compiled shape): each array `call` returns, its blocks joined along `axis` and cut to M, numpy."""
-    x = np.asarray(x)
-    n = x.shape[0]
-    m = max(BLOCK, -(-n // BLOCK) * BLOCK)
-    xs = np.concatenate([x, np.full(m - n, x[0] if n else 0.0, dtype=x.dtype)])
-    parts = [[np.asarray(a) for a in call(xs[i:i + BLOCK])] for i in range(0, m, BLOCK)]
-    return [np.take(np.concatenate([part[k] for part in parts], axis=axis), np.arange(n), axis=axis)
-            for k in range(len(parts[0]))]
 
 
 def _jets(mech, idx, sigma, q_ref, phis, p):

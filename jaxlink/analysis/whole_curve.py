@@ -30,6 +30,7 @@ import numpy as np
 from ..cache import traced
 from ..model.mechanism import Mechanism
 from ..solvers import dyads as _dyads
+from .blocks import in_blocks
 
 
 @dataclasses.dataclass(frozen=True)
@@ -61,11 +62,9 @@ def _margins(mech, sigma, q_ref, phis, p):
 
 def margins_blocked(mech, sigma, q_ref, x, p):
     """Every dyad's reach margin at the inputs `x` (M,) on the branches σ, through one stored
-    program (`_margins`) in blocks of `stroke.BLOCK` (`stroke.in_blocks`: one compiled shape for
+    program (`_margins`) in blocks of `blocks.BLOCK` (`blocks.in_blocks`: one compiled shape for
     the limits' grid and bisection, the certificate's steps and a window's dyad — the program
     `check` compiles ahead): numpy (M, n_dyads)."""
-    from .stroke import in_blocks
-
     pj = np.asarray(p)
     arg = _arg(mech, pj)
     sig, q_ref = np.asarray(sigma, dtype=pj.dtype), np.asarray(q_ref, dtype=pj.dtype)
