@@ -152,7 +152,8 @@ def test_a_wrong_state_changes_the_search_and_another_search_is_refused(whole, a
     # (before anything compiles); the compile level too (a time limit over 15 s: not `quick`)
     for change in (dict(seed=6), dict(samples=256), dict(topologies=["watt-coupler-rocker"]), dict(rounds=5),
                    dict(count=301), dict(n_points=150), dict(max_size=3.0), dict(min_transmission=20.0),
-                   dict(finish=0), dict(time_limit=20), dict(topologies=None, max_links=6)):
+                   dict(finish=0), dict(per_topology=1), dict(time_limit=20),
+                   dict(topologies=None, max_links=6)):
         with pytest.raises(MechanismError, match="another search"):
             api.synthesize(tgt, checkpoint=state, resume=True, **dict(OPTS, **change))
     # another jaxlink (its source changed, the version number not): refused

@@ -37,11 +37,11 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..solvers import dyads as _dyads
+from .golden import GOLD as _GOLD
+from .golden import golden
 
 #: a margin this much below zero still counts as assembled (rounding at an exact toggle)
 MARGIN_SLACK = 1e-12
-#: golden ratio conjugate (√5 − 1) / 2
-_GOLD = 0.6180339887498949
 
 
 class Certificate(NamedTuple):
@@ -232,18 +232,7 @@ def certify_host(margins, phis, *, refine: int = 8, steps: int = 40) -> Certific
     j = np.argmin(vals, axis=1)
     rows = np.arange(k)
     vj, xj = vals[rows, j], inner[rows, j]
-    lo, hi = xj - h / 9.0, xj + h / 9.0
-    x1, x2 = hi - _GOLD * (hi - lo), lo + _GOLD * (hi - lo)
-    f12 = margin(np.concatenate([x1, x2]))
-    f1, f2 = f12[:k], f12[k:]
-    for _ in range(int(steps)):
-        left = f1 <= f2  # the minimum is in [lo, x2]
-        nlo, nhi = np.where(left, lo, x1), np.where(left, x2, hi)
-        nx1 = np.where(left, nhi - _GOLD * (nhi - nlo), x2)
-        nx2 = np.where(left, x1, nlo + _GOLD * (nhi - nlo))
-        fnew = margin(np.where(left, nx1, nx2))
-        f1, f2 = np.where(left, fnew, f2), np.where(left, f1, fnew)
-        lo, hi, x1, x2 = nlo, nhi, nx1, nx2
+    x1, x2, f1, f2 = golden(margin, xj - h / 9.0, xj + h / 9.0, steps)
     cand = np.stack([vj, f1, f2])  # (3, k)
     where = np.stack([xj, x1, x2])
     c = np.argmin(cand, axis=0)

@@ -38,9 +38,8 @@ from ..solvers import dyads as _dyads
 from ..solvers.assemble import solve
 from ..solvers.branch_points import TOGGLE, branch_points
 from .blocks import BLOCK, in_blocks
+from .golden import golden
 from .whole_curve import _arg, margins_blocked
-
-_GOLD = 0.6180339887498949
 
 
 @dataclasses.dataclass(frozen=True)
@@ -163,17 +162,7 @@ def _golden(f, a, b, c0, x0, sign, iterations: int = 60):
     def ev(x):
         return sign * np.asarray(f(x))[rows, rows]
 
-    x1, x2 = b - _GOLD * (b - a), a + _GOLD * (b - a)
-    f1, f2 = ev(x1), ev(x2)
-    for _ in range(iterations):
-        left = f1 <= f2
-        b = np.where(left, x2, b)
-        a = np.where(left, a, x1)
-        nx1 = np.where(left, b - _GOLD * (b - a), x2)
-        nx2 = np.where(left, x1, a + _GOLD * (b - a))
-        fn = ev(np.where(left, nx1, nx2))
-        f1, f2 = np.where(left, fn, f2), np.where(left, f1, fn)
-        x1, x2 = nx1, nx2
+    x1, x2, f1, f2 = golden(ev, a, b, iterations)
     best, best_x = [], []
     for i in rows:  # the least of the sample and the two refined points (the first on a tie)
         cands = [(c0[i], x0[i]), (f1[i] * sign[i], x1[i]), (f2[i] * sign[i], x2[i])]

@@ -35,8 +35,7 @@ from ..files import expr as _expr
 from ..model.mechanism import Mechanism
 from ..solvers import dyads as _dyads
 from .blocks import BLOCK, in_blocks
-
-_GOLD = 0.6180339887498949
+from .golden import golden
 
 
 def rockers(mech: Mechanism) -> tuple:
@@ -151,17 +150,7 @@ def _extremes(ev, grid, v, col, sign):
     k = np.argmin(vs, axis=0)
     n = grid.shape[0] - 1
     a, b = grid[np.maximum(k - 1, 0)], grid[np.minimum(k + 1, n)]
-    x1, x2 = b - _GOLD * (b - a), a + _GOLD * (b - a)
-    f1, f2 = sign * ev(x1, col)[1], sign * ev(x2, col)[1]
-    for _ in range(60):
-        left = f1 <= f2
-        b = np.where(left, x2, b)
-        a = np.where(left, a, x1)
-        nx1 = np.where(left, b - _GOLD * (b - a), x2)
-        nx2 = np.where(left, x1, a + _GOLD * (b - a))
-        fn = sign * ev(np.where(left, nx1, nx2), col)[1]
-        f1, f2 = np.where(left, fn, f2), np.where(left, f1, fn)
-        x1, x2 = nx1, nx2
+    x1, x2, f1, f2 = golden(lambda x: sign * ev(x, col)[1], a, b, 60)
     best_x = np.where(f1 <= f2, x1, x2)
     best = np.minimum(f1, f2)
     samp = vs[k, np.arange(len(col))]
