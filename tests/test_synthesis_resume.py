@@ -56,13 +56,8 @@ def _bits(res) -> list:
 
 
 def _clean(lines: list[str]) -> list[str]:
-    """The search's log without its clock (what each round and polish found)."""
-    return [re.sub(r", [0-9.]+ s$", "", x) for x in lines]
-
-
-def _clean(lines: list[str]) -> list[str]:
-    """The search's log without its clock (what each round and polish found)."""
-    return [re.sub(r", [0-9.]+ s$", "", x) for x in lines]
+    """The search's log without its clock (what each round and polish found; a round's phases' times)."""
+    return [re.sub(r", [0-9.]+ s( \([a-z0-9., ]+\))?$", "", x) for x in lines]
 
 
 @pytest.fixture(scope="module")
@@ -160,6 +155,15 @@ def test_a_wrong_state_changes_the_search_and_another_search_is_refused(whole, a
     import jaxlink.cache as cache
 
     monkeypatch.setattr(cache, "_SOURCE_DIGEST", ["another source"])
+    with pytest.raises(MechanismError, match="another search"):
+        api.synthesize(tgt, checkpoint=state, resume=True, **OPTS)
+    monkeypatch.undo()
+    # other blocks (their bits differ): given, or a GPU's (`search.block_caps`) resuming a CPU's state
+    with pytest.raises(MechanismError, match="another search"):
+        api.synthesize(tgt, checkpoint=state, resume=True, blocks=(1024, 64, 4), **OPTS)
+    import jaxlink.synthesis.search as search
+
+    monkeypatch.setattr(search, "_platform", lambda: "gpu")
     with pytest.raises(MechanismError, match="another search"):
         api.synthesize(tgt, checkpoint=state, resume=True, **OPTS)
     monkeypatch.undo()

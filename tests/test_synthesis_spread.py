@@ -145,3 +145,24 @@ def test_two_processes_give_the_designs_of_one():
     assert [p.returncode for p in procs] == [0, 0], [o[1][-2000:] for o in outs]
     for out, _ in outs:  # every process returns the designs of one process, bit for bit
         assert eval([x for x in out.splitlines() if x.startswith("[")][-1]) == one
+
+
+@pytest.mark.parametrize("platform, counts, sizes", [("cpu", (8, 86, 43), (1024, 64, 8)),
+                                                     ("gpu", (1, 3, 1), (8192, 1835, 344))])
+def test_the_blocks_of_a_round_on_each_platform(monkeypatch, platform, counts, sizes):
+    """The default search over the 43 topologies up to ten links (8192 screen poses a topology, 128
+    ranked, 8 refined): on a CPU small blocks (1024, 64, 8 rows); on a GPU, whose small blocks run at
+    their kernels' latency one after another, a batch in as few blocks as `ACCEL_BLOCKS` allows (the
+    programs not compiled: only their blocks)."""
+    from jaxlink.synthesis import search as S
+
+    assert S.block_caps("cpu", False) == (S.SCREEN_BLOCK, S.RANK_BLOCK, S.REFINE_BLOCK) == (1024, 64, 8)
+    assert S.block_caps("cpu", True)[2] == S.REFINE_BLOCK_QUICK
+    assert S.block_caps("gpu", False) == S.block_caps("gpu", True) == S.block_caps("cuda", False) == S.ACCEL_BLOCKS
+    monkeypatch.setattr(S, "_platform", lambda: platform)
+    monkeypatch.setattr(S, "_compiled", lambda *a: a)
+    prog = S.programs(43, 9, False, samples=8192, screen_keep=128, refine=8, steps=300)
+    assert (prog.screen.count, prog.rank.count, prog.refine.count) == counts
+    assert (prog.screen.n, prog.rank.n, prog.refine.n) == (8192, 43 * 128, 43 * 8)
+    assert (prog.screen.size, prog.rank.size, prog.refine.size) == sizes
+    assert prog.refine.programs[0][1] == prog.refine.size  # the refinement compiled for its block

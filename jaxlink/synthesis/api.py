@@ -17,7 +17,7 @@ from . import distance as _dist
 from . import size as _size
 from . import transmission as _tm
 from .mechanism import crank_angle, placed_pose, to_sketch
-from .search import Candidate, certified_interval, interval_offsets, search
+from .search import Candidate, certified_interval, default_blocks, interval_offsets, search
 from .target import Target, load_target, make_target
 from .topology import MAX_DYADS, Topology
 from .topology import topologies as builtin_topologies
@@ -127,6 +127,14 @@ def _timed_points(c: Candidate, target: Target, m: _dist.Match, start_deg: float
     return start_deg + np.degrees(dt), at
 
 
+def _blocks_of(options: dict, time_limit: float) -> tuple[int, ...]:
+    """The blocks' caps a search with these `search.search` options and time limit takes."""
+    if options.get("blocks") is not None:
+        return tuple(int(b) for b in options["blocks"])
+    quick = options.get("quick")
+    return default_blocks(time_limit <= 15.0 if quick is None else bool(quick))
+
+
 def synthesize(target: Any, *, closed: bool | None = None, time_limit: float = 60.0, seed: int = 0,
                rounds: int | None = None, max_links: int = 8, sliders: bool = False, levers: bool = False,
                topologies: list[str | Topology] | None = None,
@@ -226,7 +234,9 @@ def synthesize(target: Any, *, closed: bool | None = None, time_limit: float = 6
     fp = _checkpoint.fingerprint(tgt, topos, seed=seed, rounds=rounds, samples=samples, count=count,
                                  n_points=n_points, max_size=max_size, min_transmission=min_transmission,
                                  time_limit=time_limit if rounds is None else bool(time_limit <= 15.0),
-                                 options=sorted(search_options.items())) if checkpoint is not None else ""
+                                 options=sorted(search_options.items()),
+                                 # the blocks' caps (the platform's unless given): the answer's bits depend on them
+                                 blocks=_blocks_of(search_options, time_limit)) if checkpoint is not None else ""
     if checkpoint is not None and not resume:
         Path(checkpoint).unlink(missing_ok=True)  # an earlier search's state is never this one's
     interrupted = False

@@ -27,10 +27,11 @@ With `rounds` = N the search runs exactly N rounds, full and polishing alternati
 when time is no limit), whatever the time: the same result on any machine.
 
 The screen's, the rank's and the refinement's batches are cut into blocks of a size that depends
-on the batch only, one program a block (`spread.Blocked`), the blocks spread over this process's
-devices and over the processes of a `jax.distributed` group: the same numbers bit for bit as on
-one device in one process (a program's bits depend on its batch's shape: `spread`). Several processes take the
-same decisions: every one holds every batch's results, and the time decisions are process 0's
+on the batch and the platform only (`block_caps`: small blocks on a CPU, whole batches on a GPU),
+one program a block (`spread.Blocked`), the blocks spread over this process's devices and over the
+processes of a `jax.distributed` group: the same numbers bit for bit as on one device in one
+process (a program's bits depend on its batch's shape: `spread`). Several processes take the same
+decisions: every one holds every batch's results, and the time decisions are process 0's
 (`spread.agreed`).
 """
 
@@ -92,6 +93,33 @@ REFINE_BLOCK = 8
 #: blocks of 8 slots took 9.8 s against 7.6 s for one batch of 56 (a default round; full level: the same
 #: time); the block still depends only on the batch and the level, never on the devices
 REFINE_BLOCK_QUICK = 64
+#: the caps of the screen's, the rank's and the refinement's blocks on an accelerator (a GPU, at either
+#: level): there a block's kernels run at their launch latency, not at their throughput, and the blocks
+#: of one batch run one after another on the one device (a full round of the 43 topologies up to ten
+#: links has 344 refinement slots: 43 blocks of 8, each 300 Adam steps of small kernels), so one block
+#: takes a whole batch of the default search (8192 screened poses a topology, 344 slots; the rank's
+#: 5504 rows in 3 blocks: its distances at 32 rotations, about 1 GB a block); on a CPU XLA spreads one block's
+#: work over the cores and the small blocks cost nothing. The caps depend on the platform only, never
+#: on the number of devices or processes: on one platform the same bits whatever the layout (`spread`)
+ACCEL_BLOCKS = (8192, 2048, 512)
+
+
+def _platform() -> str:
+    """The platform of this process's devices ("cpu", "gpu", ...)."""
+    return jax.local_devices()[0].platform
+
+
+def default_blocks(quick: bool) -> tuple[int, int, int]:
+    """The caps `programs` takes on this process's devices (`block_caps` of their platform)."""
+    return block_caps(_platform(), quick)
+
+
+def block_caps(platform: str, quick: bool) -> tuple[int, int, int]:
+    """The caps (screen, rank, refinement) of `programs`' blocks on devices of `platform` ("cpu",
+    "gpu", ...), for a `quick` search or not."""
+    if platform == "cpu":
+        return SCREEN_BLOCK, RANK_BLOCK, REFINE_BLOCK_QUICK if quick else REFINE_BLOCK
+    return ACCEL_BLOCKS
 
 
 class Programs(NamedTuple):
@@ -105,7 +133,7 @@ class Programs(NamedTuple):
 def programs(n_topos: int, n_dyads: int, closed: bool, *, samples: int, screen_keep: int, refine: int,
              steps: int, quick: bool = False, where: _spread.Layout | None = None,
              polish_points: int = 0, sliders: bool = False, timed: bool = False,
-             bounded: bool = False) -> Programs:
+             bounded: bool = False, blocks: tuple[int, int, int] | None = None) -> Programs:
     """Compile the screen, the rank and the refinement for these shapes, all three at once (XLA
     compiles in parallel threads; on a cold start compiling is most of a short search's time).
     The rank compiles at XLA's lowest optimisation level (about half the compile time, its run
@@ -115,21 +143,23 @@ def programs(n_topos: int, n_dyads: int, closed: bool, *, samples: int, screen_k
     float64 polish's program for a target of that many points is compiled beside them, into its
     memo (`polish.program`, which `polish.polish` then finds ready). `sliders`: the topologies may
     hold slider dyads (`tracer.trace`; other programs, the RRR ones unchanged without it).
-    Each program computes one block of its batch (`spread.blocks`, at most `SCREEN_BLOCK`,
-    `RANK_BLOCK`, `REFINE_BLOCK` rows), the same block whatever the devices and processes (`where`,
+    Each program computes one block of its batch (`spread.blocks`, at most `block_caps` rows: on a
+    CPU `SCREEN_BLOCK`, `RANK_BLOCK`, `REFINE_BLOCK`; on a GPU `ACCEL_BLOCKS`), the same block
+    whatever the number of devices and processes (`where`,
     default `spread.layout()`), and is called on whole batches (`spread.Blocked`).
     `timed`: a timed target's two programs (`_screen_timed`, `_refine_timed`; no rank: `rank` None)
     and its polish (`polish.program_timed` for `polish_points` points). `bounded`: the programs
-    that keep a design within a size (`size`; their last argument the bound, unused without it)."""
+    that keep a design within a size (`size`; their last argument the bound, unused without it).
+    `blocks`: other caps (screen, rank, refinement) than the platform's (`block_caps`)."""
     keep = min(screen_keep, samples * len(_subarcs(closed)))
     sizes: tuple[int, ...] = (samples, keep * n_topos, min(refine, keep) * n_topos)
-    caps: tuple[int, ...] = (SCREEN_BLOCK, RANK_BLOCK, REFINE_BLOCK_QUICK if quick else REFINE_BLOCK)
+    caps: tuple[int, ...] = default_blocks(quick) if blocks is None else tuple(blocks)
     jobs = [("screen", n_dyads, closed, 0, quick and closed, sliders, bounded),
             ("rank", n_dyads, False, 0, True, sliders, bounded),
             ("refine", n_dyads, False, steps, quick, sliders, bounded)]
     if timed:
         sizes = (samples, min(refine, samples * _STARTS) * n_topos)
-        caps = (SCREEN_BLOCK, REFINE_BLOCK_QUICK if quick else REFINE_BLOCK)
+        caps = (caps[0], caps[2])
         jobs = [("screen-timed", n_dyads, False, 0, quick, sliders, bounded),
                 ("refine-timed", n_dyads, False, steps, quick, sliders, bounded)]
     x64 = bool(jax.config.read("jax_enable_x64"))  # the traced program's default dtypes depend on it
@@ -543,9 +573,11 @@ def size_of(topo: Topology, pose, m: _dist.Match, target: Target, n_points: int 
 
 
 def _full_slots(prog, key, arr, samples, screen_keep, refine, tdesc, trank, flag, arcs_all, closed, elites,
-                jitter, rng, bounds):
+                jitter, rng, bounds, clock=None):
     """A full round's refinement slots: screen, rank, the best `refine` per topology rotated to their
-    best angle; the last half of each topology's slots restart from its best refined so far, jittered."""
+    best angle; the last half of each topology's slots restart from its best refined so far, jittered.
+    `clock` (a dict): the seconds of the screen and of the rank are written there."""
+    t0 = time.perf_counter()
     n_topos = arr.parents.shape[0]
     picks_pose, picks_arc, picks_topo = [], [], []
     for ti in range(n_topos):
@@ -563,9 +595,12 @@ def _full_slots(prog, key, arr, samples, screen_keep, refine, tdesc, trank, flag
     pose = np.concatenate(picks_pose)
     arc = np.concatenate(picks_arc)
     tix = np.concatenate(picks_topo)
+    t1 = time.perf_counter()
     val, phi = prog.rank(arr.parents[tix], arr.active[tix], arr.traced[tix], pose, arc, trank, flag,
                          _u(RANK_T, closed), bounds)
     val, phi = np.asarray(val), np.asarray(phi)
+    if clock is not None:
+        clock.update(screen=t1 - t0, rank=time.perf_counter() - t1)
     # `refine` per topology (the same shapes every round); the inf ones are dropped after
     sel = np.concatenate([np.flatnonzero(tix == ti)[np.argsort(val[tix == ti], kind="stable")][:refine]
                           for ti in range(n_topos)])
@@ -638,7 +673,8 @@ def search(target: Target, topos: list[Topology], *, time_limit: float, seed: in
            steps: int = 300, n_trace: int = 1000, n_points: int = _dist.N_POINTS, per_topology: int = 2,
            lr: float = 0.01, jitter: float = 0.02, quick: bool | None = None, t0: float | None = None,
            finish: int | None = None, max_size: float | None = None, min_transmission: float | None = None,
-           log=None, checkpoint=None, resume: bool = False, fingerprint: str = "") -> list[Candidate]:
+           log=None, checkpoint=None, resume: bool = False, fingerprint: str = "",
+           blocks: tuple[int, int, int] | None = None) -> list[Candidate]:
     """Rounds of screen → rank → refine → score until `time_limit` seconds (at least one round).
     `quick` (`programs`; default: when `time_limit` ≤ 15 s) trades run time for compile time.
     After each full round, and whenever the time left is too short for another full round but not
@@ -664,6 +700,8 @@ def search(target: Target, topos: list[Topology], *, time_limit: float, seed: in
     (`checkpoint.save`, with `fingerprint`); `resume`: continue from the state saved there
     (`checkpoint.load`; none: from the start). With `rounds` a resumed search ends with exactly the
     uninterrupted one's candidates; with a time limit the time spent before counts against it.
+    `blocks`: the caps (screen, rank, refinement) of the batches' blocks (`programs`; default the
+    platform's, `block_caps`: the answer's bits depend on them).
     Returns every scored candidate that assembles (and is within `max_size`, and keeps
     `min_transmission`), best first."""
     if rounds is not None and (isinstance(rounds, bool) or not isinstance(rounds, (int, np.integer)) or rounds < 1):
@@ -698,7 +736,7 @@ def search(target: Target, topos: list[Topology], *, time_limit: float, seed: in
     polish_points = (len(target.points) if timed else n_points) if finish > 0 else 0
     prog = programs(len(topos), arr.parents.shape[1], closed, samples=samples, screen_keep=screen_keep,
                     refine=refine, steps=steps, quick=quick, polish_points=polish_points,
-                    sliders=sliders, timed=timed, bounded=bounded)
+                    sliders=sliders, timed=timed, bounded=bounded, blocks=blocks)
     if timed:  # the screen's and the refinement's samples of the target; `jitter` leaves the span alone
         ts = timed_samples(target, TIMED_SCREEN_T)
         screen_target = (*(np.asarray(x, np.float32) for x in ts[:3]), ts[3])
@@ -782,16 +820,20 @@ def search(target: Target, topos: list[Topology], *, time_limit: float, seed: in
     while not done:
         rnd += 1
         n_before = len(found)
+        clock: dict[str, float] = {}  # the round's phases (s), for the log
         if polish:
             stix, poses0, arcs0 = _polish_slots(elites, elite_vals, len(stix), jitter, closed or timed, rng)
             rank_ok = np.ones(len(stix), bool)
         elif timed:
+            t_screen = time.perf_counter()
             stix, poses0, arcs0, rank_ok = _full_slots_timed(prog, key, arr, nsl, screen_target, elites, jitter, rng,
                                                              bounds)
+            clock["screen"] = time.perf_counter() - t_screen
             key = jax.random.fold_in(key, rnd)
         else:
             stix, poses0, arcs0, rank_ok = _full_slots(prog, key, arr, samples, screen_keep, refine, tdesc,
-                                                       trank, flag, arcs_all, closed, elites, jitter, rng, bounds)
+                                                       trank, flag, arcs_all, closed, elites, jitter, rng, bounds,
+                                                       clock)
             key = jax.random.fold_in(key, rnd)
         t_ref = time.perf_counter()
         if timed:
@@ -801,6 +843,8 @@ def search(target: Target, topos: list[Topology], *, time_limit: float, seed: in
             p, a, v = prog.refine(arr.parents[stix], arr.active[stix], arr.traced[stix], poses0,
                                   arcs0, ttarget, np.float32(lr), flag, _u(REFINE_T, closed), bounds)
         p, a, v = np.asarray(p, float), np.asarray(a, float), np.asarray(v)
+        t_score = time.perf_counter()
+        clock["refine"] = t_score - t_ref
         for ti in range(len(topos)):
             idx = np.flatnonzero((stix == ti) & np.isfinite(v) & rank_ok)
             pool = [(v[i], p[i].astype(np.float32), a[i].astype(np.float32)) for i in idx]
@@ -831,8 +875,10 @@ def search(target: Target, topos: list[Topology], *, time_limit: float, seed: in
                     kept += 1
         if log is not None:
             best = min((c.match.distance for c in found), default=float("inf"))
+            clock["score"] = time.perf_counter() - t_score
+            phases = ", ".join(f"{what} {sec:.1f} s" for what, sec in clock.items())
             log(f"round {rnd}{' (polish)' if polish else ''}: {len(found)} candidates, best distance {best:.4f}, "
-                f"{time.perf_counter() - began:.1f} s")
+                f"{time.perf_counter() - began:.1f} s ({phases})")
         now = time.perf_counter()
         dur = now - round_start
         if polish:
