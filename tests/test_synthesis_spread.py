@@ -166,3 +166,33 @@ def test_the_blocks_of_a_round_on_each_platform(monkeypatch, platform, counts, s
     assert (prog.screen.n, prog.rank.n, prog.refine.n) == (8192, 43 * 128, 43 * 8)
     assert (prog.screen.size, prog.rank.size, prog.refine.size) == sizes
     assert prog.refine.programs[0][1] == prog.refine.size  # the refinement compiled for its block
+
+
+def test_a_time_limited_search_stops_scoring_at_its_limit(monkeypatch):
+    """In one process, once a design is found, no exact score starts past the time limit: a round
+    whose scoring reaches the limit (here the clock jumps past it in the second round's first score)
+    scores no more candidates, and the search ends with what it found (the first round's designs)."""
+    import types
+
+    from jaxlink.synthesis import search as S
+    from jaxlink.synthesis.api import synthesize
+
+    real_clock, real_score = S.time.perf_counter, S.score
+    jump = [0.0]
+    lines: list[str] = []
+    calls = {1: 0, 2: 0, 3: 0}
+
+    def score(*args, **kw):
+        rnd = sum(x.startswith("round") for x in lines) + 1
+        calls[rnd] += 1
+        if rnd == 2:
+            jump[0] = 1e4  # the limit (1000 s) passes during this score
+        return real_score(*args, **kw)
+
+    monkeypatch.setattr(S, "time", types.SimpleNamespace(perf_counter=lambda: real_clock() + jump[0]))
+    monkeypatch.setattr(S, "score", score)
+    kw = dict(_SEARCH, time_limit=1000.0, rounds=None, quick=True)  # the short search's programs
+    r = synthesize(_arc(), log=lines.append, **kw)
+    assert [x.split(":")[0] for x in lines if x.startswith("round")] == ["round 1", "round 2 (polish)"]
+    assert calls[1] >= 2 and calls[2] == 1 and calls[3] == 0  # round 1 scored its 2 (or more tried)
+    assert r.designs and np.isfinite(r.best.distance)

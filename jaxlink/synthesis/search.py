@@ -18,7 +18,9 @@ One **round** (repeated with fresh candidates until the time limit):
 4. **score**: the refined candidates of each topology, best by the surrogate first, traced exactly
    (`tracer.trace_exact`, float64) at `n_trace` inputs, checked over their whole interval
    (`assembly.certify`) and matched (`distance.match`), until `per_topology` pass (at most
-   `SCORE_TRIES` × `per_topology` tried).
+   `SCORE_TRIES` × `per_topology` tried); the topologies side by side in `SCORE_THREADS` threads,
+   the most promising first; in a time-limited search in one process, once a design is found, no
+   score starts past the time limit (less `SCORE_RESERVE_S`).
 
 After each full round, and while a full round would not fit in the time left, a **polishing
 round**: refine and score only, every slot on the best three topologies' best refined so far
@@ -38,6 +40,7 @@ decisions: every one holds every batch's results, and the time decisions are pro
 from __future__ import annotations
 
 import functools
+import os
 import time
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
@@ -72,6 +75,10 @@ MARGIN_FLOOR = 0.02
 #: a round scores a topology's refined candidates in the surrogate's order until `per_topology`
 #: pass the exact check, at most this many times `per_topology` of them
 SCORE_TRIES = 4
+#: the threads that score a round's candidates (NumPy float64 and SciPy k-d trees, one topology a
+#: task): 43 ten-bar topologies' 86+ scores took 6-18 s of a 58 s letter on an H200's host shared by
+#: 5 processes, where the device's screen, rank and refinement took about 1 s
+SCORE_THREADS = max(1, min(4, os.cpu_count() or 1))
 _STARTS = 16
 #: a timed target's points in the screen (subsampled or padded to it, `timed_samples`); the refinement
 #: takes `REFINE_T`
@@ -853,15 +860,19 @@ def search(target: Target, topos: list[Topology], *, time_limit: float, seed: in
             if pool:
                 elite_vals[ti] = pool[:2]
                 elites[ti] = [(e[1], e[2]) for e in pool[:2]]
-        for ti in range(len(topos)):
+        # the exact scoring after the search's first design stops at the time limit (one process)
+        stop = began + time_limit - SCORE_RESERVE_S if cut and found else None
+
+        def scored(ti: int, stop=stop) -> list[Candidate]:
+            """Topology `ti`'s refined candidates scored in the surrogate's order until `per_topology`
+            pass, trying at most SCORE_TRIES times as many: the best by the surrogate can all fail
+            the exact check (a four-bar pushed to a dead centre on letter R's corners), the next
+            ones not; none after `stop` (a `time.perf_counter()` time)."""
             idx = np.flatnonzero(stix == ti)
             idx = idx[np.isfinite(v[idx]) & rank_ok[idx]]
-            kept = 0
-            # in the surrogate's order until `per_topology` pass, trying at most SCORE_TRIES times as
-            # many: the best by the surrogate can all fail the exact check (a four-bar pushed to a
-            # dead centre on letter R's corners), the next ones not
+            kept: list[Candidate] = []
             for i in idx[np.argsort(v[idx])][:SCORE_TRIES * per_topology]:
-                if kept >= per_topology:
+                if len(kept) >= per_topology or (stop is not None and time.perf_counter() >= stop):
                     break
                 start = float(a[i, 0])
                 span = (float(target.inputs[-1] - target.inputs[0]) if target.inputs is not None
@@ -870,9 +881,19 @@ def search(target: Target, topos: list[Topology], *, time_limit: float, seed: in
                 sz = size_of(topos[ti], p[i], m, target, n_points, frame)
                 if np.isfinite(m.distance) and asm.ok and (not sized or sz <= bound) and (
                         floor == 0 or keeps_transmission(topos[ti], p[i], start, span, target, floor)):
-                    found.append(Candidate(topos[ti], p[i], start, span, m, asm, time.perf_counter() - began,
-                                           size=sz))
-                    kept += 1
+                    kept.append(Candidate(topos[ti], p[i], start, span, m, asm, time.perf_counter() - began,
+                                          size=sz))
+            return kept
+
+        # the topologies side by side (NumPy and SciPy's k-d trees release the interpreter), the most
+        # promising first (the least surrogate value: what a stop at the time limit keeps); the
+        # candidates added in topology order (each topology's the same whatever the threads)
+        ok_v = np.where(np.isfinite(v) & rank_ok, v, np.inf)
+        first = sorted(range(len(topos)), key=lambda ti: float(np.min(ok_v[stix == ti], initial=np.inf)))
+        with ThreadPoolExecutor(SCORE_THREADS) as ex:
+            futures = {ti: ex.submit(scored, ti) for ti in first}
+            for ti in range(len(topos)):
+                found.extend(futures[ti].result())
         if log is not None:
             best = min((c.match.distance for c in found), default=float("inf"))
             clock["score"] = time.perf_counter() - t_score
