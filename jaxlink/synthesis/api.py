@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 import time
+from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 from typing import Any, Callable, NamedTuple
 
@@ -17,7 +18,7 @@ from . import distance as _dist
 from . import size as _size
 from . import transmission as _tm
 from .mechanism import crank_angle, placed_pose, to_sketch
-from .search import Candidate, certified_interval, default_blocks, interval_offsets, search
+from .search import SCORE_THREADS, Candidate, certified_interval, default_blocks, interval_offsets, search
 from .target import Target, load_target, make_target
 from .topology import MAX_DYADS, Topology
 from .topology import topologies as builtin_topologies
@@ -106,7 +107,10 @@ def _design(c: Candidate, target: Target, n_trace: int, name: str) -> Design:
     sk = to_sketch(c.topology, placed, name=name, unit=target.unit,
                    description=f"{c.topology.name}, synthesized for {target.source} (distance {m.distance:.6g})")
     inputs_deg, at_inputs = _timed_points(c, target, m, start)
-    mu = _tm.least(c.topology, c.pose, *certified_interval(c.start, c.span, target))
+    # the least transmission angle: the assembly check's least margin (the same certificate over
+    # the same interval) unless slotted levers' margins count there and not here
+    mu = (_tm.least(c.topology, c.pose, *certified_interval(c.start, c.span, target)) if c.topology.levers
+          else c.assembly)
     mu_deg = _tm.angle_deg(mu.margin) if np.isfinite(mu.margin) else float("nan")
     return Design(c.topology.name, c.topology.n_joints, c.topology.n_links, float(m.distance), start,
                   start + math.degrees(span), n_trace, float(m.scale), math.degrees(m.rotation),
@@ -259,7 +263,8 @@ def synthesize(target: Any, *, closed: bool | None = None, time_limit: float = 6
     for c in found:
         if c.topology.name not in best:
             best[c.topology.name] = c
-    designs = [_design(c, tgt, count, name) for c in best.values()]
+    with ThreadPoolExecutor(SCORE_THREADS) as ex:  # the designs side by side (NumPy), in order
+        designs = list(ex.map(lambda c: _design(c, tgt, count, name), best.values()))
     designs.sort(key=lambda d: d.distance)
     designs = [d._replace(pareto=not any(o.joints <= d.joints and o.distance < d.distance for o in designs))
                for d in designs]
