@@ -24,6 +24,8 @@ import numpy as np
 import pytest
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+# one worker: the searches share the short four-bar search's compiled programs
+pytestmark = pytest.mark.xdist_group("synthesis_spread")
 
 
 def _arc():
@@ -191,7 +193,7 @@ def test_a_time_limited_search_stops_scoring_at_its_limit(monkeypatch):
 
     monkeypatch.setattr(S, "time", types.SimpleNamespace(perf_counter=lambda: real_clock() + jump[0]))
     monkeypatch.setattr(S, "score", score)
-    kw = dict(_SEARCH, time_limit=1000.0, rounds=None, quick=True)  # the short search's programs
+    kw = dict(_SEARCH, refine=8, time_limit=1000.0, rounds=None, quick=True)  # test_rounds_are_exact's programs
     r = synthesize(_arc(), log=lines.append, **kw)
     assert [x.split(":")[0] for x in lines if x.startswith("round")] == ["round 1", "round 2 (polish)"]
     assert calls[1] >= 2 and calls[2] == 1 and calls[3] == 0  # round 1 scored its 2 (or more tried)
