@@ -10,12 +10,11 @@
 # Missing packages travel as wheels in .whl/ (see device_run.sh).
 # XLA_PYTHON_CLIENT_PREALLOCATE=false: the processes share the device's memory. TOTAL=0: no tests.
 # MAXLINKS=10: the ten-bars too (default 8).
-# Measured on an H200 (2026-11-26): shared 5 ways a full round took about 3.5 s (16-19 rounds a
-# letter in 60 s), shared 13 ways 15-28 s (2-3 rounds): sharing is not one letter on one GPU.
-# The GPU goal's measurement in a session's 15 minutes (2026-11-27, H200): all 26 letters with
-# MAXLINKS=10 PROCS=5 WARM=1 LIMIT=58 TOTAL=0 LETTERS_TIMEOUT=385 took 390 s of command (warm-up
-# 57 s, a ten-bar round 17-44 s shared 5 ways) and about 400 s of device time with the start:
-# two such calls fit in a session, not three.
+# The GPU goal's measurement in a session's 15 minutes (2026-11-27, H200, the GPU's blocks, 864af9e):
+# all 26 letters with MAXLINKS=10 PROCS=5 WARM=1 LIMIT=58 TOTAL=0 LETTERS_TIMEOUT=385 took 407 s
+# of command (warm-up 46 s; a full round 7-20 s shared 5 ways, most of it the host's exact scoring),
+# about 440 s of device time with the start; PROCS=7 LETTERS_TIMEOUT=270 took 288 s (a little
+# worse: mean 0.0227 against 0.0210). Then E alone, benchmarks/synthesis_blocks.py, 75 s.
 T0=$(date +%s)
 export PYTHONUNBUFFERED=1 XLA_PYTHON_CLIENT_PREALLOCATE=false
 if ls .whl/*.whl >/dev/null 2>&1; then
