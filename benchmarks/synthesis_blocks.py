@@ -1,5 +1,5 @@
 """The synthesis search's blocks on this machine's device: one letter (or a planted curve), exactly
-`--rounds` rounds, with the platform's block caps (`jaxlink.synthesis.search.block_caps`) and with
+`--rounds` rounds, with the platform's block caps (`jaxlink.synthesis.block_caps`) and with
 another platform's (`--as cpu` on a GPU: the CPU's small blocks), each round's phases (screen,
 rank, refinement, exact scoring) from the search's log, the best distance and the wall time (the
 compiling of each caps' programs included).
@@ -26,7 +26,7 @@ import numpy as np
 jax.config.update("jax_enable_x64", True)
 
 import jaxlink as jl  # noqa: E402
-from jaxlink.synthesis.search import block_caps, default_blocks  # noqa: E402
+from jaxlink.synthesis import block_caps, default_blocks  # noqa: E402
 
 
 def run(target, caps: tuple[int, int, int] | None, rounds: int, max_links: int, time_limit: float) -> dict:

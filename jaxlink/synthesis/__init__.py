@@ -8,7 +8,8 @@
 - `assembly`: the check that a candidate assembles over its whole interval on its branch;
 - `size`: a design's size in extents of the target, and the bound a search keeps to (`max_size`);
 - `transmission`: a design's least transmission angle, and the floor a search keeps to (`min_transmission`);
-- `search`: screen → rank → refine → score rounds;
+- `search`: screen → rank → refine → score rounds (`block_caps`, `default_blocks`: the blocks a
+  platform's batches are cut into);
 - `mechanism`: a candidate as a sketch file; `api`: `synthesize`.
 
 `jaxlink.synthesize` is the entry point; `jaxlink.synthesis.distance.match` the metric.
@@ -19,6 +20,8 @@ from .api import Synthesis as Synthesis
 from .api import synthesize as synthesize
 from .distance import Match as Match
 from .distance import match as match
+from .search import block_caps as block_caps
+from .search import default_blocks as default_blocks
 from .target import Target as Target
 from .target import load_target as load_target
 from .target import make_target as make_target
