@@ -198,3 +198,22 @@ def test_a_time_limited_search_stops_scoring_at_its_limit(monkeypatch):
     assert [x.split(":")[0] for x in lines if x.startswith("round")] == ["round 1", "round 2 (polish)"]
     assert calls[1] >= 2 and calls[2] == 1 and calls[3] == 0  # round 1 scored its 2 (or more tried)
     assert r.designs and np.isfinite(r.best.distance)
+
+
+def test_the_blocks_option_is_the_default_path_and_other_blocks_are_other_programs():
+    """`blocks` given as the platform's caps is the default search bit for bit; other caps (the
+    refinement's 8 slots in two blocks of 4) run their own programs (the compiled programs are keyed
+    by the block: a key blind to it would call the block-of-8 program on 4 rows and fail) and still
+    end at designs that assemble; a bad value is refused with a message naming it."""
+    from jaxlink.errors import MechanismError
+    from jaxlink.synthesis import default_blocks
+    from jaxlink.synthesis.api import synthesize
+
+    kw = dict(_SEARCH, refine=8, finish=0)  # test_rounds_are_exact's programs (a quick search)
+    plain = _designs(synthesize(_arc(), **kw))
+    assert _designs(synthesize(_arc(), blocks=default_blocks(True), **kw)) == plain
+    other = synthesize(_arc(), blocks=(1024, 64, 4), **kw)
+    assert other.designs and all(np.isfinite(d.distance) and d.margin > 0 for d in other.designs)
+    for bad in ((0, 64, 8), (1024, 64), "abc", (1.5, 64, 8), (True, 64, 8), 8):
+        with pytest.raises(MechanismError, match="blocks = .*three whole numbers"):
+            synthesize(_arc(), blocks=bad, **kw)

@@ -18,7 +18,16 @@ from . import distance as _dist
 from . import size as _size
 from . import transmission as _tm
 from .mechanism import crank_angle, placed_pose, to_sketch
-from .search import SCORE_THREADS, Candidate, certified_interval, default_blocks, interval_offsets, search
+from .search import (
+    SCORE_THREADS,
+    Candidate,
+    certified_interval,
+    checked_blocks,
+    default_blocks,
+    interval_offsets,
+    quick_of,
+    search,
+)
 from .target import Target, load_target, make_target
 from .topology import MAX_DYADS, Topology
 from .topology import topologies as builtin_topologies
@@ -133,10 +142,8 @@ def _timed_points(c: Candidate, target: Target, m: _dist.Match, start_deg: float
 
 def _blocks_of(options: dict, time_limit: float) -> tuple[int, ...]:
     """The blocks' caps a search with these `search.search` options and time limit takes."""
-    if options.get("blocks") is not None:
-        return tuple(int(b) for b in options["blocks"])
-    quick = options.get("quick")
-    return default_blocks(time_limit <= 15.0 if quick is None else bool(quick))
+    given = checked_blocks(options.get("blocks"))
+    return default_blocks(quick_of(time_limit, options.get("quick"))) if given is None else given
 
 
 def synthesize(target: Any, *, closed: bool | None = None, time_limit: float = 60.0, seed: int = 0,
@@ -207,6 +214,10 @@ def synthesize(target: Any, *, closed: bool | None = None, time_limit: float = 6
     if per is not None and (isinstance(per, bool) or not isinstance(per, (int, np.integer)) or per < 1):
         raise MechanismError(f"per_topology = {per!r}: the number of candidates of a topology kept by a round must "
                              "be a whole number, at least 1")
+    try:
+        checked_blocks(search_options.get("blocks"))
+    except ValueError as e:
+        raise MechanismError(str(e)) from None
     t0 = time.perf_counter()
     if isinstance(target, Target):
         tgt = target if closed is None else target._replace(closed=bool(closed))
@@ -237,7 +248,7 @@ def synthesize(target: Any, *, closed: bool | None = None, time_limit: float = 6
                              "processes run without it")
     fp = _checkpoint.fingerprint(tgt, topos, seed=seed, rounds=rounds, samples=samples, count=count,
                                  n_points=n_points, max_size=max_size, min_transmission=min_transmission,
-                                 time_limit=time_limit if rounds is None else bool(time_limit <= 15.0),
+                                 time_limit=time_limit if rounds is None else quick_of(time_limit, None),
                                  options=sorted(search_options.items()),
                                  # the blocks' caps (the platform's unless given): the answer's bits depend on them
                                  blocks=_blocks_of(search_options, time_limit)) if checkpoint is not None else ""

@@ -111,6 +111,32 @@ REFINE_BLOCK_QUICK = 64
 ACCEL_BLOCKS = (8192, 2048, 512)
 
 
+#: a search of at most this time limit (s) is `quick` unless told (`quick_of`)
+QUICK_S = 15.0
+
+
+def quick_of(time_limit: float, quick: bool | None) -> bool:
+    """Whether a search with this time limit compiles its programs at XLA's lowest level (`quick`
+    if given, else a time limit of at most `QUICK_S`)."""
+    return time_limit <= QUICK_S if quick is None else bool(quick)
+
+
+def checked_blocks(blocks) -> tuple[int, int, int] | None:
+    """`blocks` (the caps of `programs`' blocks: screen, rank, refinement) as three whole numbers,
+    or None; ValueError naming the value otherwise."""
+    if blocks is None:
+        return None
+    try:
+        caps = tuple(blocks)
+    except TypeError:
+        caps = ()
+    if len(caps) != 3 or not all(isinstance(c, (int, np.integer)) and not isinstance(c, bool) and c >= 1
+                                 for c in caps):
+        raise ValueError(f"blocks = {blocks!r}: three whole numbers of rows, at least 1 each (the screen's, "
+                         "the rank's and the refinement's blocks), or None for the platform's")
+    return int(caps[0]), int(caps[1]), int(caps[2])
+
+
 def _platform() -> str:
     """The platform of this process's devices ("cpu", "gpu", ...)."""
     return jax.local_devices()[0].platform
@@ -160,7 +186,8 @@ def programs(n_topos: int, n_dyads: int, closed: bool, *, samples: int, screen_k
     `blocks`: other caps (screen, rank, refinement) than the platform's (`block_caps`)."""
     keep = min(screen_keep, samples * len(_subarcs(closed)))
     sizes: tuple[int, ...] = (samples, keep * n_topos, min(refine, keep) * n_topos)
-    caps: tuple[int, ...] = default_blocks(quick) if blocks is None else tuple(blocks)
+    given = checked_blocks(blocks)
+    caps: tuple[int, ...] = default_blocks(quick) if given is None else given
     jobs = [("screen", n_dyads, closed, 0, quick and closed, sliders, bounded),
             ("rank", n_dyads, False, 0, True, sliders, bounded),
             ("refine", n_dyads, False, steps, quick, sliders, bounded)]
@@ -737,7 +764,8 @@ def search(target: Target, topos: list[Topology], *, time_limit: float, seed: in
     bound = float(max_size) if max_size is not None and sized else np.inf  # in target extents
     floor = _tm.floor_of(min_transmission)  # sin² μ of the least transmission angle (0: none)
     bounds = np.array([_size.limit(bound, frame[2], frame[1]), floor], np.float32)
-    quick = time_limit <= 15.0 if quick is None else quick
+    quick = quick_of(time_limit, quick)
+    blocks = checked_blocks(blocks)
     finish = (0 if quick else 4) if finish is None else finish
     sliders = any(t.sliders or t.levers for t in topos)  # the programs that trace both kinds
     polish_points = (len(target.points) if timed else n_points) if finish > 0 else 0
