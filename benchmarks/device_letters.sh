@@ -10,11 +10,11 @@
 # Missing packages travel as wheels in .whl/ (see device_run.sh).
 # XLA_PYTHON_CLIENT_PREALLOCATE=false: the processes share the device's memory. TOTAL=0: no tests.
 # MAXLINKS=10: the ten-bars too (default 8).
-# The GPU goal's measurement in a session's 15 minutes (2026-11-27, H200, the GPU's blocks, 864af9e):
-# all 26 letters with MAXLINKS=10 PROCS=5 WARM=1 LIMIT=58 TOTAL=0 LETTERS_TIMEOUT=385 took 407 s
-# of command (warm-up 46 s; a full round 7-20 s shared 5 ways, most of it the host's exact scoring),
-# about 440 s of device time with the start; PROCS=7 LETTERS_TIMEOUT=270 took 288 s (a little
-# worse: mean 0.0227 against 0.0210). Then E alone, benchmarks/synthesis_blocks.py, 75 s.
+# The GPU goal's measurement in a session's 15 minutes (2026-11-27, H100, b1e4d30): all 26 letters
+# with MAXLINKS=10 PROCS=5 WARM=1 LIMIT=57 TOTAL=0 LETTERS_TIMEOUT=390 (the device tool's kind
+# nvidia-h100-x1, carry .whl, timeout 480) took 399 s of command (warm-up 47 s; every letter 56.3-57.2 s;
+# mean 0.0226, median 0.0137, better than LInK on 19), about 443 s of device time with the start;
+# the whole test suite after it (pytest -n 14, cut at 380 s) took the remaining 400 s.
 T0=$(date +%s)
 export PYTHONUNBUFFERED=1 XLA_PYTHON_CLIENT_PREALLOCATE=false
 if ls .whl/*.whl >/dev/null 2>&1; then
