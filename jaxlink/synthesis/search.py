@@ -96,9 +96,11 @@ _QUICK: dict[str, Any] = {"xla_backend_optimization_level": 0}
 SCREEN_BLOCK = 1024
 RANK_BLOCK = 64
 REFINE_BLOCK = 8
-#: the refinement's block at XLA's lowest level (`quick`): its 300 steps' kernels run unfused enough that
-#: blocks of 8 slots took 9.8 s against 7.6 s for one batch of 56 (a default round; full level: the same
-#: time); the block still depends only on the batch and the level, never on the devices
+#: the refinement's block in a `quick` search: chosen when a quick search compiled its refinement at XLA's
+#: lowest level, where blocks of 8 slots took 9.8 s against 7.6 s for one batch of 56 (a default round);
+#: the refinement now compiles at the full level in every search (`programs`), where the block's size
+#: does not change the time, and the quick block stays (another block: other bits); it depends only
+#: on the batch and `quick`, never on the devices
 REFINE_BLOCK_QUICK = 64
 #: the caps of the screen's, the rank's and the refinement's blocks on an accelerator (a GPU, at either
 #: level): there a block's kernels run at their launch latency, not at their throughput, and the blocks
@@ -116,8 +118,9 @@ QUICK_S = 15.0
 
 
 def quick_of(time_limit: float, quick: bool | None) -> bool:
-    """Whether a search with this time limit compiles its programs at XLA's lowest level (`quick`
-    if given, else a time limit of at most `QUICK_S`)."""
+    """Whether a search with this time limit is `quick` (if given, else a time limit of at most
+    `QUICK_S`): a closed or timed target's screen compiled at XLA's lowest level, no final polish by default,
+    the refinement's blocks of `REFINE_BLOCK_QUICK` (`programs`, `search`)."""
     return time_limit <= QUICK_S if quick is None else bool(quick)
 
 
@@ -170,9 +173,12 @@ def programs(n_topos: int, n_dyads: int, closed: bool, *, samples: int, screen_k
     """Compile the screen, the rank and the refinement for these shapes, all three at once (XLA
     compiles in parallel threads; on a cold start compiling is most of a short search's time).
     The rank compiles at XLA's lowest optimisation level (about half the compile time, its run
-    time about the same); the refinement too when `quick` (it then runs about twice as long: for
-    short searches), and the screen when `quick` and `closed` (an open target's screen, 64
-    sub-arcs a candidate, would run longer than its compiling saves). `polish_points` > 0: the
+    time about the same), and the screen when `quick` and `closed` (an open target's screen, 64
+    sub-arcs a candidate, would run longer than its compiling saves). The refinement always
+    compiles at the full level: at the lowest its 300 steps ran 2-3 times as long, more than the
+    compiling saved even in a short search (the 16 built-ins, 15 s, 2 cores: its round 32.7 s cold
+    and 26.1 s warm against 23.5 and 14.8 s; a four-bar: 5.3 s cold against 5.5 s, its round 1.7
+    against 1.5 s warm). `polish_points` > 0: the
     float64 polish's program for a target of that many points is compiled beside them, into its
     memo (`polish.program`, which `polish.polish` then finds ready). `sliders`: the topologies may
     hold slider dyads (`tracer.trace`; other programs, the RRR ones unchanged without it).
@@ -190,12 +196,12 @@ def programs(n_topos: int, n_dyads: int, closed: bool, *, samples: int, screen_k
     caps: tuple[int, ...] = default_blocks(quick) if given is None else given
     jobs = [("screen", n_dyads, closed, 0, quick and closed, sliders, bounded),
             ("rank", n_dyads, False, 0, True, sliders, bounded),
-            ("refine", n_dyads, False, steps, quick, sliders, bounded)]
+            ("refine", n_dyads, False, steps, False, sliders, bounded)]
     if timed:
         sizes = (samples, min(refine, samples * _STARTS) * n_topos)
         caps = (caps[0], caps[2])
         jobs = [("screen-timed", n_dyads, False, 0, quick, sliders, bounded),
-                ("refine-timed", n_dyads, False, steps, quick, sliders, bounded)]
+                ("refine-timed", n_dyads, False, steps, False, sliders, bounded)]
     x64 = bool(jax.config.read("jax_enable_x64"))  # the traced program's default dtypes depend on it
     where = _spread.layout() if where is None else where
     if where.devices > len(jax.local_devices()):
