@@ -208,14 +208,27 @@ def programs(n_topos: int, n_dyads: int, closed: bool, *, samples: int, screen_k
         raise ValueError(f"{where.devices} devices asked for, {len(jax.local_devices())} here")
     block = [_spread.blocks(n, cap)[1] for n, cap in zip(sizes, caps)]
     tasks = [(job, b, d) for job, b in zip(jobs, block) for d in range(where.devices)]
-    with ThreadPoolExecutor(len(tasks) + (polish_points > 0)) as ex:
-        pol = (None if polish_points <= 0
-               else ex.submit(_polish_program_timed, n_dyads, polish_points, sliders, bounded) if timed
-               else ex.submit(_polish_program, n_dyads, polish_points, sliders, bounded))
-        compiled = list(ex.map(lambda t: _compiled(t[0][0], t[1], *t[0][1:], x64, t[2]), tasks))
-        if pol is not None:
-            pol.result()
-    per = [compiled[i * where.devices:(i + 1) * where.devices] for i in range(len(jobs))]
+    ex = ThreadPoolExecutor(len(tasks) + (polish_points > 0))
+    pol = (None if polish_points <= 0
+           else ex.submit(_polish_program_timed, n_dyads, polish_points, sliders, bounded) if timed
+           else ex.submit(_polish_program, n_dyads, polish_points, sliders, bounded))
+    futures = [ex.submit(_compiled, t[0][0], t[1], *t[0][1:], x64, t[2]) for t in tasks]
+    ex.shutdown(wait=False)  # the threads end with their compiling
+
+    def ready(fs: list, also=None) -> list:
+        """The programs of `fs` once compiled (and `also`, the polish's)."""
+        out = [f.result() for f in fs]
+        if also is not None:
+            also.result()
+        return out
+
+    # the screen and the rank are waited for here; the refinement (and the polish) go on compiling
+    # while the first round screens and ranks, and are waited for at the refinement's first call
+    # (`spread.Blocked`): the same programs, the same bits, compiled at once
+    per: list = []
+    for i, job in enumerate(jobs):
+        fs = futures[i * where.devices:(i + 1) * where.devices]
+        per.append(functools.partial(ready, fs, pol) if job[0].startswith("refine") else ready(fs))
     rows: tuple[tuple[int, ...], ...] = ((1, 2, 3), (0, 1, 2, 3, 4), (0, 1, 2, 3, 4))
     keyed: tuple[int | None, ...] = (0, None, None)
     if timed:

@@ -68,12 +68,20 @@ class Blocked:
     The arguments at positions `rows` have the candidate axis first and are cut into blocks; the
     one at `keyed` (a PRNG key, or None) is folded with each block's index; the others go whole to
     every block. The outputs (a tuple, candidate axis first) come back whole, in row order, on
-    every process (NumPy arrays)."""
+    every process (NumPy arrays). `programs` may also be a function that returns them (waiting for
+    programs still compiling): called at their first use."""
 
-    def __init__(self, programs: Sequence[Callable], rows: tuple[int, ...], keyed: int | None, where: Layout,
-                 n: int, size: int):
-        self.programs, self.rows, self.keyed, self.where, self.n, self.size = programs, rows, keyed, where, n, size
+    def __init__(self, programs: Sequence[Callable] | Callable[[], Sequence[Callable]], rows: tuple[int, ...],
+                 keyed: int | None, where: Layout, n: int, size: int):
+        self._programs, self.rows, self.keyed, self.where, self.n, self.size = programs, rows, keyed, where, n, size
         self.count = -(-n // size)
+
+    @property
+    def programs(self) -> Sequence[Callable]:
+        """The programs, one per device (waited for on the first use when given as a function)."""
+        if callable(self._programs):
+            self._programs = list(self._programs())
+        return self._programs
 
     def __call__(self, *args: Any) -> tuple[np.ndarray, ...]:
         devices = jax.local_devices()[:self.where.devices]
