@@ -125,12 +125,9 @@ def test_lever_sketch_replays_the_tracer(tmp_path, name):
 
 
 def test_planted_lever_design_is_recovered_and_replayed(tmp_path):
-    """`jaxlink synthesize` of the four-bar and the lever topology on the planted lever design's
-    curve: the lever design recovered below the discretisation floor (0.032), and its written file
-    (`designs/RANK-four-bar+lever-J4.toml`) replays it to 1e-9. Which of the two ranks first is a
-    draw: a four-bar also follows this curve below the floor (seeds 0-3 on this CPU: the lever
-    0.0055-0.0122, the four-bar 0.0091-0.0174, the lever first on two; on an H100 the four-bar
-    first, 0.0074 against 0.0164)."""
+    """`jaxlink synthesize --levers` (up to 6 links: the four-bar, the six-bars and the lever's
+    variants) on the planted lever design's curve: the lever topology found, below the
+    discretisation floor and the best four-bar, and the written file replays it to 1e-9."""
     from test_synthesis import _floor
 
     target = trace_exact(LEVER, POSE, np.linspace(0, 2 * np.pi, 400, endpoint=False))[0][:, 5] * 20 + [50, 30]
@@ -141,20 +138,20 @@ def test_planted_lever_design_is_recovered_and_replayed(tmp_path):
                      "--samples", "2048", "--time-limit", "5", "--count", "400", "--no-plot",
                      "--out", str(out_dir)]) == 0
     res = json.loads((out_dir / "synthesis.json").read_text())
-    assert {d["topology"] for d in res["designs"]} == {"four-bar", LEVER.name}
-    lever = next(d for d in res["designs"] if d["topology"] == LEVER.name)
+    best = res["designs"][0]
     tgt = load_target(f)
-    assert lever["links"] == 6 and lever["levers"] == {"C": {"on": "link1", "through": "F1"}}
-    assert lever["distance"] < _floor(tgt.points, True)
-    assert "l4_1" in lever["lengths"] and "l4_3" not in lever["lengths"]
+    four = next(d for d in res["designs"] if d["topology"] == "four-bar")
+    assert best["topology"] == LEVER.name and best["links"] == 6 and best["levers"] == {
+        "C": {"on": "link1", "through": "F1"}}
+    assert best["distance"] < _floor(tgt.points, True) and best["distance"] < four["distance"]
+    assert "l4_1" in best["lengths"] and "l4_3" not in best["lengths"]
     out = tmp_path / "replay.csv"
-    written = out_dir / "designs" / f"{lever['rank']}-{LEVER.name}.toml"
-    assert cli_main(["kinematics", str(written), "--start", repr(lever["start_deg"]),
-                     "--step", repr(360 / lever["count"]), "--count", str(lever["count"]), "--outputs", "position",
+    assert cli_main(["kinematics", str(out_dir / "synthesized.toml"), "--start", repr(best["start_deg"]),
+                     "--step", repr(360 / best["count"]), "--count", str(best["count"]), "--outputs", "position",
                      "--units", "file", "--csv", str(out)]) == 0
     rows = list(csv.DictReader(out.open()))
     curve = np.array([[float(x["P_x_mm"]), float(x["P_y_mm"])] for x in rows])
-    assert abs(D.match(curve, tgt.points, closed=True).distance - lever["distance"]) < 1e-9
+    assert abs(D.match(curve, tgt.points, closed=True).distance - best["distance"]) < 1e-9
 
 
 def test_levers_option_adds_the_lever_topologies(tmp_path, monkeypatch):
