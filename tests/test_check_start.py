@@ -98,9 +98,8 @@ def test_the_start_from_the_turn_is_the_start_solved_alone(default_level):
     rows = {w[0]: w[1:] for w in starts}
     assert len(rows) == 7, out
     assert all(v[0] == "SAME" for v in rows.values()), out
-    # the check has teeth: a start solved as one input alone differs from the turn's somewhere (on
-    # the CPU: XLA's CPU code vectorizes a batch of one otherwise; on an H100 they were the same bits)
-    assert any(v[1] == "ONE-DIFFERENT" for v in rows.values()) or jax.default_backend() != "cpu", out
+    # the check has teeth: a start solved as one input alone differs from the turn's somewhere
+    assert any(v[1] == "ONE-DIFFERENT" for v in rows.values()), out
 
 
 def test_jets_and_transmission_angles_of_an_input_do_not_depend_on_the_inputs_beside_it(default_level):
@@ -108,8 +107,7 @@ def test_jets_and_transmission_angles_of_an_input_do_not_depend_on_the_inputs_be
     assert len(rows) >= 8 and {w[1] for w in rows} == {"jets", "cos"}, out
     assert all(w[2] == "True" for w in rows), out
     # the check has teeth: one program of a whole turn gives other last bits than its blocks somewhere
-    # (on the CPU; on an H100 the same bits)
-    assert any(w[3] == "False" for w in rows) or jax.default_backend() != "cpu", out
+    assert any(w[3] == "False" for w in rows), out
 
 
 def _power(x, k):

@@ -138,9 +138,8 @@ def test_a_search_killed_in_the_final_polish_resumes_there(whole, tmp_path):
 def test_a_wrong_state_changes_the_search_and_another_search_is_refused(whole, after_two, tmp_path, monkeypatch):
     """A state restored wrongly — the random generator of another seed (the jitter of the
     refinements' starts), or without the elites (those starts) — gives another search: the
-    comparison above (designs, log, last state) can fail. (Whether the designs and the log differ
-    depends on the platform's bits: on an H100 the third round with another generator kept the
-    same designs; its last state differs anywhere.)"""
+    comparison above can fail: the designs, the log and the last state each differ. (A wrong
+    screen key is not visible in this small search: its third round's best come from the elites.)"""
     state = tmp_path / "s.state"
     tgt = make_target(TARGET, closed=True)
     real = ckpt.load
@@ -158,7 +157,7 @@ def test_a_wrong_state_changes_the_search_and_another_search_is_refused(whole, a
         lines: list[str] = []
         got = _bits(api.synthesize(tgt, checkpoint=state, resume=True, log=lines.append, **OPTS))
         rest = _clean(lines[1:])
-        assert (got, rest, _state(state)) != (whole[0], whole[1][-len(rest):], whole[2]), part
+        assert got != whole[0] and rest != whole[1][-len(rest):], part
         assert _state(state)[2] != whole[2][2] if part == "rng" else _state(state)[4] != whole[2][4], part
     monkeypatch.undo()
     # every input that changes the answer is in the state's fingerprint: one changed, it is refused

@@ -55,6 +55,33 @@ def test_blocks_and_their_owners():
         blocks(0, 4)
 
 
+def test_programs_given_later_compute_the_same_bits_and_are_asked_for_once():
+    """`spread.Blocked` with its programs given as a function (the refinement's and the polish's,
+    still compiling while the first round screens: `search.programs`) computes what the same
+    programs given at once compute, bit for bit, and asks for them once, at their first use."""
+    import jax
+    import jax.numpy as jnp
+
+    from jaxlink.synthesis.spread import Blocked, layout
+
+    prog = jax.jit(lambda x, k: (jnp.sin(x) * k, jnp.sum(x, axis=1))).lower(
+        jax.ShapeDtypeStruct((4, 3), np.float64), jax.ShapeDtypeStruct((), np.float64)).compile()
+    asked: list[int] = []
+
+    def later():
+        asked.append(1)
+        return [prog]
+
+    x = np.random.default_rng(0).normal(size=(10, 3))
+    now, deferred = Blocked([prog], (0,), None, layout(), 10, 4), Blocked(later, (0,), None, layout(), 10, 4)
+    assert asked == [] and deferred.count == now.count == 3
+    for k in (1.5, -2.0):
+        got, want = deferred(x, np.float64(k)), now(x, np.float64(k))
+        assert [a.tobytes() for a in got] == [a.tobytes() for a in want] and got[0].shape == (10, 3)
+    assert asked == [1]
+    assert np.array_equal(now(x, np.float64(1.5))[0], np.sin(x) * 1.5)
+
+
 # a quick search (time limit <= 15 s): its refinement's blocks are of at most REFINE_BLOCK_QUICK = 64 slots, so
 # 80 slots make two blocks of 40 (each device gets screen, rank and refinement blocks)
 _SEARCH = dict(closed=True, topologies=["four-bar"], time_limit=0.1, rounds=2, count=400, samples=2048, refine=80)

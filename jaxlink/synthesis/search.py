@@ -44,7 +44,7 @@ import os
 import time
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
-from typing import Any, Callable, NamedTuple
+from typing import Any, NamedTuple
 
 import jax
 import jax.numpy as jnp
@@ -159,11 +159,12 @@ def block_caps(platform: str, quick: bool) -> tuple[int, int, int]:
 
 
 class Programs(NamedTuple):
-    """The three compiled programs of a search (`programs`): callables on the dynamic arguments."""
+    """The three compiled programs of a search (`programs`): callables on the dynamic arguments,
+    each computing its batch in blocks (`spread.Blocked`)."""
 
-    screen: Callable
-    rank: Callable | None  # None for a timed target (no rank)
-    refine: Callable
+    screen: _spread.Blocked
+    rank: _spread.Blocked | None  # None for a timed target (no rank)
+    refine: _spread.Blocked
 
 
 def programs(n_topos: int, n_dyads: int, closed: bool, *, samples: int, screen_keep: int, refine: int,
@@ -845,6 +846,9 @@ def search(target: Target, topos: list[Topology], *, time_limit: float, seed: in
 
     def polish_one(c: Candidate) -> None:
         nonlocal t_polish
+        # the polish's program compiles beside the refinement's and is waited for with it (`programs`):
+        # a search resumed at its final polish has not called the refinement yet
+        _ = prog.refine.programs
         t1 = time.perf_counter()
         origins.add(id(c))
         ti = topos.index(c.topology)
