@@ -235,6 +235,11 @@ def test_file_format_names_every_table_and_key():
     expected |= {f"[{t}" for t in scene._SCHEMA} | {k for keys in scene._SCHEMA.values() for k in keys}
     expected |= set(scene._GEOMETRY_KEYS)
     expected |= set(reader.LENGTH_UNITS) | set(reader.ANGLE_UNITS)
+    expected |= set(reader.MECHANISM_KEYS) | set(reader.INPUT_KEYS) | set(reader.PARAMETER_KEYS)
+    expected |= set(problem.PLACEMENT_KEYS)
+    from jaxlink.files import sketch, sketch_bodies
+
+    expected |= sketch._SKETCH_KEYS | sketch._INPUT_KEYS | sketch._SLIDER_KEYS | sketch_bodies._MASS_KEYS
     from jaxlink.study import inputs as study_inputs
 
     expected |= set(study_inputs.KNOWN_KEYS) | set(study_inputs.TOLERANCE_KEYS) | set(study_inputs.METRICS)

@@ -21,6 +21,7 @@ import pathlib
 
 from ..errors import MechanismError
 from ..files.expr import suggest
+from ..files.keys import check_keys
 from ..files.locator import Locator
 from ..files.overrides import parse_set
 from ..files.source import parse_toml
@@ -170,11 +171,9 @@ def loads_scene(text: str, *, file: str = "<string>", overrides: list[str] | Non
         if not isinstance(content, dict):
             raise MechanismError(f"[{table}] must be a table", file=path, line=loc.line("", table),
                                  key=table)
+        check_keys(content, _SCHEMA[table], table, lambda m, k, _t=table: err(m, _t, k))
         for key, value in content.items():
-            want = _SCHEMA[table].get(key)
-            if want is None:
-                raise err(f"unknown key{suggest(key, _SCHEMA[table])}; known keys of [{table}]: "
-                          + ", ".join(_SCHEMA[table]), table, key)
+            want = _SCHEMA[table][key]
             if want is float and isinstance(value, (int, float)) and not isinstance(value, bool) \
                     and not abs(value) <= 1e15:  # nan, inf, a 400-digit integer
                 shown = repr(value) if abs(value) < 10**30 else "an integer of more than 30 digits"
@@ -235,10 +234,8 @@ def loads_scene(text: str, *, file: str = "<string>", overrides: list[str] | Non
         sub = f"[{i}]"
         if not isinstance(gd, dict):
             raise err("each [[cam.geometry]] must be a table", "cam", "geometry", sub, index=i)
-        for key in gd:
-            if key not in _GEOMETRY_KEYS:
-                raise err(f"unknown key {key!r}; known: name, R, descent_deg", "cam",
-                          "geometry", f"{sub}.{key}", index=i, subkey=key)
+        check_keys(gd, _GEOMETRY_KEYS, "cam.geometry", lambda m, k, _i=i, _s=sub: err(
+            m, "cam", "geometry", f"{_s}.{k}", index=_i, subkey=k))
         for key, typ in _GEOMETRY_KEYS.items():
             if key not in gd:
                 raise err(f"missing key {key!r}", "cam", "geometry", sub, index=i)

@@ -172,14 +172,18 @@ def branch_point_warnings(table) -> None:
 
 def load_from_args(args):
     """The mechanism of FILE with the `--set` overrides applied, the whole file validated: every
-    table the reader checks, and `[optimize]` as `jaxlink optimize` checks it (for every command,
-    `check` and `kinematics` too; nothing is compiled)."""
+    table the reader checks, `[optimize]` as `jaxlink optimize` checks it and the keys of `[study]`
+    (for every command, `check` and `kinematics` too; nothing is compiled)."""
     from ..files.overrides import parse_numbers
     from ..files.reader import load
     from ..optimize.problem import check_table
 
     mech = load(args.file, overrides=parse_numbers(getattr(args, "set", [])))
     check_table(mech)
+    if "study" in mech.tables:  # its keys (jaxlink.study is imported only for a file that has one)
+        from ..study.inputs import check_study_keys
+
+        check_study_keys(mech)
     return mech
 
 

@@ -61,6 +61,7 @@ from ..errors import MechanismError
 from ..model.bodies import GROUND, JOINT_CLASS, Body, Force, Joint, Model, Spring, Torque
 from . import expr as _expr
 from .expr import ANGLE, LENGTH, ExprSyntaxError, UnitError
+from .keys import check_keys
 
 BODY_KEYS = {"angle", "mass", "centroid", "inertia", "description"}
 JOINT_KEYS = {"bodies", "kind", "at", "axis", "description"}
@@ -368,10 +369,8 @@ def joint_members(j: Mapping, jname: str, table: str, err, body_index) -> tuple[
 
 
 def unknown_keys(d: Mapping, allowed, table: str, err) -> None:
-    for k in d:
-        if k not in allowed:
-            raise err(f"unknown key '{k}'{_expr.suggest(k, allowed)}; allowed: {', '.join(sorted(allowed))}",
-                      table, k)
+    """Refuse a key of `[table]` not in `allowed` (`jaxlink/files/keys.py`), on its line."""
+    check_keys(d, allowed, table, lambda m, k: err(m, table, k))
 
 
 #: largest magnitude of a number of [bodies], [joints], [loads], [environment] (SI)

@@ -26,6 +26,7 @@ from ..model.mechanism import Mechanism
 from . import expr as _expr
 from .bodies import read_bodies
 from .expr import ANGLE, LENGTH, ExprSyntaxError, UnitError
+from .keys import check_keys
 from .locator import Locator
 from .source import parse_toml
 
@@ -42,6 +43,12 @@ KNOWN_TABLES = {
     "mechanism", "parameters", "input", "unknowns", "loops", "points",
     "bodies", "joints", "loads", "environment", "optimize", "dynamics", "sketch", "study",
 }
+#: the keys of `[mechanism]`, of `[input]` and of a parameter given as a table; any other key is
+#: refused (`jaxlink/files/keys.py`). `[dynamics]` is reserved: it may be there, empty.
+MECHANISM_KEYS = {"name", "description", "length_unit", "angle_unit", "kind"}
+INPUT_KEYS = {"name", "start", "body", "at", "axis", "base"}
+PARAMETER_KEYS = {"value", "unit"}
+DYNAMICS_KEYS: set[str] = set()
 
 
 def load(source: str | pathlib.Path, *, overrides: Mapping[str, float] | None = None) -> Mechanism:
@@ -86,11 +93,19 @@ def loads(text: str, *, file: str = "<string>", overrides: Mapping[str, float] |
             )
     if not isinstance(mech, dict):
         raise MechanismError("missing [mechanism] table (name, length_unit, angle_unit)", file=file)
+    check_keys(mech, MECHANISM_KEYS, "mechanism", lambda m, k: err(m, "mechanism", k))
+    dynamics = data.get("dynamics", {})
+    if not isinstance(dynamics, dict):
+        raise err("[dynamics] must be a table (reserved: empty in a linkage file)", "dynamics")
+    check_keys(dynamics, DYNAMICS_KEYS, "dynamics", lambda m, k: err(
+        m + " ([dynamics] is reserved in a linkage file: jaxlink reads none of its keys yet)", "dynamics", k))
     layout = None
     if "sketch" in data:  # joints and links: derive the loop form (jaxlink/files/sketch.py)
         from .sketch import derive
 
         data, layout = derive(data, err, file)
+    if isinstance(data.get("input"), dict):
+        check_keys(data["input"], INPUT_KEYS, "input", lambda m, k: err(m, "input", k))
     name = str(mech.get("name", pathlib.Path(file).stem))
     lu = mech.get("length_unit", "m")
     au = mech.get("angle_unit", "rad")
@@ -113,10 +128,8 @@ def loads(text: str, *, file: str = "<string>", overrides: Mapping[str, float] |
             derived_text[pname] = v
             continue
         if isinstance(v, dict):
-            extra = set(v) - {"value", "unit"}
-            if extra:
-                raise err(f"a parameter table has only 'value' and 'unit', not {', '.join(map(repr, sorted(extra)))}",
-                          "parameters", pname)
+            check_keys(v, PARAMETER_KEYS, f"parameters.{pname}",
+                       lambda m, k, _p=pname: err(m, "parameters", _p, keyname=f"parameters.{_p}.{k}"))
             if "value" not in v:
                 raise err("a parameter table needs 'value' (and optionally 'unit')", "parameters", pname)
             unit = v.get("unit")

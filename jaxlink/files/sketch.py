@@ -49,6 +49,7 @@ import re
 from typing import Any, Callable
 
 from ..errors import MechanismError
+from .keys import check_keys
 from .sketch_bodies import body_tables
 from .sketch_loops import ORIGIN as _ORIGIN
 from .sketch_loops import Edge as _Edge
@@ -59,6 +60,8 @@ from .sketch_loops import text as _text
 FRAME = "frame"
 _NAME = re.compile(r"[A-Za-z_][A-Za-z0-9_]*")
 _SKETCH_KEYS = {"frame", "points", "input", "joints", "links", "sliders", "masses"}
+_INPUT_KEYS = {"crank", "actuator", "name"}
+_SLIDER_KEYS = {"on", "along", "through"}
 #: tables a sketch file may not have: the sketch derives them
 DERIVED_TABLES = ("parameters", "input", "unknowns", "loops", "points", "bodies", "joints")
 
@@ -92,9 +95,7 @@ def derive(data: dict, err: Callable[..., MechanismError], file: str) -> tuple[d
         if t in data:
             raise err(f"a sketch file derives [{t}] from the joints and links; remove [{t}] (`jaxlink check` "
                       "prints what was derived)", t)
-    for k in sk:
-        if k not in _SKETCH_KEYS:
-            raise err(f"unknown key '{k}' in [sketch]; known: {', '.join(sorted(_SKETCH_KEYS))}", "sketch", k)
+    check_keys(sk, _SKETCH_KEYS, "sketch", lambda m, k: err(m, "sketch", k))
     lu = data.get("mechanism", {}).get("length_unit", "m")
     deg = data.get("mechanism", {}).get("angle_unit", "rad") == "deg"
 
@@ -157,12 +158,11 @@ def derive(data: dict, err: Callable[..., MechanismError], file: str) -> tuple[d
 
     # ------------------------------------------------------------------ the input
     inp = sk.get("input")
+    if isinstance(inp, dict):
+        check_keys(inp, _INPUT_KEYS, "sketch.input", lambda m, k: err(m, "sketch.input", k))
     if not isinstance(inp, dict) or ("crank" in inp) == ("actuator" in inp):
         raise err("[sketch.input] needs crank = \"LINK\" (a link turning about its frame joint) or "
                   "actuator = [\"C1\", \"C2\"] (a linear actuator: the input is their distance)", "sketch", "input")
-    for k in inp:
-        if k not in ("crank", "actuator", "name"):
-            raise err(f"unknown key '{k}' in [sketch.input]; known: crank, actuator, name", "sketch.input", k)
     crank = None
     actuator = None
     if "crank" in inp:
@@ -196,12 +196,12 @@ def derive(data: dict, err: Callable[..., MechanismError], file: str) -> tuple[d
     for j, v in sliders_raw.items():
         if j not in xy:
             raise err(f"'{j}' is not a joint of [sketch.joints]{_suggest(j, xy)}", "sketch.sliders", j)
+        if isinstance(v, dict):
+            check_keys(v, _SLIDER_KEYS, f"sketch.sliders.{j}",
+                       lambda m, k, _j=j: err(m, "sketch.sliders", _j, keyname=f"sketch.sliders.{_j}.{k}"))
         if not isinstance(v, dict) or "on" not in v or (("along" in v) == ("through" in v)):
             raise err(f"slider '{j}' = {{ on = BODY, along = [dx, dy] }} or {{ on = BODY, through = JOINT }}: the "
                       "body its line is fixed to, and the line's direction", "sketch.sliders", j)
-        for k in v:
-            if k not in ("on", "along", "through"):
-                raise err(f"unknown key '{k}' in slider '{j}'; known: on, along, through", "sketch.sliders", j)
         on = v["on"]
         if on != FRAME and on not in bodies:
             raise err(f"slider '{j}': on = {on!r} is neither 'frame' nor a link{_suggest(str(on), bodies)}",

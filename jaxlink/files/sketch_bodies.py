@@ -7,9 +7,11 @@ from __future__ import annotations
 import math
 
 from ..model.bodies import GROUND
+from .keys import check_keys
 
 FRAME = "frame"
 _MASS_KEYS = {"mass", "inertia", "centroid"}
+_BLOCK_KEYS = {"mass", "inertia"}
 
 
 def body_tables(masses, loads, err, *, bodies, frame, sliders, theta, crank, actuator, chain, xy, body_angle, ang,
@@ -31,10 +33,8 @@ def body_tables(masses, loads, err, *, bodies, frame, sliders, theta, crank, act
         if not isinstance(spec, dict):
             raise err(f"masses of '{b}' must be {{ mass = kg, inertia = kg·m², centroid = [x, y] }}",
                       "sketch.masses", b)
-        for k in spec:
-            if k not in _MASS_KEYS:
-                raise err(f"unknown key '{k}' in the masses of '{b}'; known: {', '.join(sorted(_MASS_KEYS))}",
-                          "sketch.masses", b)
+        check_keys(spec, _MASS_KEYS, f"sketch.masses.{b}",
+                   lambda m, k, _b=b: err(m, "sketch.masses", _b, keyname=f"sketch.masses.{_b}.{k}"))
         table: dict = {"angle": theta[b]}
         m = spec.get("mass", 0.0)
         if isinstance(m, bool) or not isinstance(m, (int, float)) or not math.isfinite(m) or m < 0:
@@ -78,7 +78,11 @@ def body_tables(masses, loads, err, *, bodies, frame, sliders, theta, crank, act
             axis = f"{j}_angle" if sl["on"] == FRAME else f"{theta[sl['on']]} + {j}_angle"
             out_b[block] = {"angle": axis}
             spec = masses.get(j, {})
-            if not isinstance(spec, dict) or set(spec) - {"mass", "inertia"}:
+            if isinstance(spec, dict):
+                check_keys(spec, _BLOCK_KEYS, f"sketch.masses.{j}",
+                           lambda m, k, _j=j: err(m + " (a slider's block: its centroid is the joint)", "sketch.masses",
+                                                  _j, keyname=f"sketch.masses.{_j}.{k}"))
+            if not isinstance(spec, dict):
                 raise err(f"the slider '{j}''s block takes {{ mass = kg, inertia = kg·m² }} (its centroid is the "
                           "joint)", "sketch.masses", j)
             m = spec.get("mass", 0.0)

@@ -29,6 +29,7 @@ from typing import Any, Mapping
 import numpy as np
 
 from ..errors import MechanismError
+from ..files.keys import check_keys
 from ..model.mechanism import Mechanism
 
 #: domains of the integer keys: (smallest, largest)
@@ -62,6 +63,8 @@ KNOWN_KEYS = {
     "starts", "presample", "iterations", "uniform", "chunk", "budget", "seed", "time",
     "gradient_solver", "memory", "al_rho", "al_every",
 }
+#: the keys of `placement = { x = NAME, y = NAME, angle = NAME }`
+PLACEMENT_KEYS = {"x", "y", "angle"}
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -224,9 +227,9 @@ def _problem_from(mech: Mechanism, overrides: Mapping[str, Any] | None, *, searc
         raise err("the file has no [optimize] section; add one (point, variables, samples, objective)")
     from .objectives import OBJECTIVES
 
-    for k in table:
-        if k not in KNOWN_KEYS and k not in OBJECTIVES.known_keys():
-            raise err(f"unknown key '{k}'; known keys: {', '.join(sorted(KNOWN_KEYS | OBJECTIVES.known_keys()))}", k)
+    check_keys(table, KNOWN_KEYS | OBJECTIVES.known_keys(), "optimize", err)
+    if isinstance(table.get("placement"), dict):
+        check_keys(table["placement"], PLACEMENT_KEYS, "optimize.placement", lambda m, k: err(m, f"placement.{k}"))
 
     _check_domains(table, err)
     for key, choices in CHOICES.items():

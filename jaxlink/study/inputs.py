@@ -62,6 +62,7 @@ import math
 from typing import Any, Mapping, NamedTuple
 
 from ..errors import MechanismError
+from ..files.keys import check_keys
 from .distributions import DISTRIBUTIONS as _DISTRIBUTIONS
 from .distributions import sigma_per_half_width
 
@@ -182,15 +183,31 @@ def read_study(mech, table: Mapping[str, Any] | None = None, **overrides) -> Stu
         raise _located(e) from None
 
 
+def check_study_keys(mech) -> None:
+    """Refuse a key the study does not read in the file's `[study]` and in its tolerances' tables
+    (`jaxlink/files/keys.py`), with its line: every command that reads a linkage file checks this
+    much of `[study]` (`jaxlink study` reads the rest, where its options can change what it needs)."""
+    raw = mech.tables.get("study")
+    try:
+        if not isinstance(raw, Mapping):
+            return
+        check_keys(raw, KNOWN_KEYS, "study", lambda m, k: _err(mech, m, k))
+        tolerances = raw.get("tolerances")
+        for name, entry in (tolerances.items() if isinstance(tolerances, Mapping) else ()):
+            if isinstance(entry, Mapping):
+                check_keys(entry, TOLERANCE_KEYS, f"study.tolerances.{name}",
+                           lambda m, k, _n=name: _err(mech, m, f"tolerances.{_n}.{k}"))
+    except MechanismError as e:
+        raise _located(e) from None
+
+
 def _read_study(mech, table, overrides) -> StudyInputs:
     raw = mech.tables.get("study") if table is None else table
     if raw is not None and not isinstance(raw, Mapping):
         raise _err(mech, f"[study] must be a table of keys, got {raw!r}")
     t = dict(raw or {})
     t.update({k: v for k, v in overrides.items() if v is not None})
-    for k in t:
-        if k not in KNOWN_KEYS:
-            raise _err(mech, f"unknown key '{k}'; known keys: {', '.join(sorted(KNOWN_KEYS))}", k)
+    check_keys(t, KNOWN_KEYS, "study", lambda m, k: _err(mech, m, k))
     method = t.get("method", DEFAULTS["method"])
     if method not in METHODS:
         raise _err(mech, f"'method' must be one of {', '.join(map(repr, METHODS))}, got {method!r}", "method")
@@ -379,9 +396,7 @@ def _tolerance(mech, name: str, entry, default_dist: str, default_k: float) -> t
         raise _err(mech, f"a tolerance is a number (±t) or a table {{ tol = t, sigma = s, radius = r, "
                          f"box = [wx, wy], distribution = ..., k = ... }}, got {entry!r}", key)
     e = {"tol": entry} if not isinstance(entry, Mapping) else dict(entry)
-    for k in e:
-        if k not in TOLERANCE_KEYS:
-            raise _err(mech, f"unknown key '{k}' of a tolerance; known: {', '.join(sorted(TOLERANCE_KEYS))}", key)
+    check_keys(e, TOLERANCE_KEYS, f"study.{key}", lambda m, k: _err(mech, m, f"{key}.{k}"))
     dist = e.get("distribution", default_dist)
     if dist not in DISTRIBUTIONS:
         raise _err(mech, f"'distribution' must be one of {', '.join(map(repr, DISTRIBUTIONS))}, got {dist!r}", key)
