@@ -36,7 +36,7 @@ from ..model.mechanism import Mechanism
 from ..results import RESULTS
 from ..solvers import dyads as _dyads
 from ..solvers.assemble import solve
-from ..solvers.branch_points import TOGGLE, branch_points
+from ..solvers.branch_points import GAP, TOGGLE, branch_points
 from .blocks import BLOCK, in_blocks
 from .golden import golden
 from .whole_curve import _arg, margins_blocked
@@ -263,7 +263,8 @@ def motion(mech: Mechanism, p=None, *, samples: int = 3600) -> Motion | None:
             upper, lower = up[0], down[0]
         else:
             bp = branch_points(mech, phis, _Path(q_all, res), p)
-            toggles = np.sort(bp.input[np.asarray(bp.kind) == TOGGLE])
+            kind = np.asarray(bp.kind)  # a gap between two assembled samples: two toggles
+            toggles = np.sort(np.concatenate([bp.input[(kind == TOGGLE) | (kind == GAP)], bp.end[kind == GAP]]))
             ahead, behind = toggles[toggles > start], toggles[toggles < start + 2 * np.pi]
             upper = float(ahead[0]) if ahead.size else None
             lower = float(behind[-1] - 2 * np.pi) if behind.size else None
