@@ -153,3 +153,67 @@ def test_a_window_between_two_samples_is_not_a_full_turn():
     toggle = math.acos((a * a + d * d - (b + c) ** 2) / (2 * a * d))
     assert not full
     assert abs(upper - toggle) < 1e-9 and abs(lower + toggle) < 1e-9
+
+
+# ------------------------------------------------------------ change-point four-bars (issue 46, item 7)
+# a = 30, b = 60, c = 50, d = 40 (mm): s + l = p + q = 90. At φ2 = 0 all four links lie on the frame
+# line (|A B0| = d − a = b − c): the flat position, where the rocker's rate jumps from
+# dφ4/dφ2 < 0 to > 0 (its least angle, φ4 = 0, a kink). Its other extreme is the dead centre where
+# crank and coupler fold, |A0 B| = b − a: cos φ4 = ((b − a)² − d² − c²) / (2 d c) = −0.8, with the
+# crank opposite B, φ2 = 270°. Swing acos(−0.8), rise 270°, fall 90°: time ratio 3.
+CP = (30.0, 60.0, 50.0, 40.0)
+
+
+def _change_point_closed_form(frame):
+    a, b, c, d = CP
+    swing = math.acos(((b - a) ** 2 - d * d - c * c) / (2 * d * c))  # |A0 B|² = |B0 + c e4|²
+    f4 = swing + frame  # B = B0 + c e4 on the branch of the guesses (above the frame line)
+    bx, by = d * math.cos(frame) + c * math.cos(f4), d * math.sin(frame) + c * math.sin(f4)
+    folded = math.atan2(-by, -bx)  # the crank opposite B: A0 between A and B
+    rise = math.remainder(folded - frame, 2 * math.pi) % (2 * math.pi)
+    return swing, frame, folded, max(rise, 2 * math.pi - rise) / min(rise, 2 * math.pi - rise)
+
+
+@pytest.mark.parametrize("frame", [0.0, 0.3])  # the flat position on the start sample; between two
+def test_change_point_four_bar_swing_time_ratio_and_flat_position(four_bar, frame):
+    from jaxlink.report import designer
+
+    mech = four_bar
+    if frame:  # the frame turned by 0.3 rad: the flat position at φ2 = 0.3, between the turn's samples
+        src = open(four_bar.file).read().replace('"-d @ 0"', '"-d @ g"').replace("d = 55.0", "d = 55.0\ng = 17.0")
+        mech = jl.loads(src.replace("g = 17.0", f"g = {math.degrees(frame)!r}"), file="rotated.toml")
+    p = _p(mech, *CP)
+    swing, flat, folded, ratio = _change_point_closed_form(frame)
+    assert ratio == pytest.approx(3.0, abs=1e-12)
+    m = motion(mech, p)
+    assert m.full_turn
+    assert len(m.change_points) == 1 and abs(math.remainder(m.change_points[0] - flat, 2 * math.pi)) < 1e-9
+    (o,) = m.outputs
+    assert abs(o["stroke"] - swing) < 1e-9 and abs(o["time_ratio"] - ratio) < 1e-9
+    # one extreme is the flat position (the rocker along the frame line), not a dead centre; the
+    # other the one dead centre, at `folded` or its mirror image in the frame line (the guesses'
+    # branch: above the line in the scene, below it with the frame turned)
+    assert o["min_flat"] != o["max_flat"]
+    at_flat = o["min"] if o["min_flat"] else o["max"]
+    assert abs(math.remainder(at_flat - frame, 2 * math.pi)) < 1e-9
+    assert [abs(math.remainder(x - flat, 2 * math.pi)) < 1e-9 for x, _ in o["flat_positions"]] == [True]
+    (dc,) = o["dead_centres"]
+    assert min(abs(math.remainder(dc[0] - f, 2 * math.pi)) for f in (folded, 2 * frame - folded)) < 1e-9
+    text = "\n".join(designer.lines(mech, four_bars(mech, p), m, "mm"))
+    at = f"{math.degrees(flat):.6g}°"
+    assert f"phi2 turns fully (on the guesses' branch), through the flat position at phi2 = {at}" in text
+    assert "flat position (change point, the rate jumps) at " + ("phi2 = " if o["min_flat"] else "") + at in text
+    assert "dead centres at" not in text
+    doc = designer.to_json(mech, four_bars(mech, p), m)["motion"]
+    assert doc["change_points_rad"] == m.change_points
+    assert (doc["outputs"][0]["min_at_flat"], doc["outputs"][0]["max_at_flat"]) == (o["min_flat"], o["max_flat"])
+    assert len(doc["outputs"][0]["flat_positions"]) == 1 and len(doc["outputs"][0]["dead_centres"]) == 1
+
+
+def test_a_crank_rocker_has_no_flat_position(four_bar):
+    """The differential case: the scene's crank-rocker (its least transmission angle 35°, a minimum
+    of the margin well above zero) has no change point and both extremes are dead centres."""
+    m = motion(four_bar)
+    (o,) = m.outputs
+    assert m.change_points == [] and o["flat_positions"] == [] and len(o["dead_centres"]) == 2
+    assert not o["min_flat"] and not o["max_flat"]

@@ -37,11 +37,9 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..solvers import dyads as _dyads
+from ..solvers.branch_points import MARGIN_SLACK as MARGIN_SLACK  # one number: the certificate, the gaps
 from .golden import GOLD as _GOLD
 from .golden import golden
-
-#: a margin this much below zero still counts as assembled (rounding at an exact toggle)
-MARGIN_SLACK = 1e-12
 
 
 class Certificate(NamedTuple):

@@ -11,7 +11,10 @@ none on a side, or the start is not assembled, the toggles of `jaxlink.branch_po
 every sample is assembled, the reach margins are still minimized between them
 (`jaxlink.analysis.feasibility.certify_host`): a window narrower than the samples' spacing is
 found, and its two toggles located. The result is the interval of inputs around `start` that the
-input can reach, or a full turn (certified between the samples).
+input can reach, or a full turn (certified between the samples). A full turn's **change points**
+(flat positions: a dyad's margin touching zero, two branches crossing) are located by Newton's
+method on the margin's derivative (`_change_points`), for the outputs' extremes there
+(`jaxlink.analysis.stroke`).
 
 **Transmission angle** of a dyad of two links L_a, L_b (RRR) over its known diagonal w: the
 angle μ between the two links at their joint, cos μ = (L_a² + L_b² − |w|²) / (2 |L_a| |L_b|)
@@ -25,6 +28,7 @@ transmission angle is the one farthest from 90°: min over the motion of min(μ,
 from __future__ import annotations
 
 import dataclasses
+import math
 from typing import NamedTuple
 
 import jax
@@ -36,7 +40,7 @@ from ..model.mechanism import Mechanism
 from ..results import RESULTS
 from ..solvers import dyads as _dyads
 from ..solvers.assemble import solve
-from ..solvers.branch_points import TOGGLE, branch_points
+from ..solvers.branch_points import GAP, TOGGLE, branch_points
 from .blocks import BLOCK, in_blocks
 from .golden import golden
 from .whole_curve import _arg, margins_blocked
@@ -52,8 +56,12 @@ class Motion:
     - `transmission`: per RRR dyad (solve order), a dict `loop`, `unknowns`, `min`, `min_at`,
       `max`, `max_at` (μ in rad, where in the input's SI unit) and `worst` (rad, the angle
       farthest from 90°).
-    - `outputs`: with a full turn, per slider or rocker the stroke or swing, its dead centres, the
-      time ratio and the velocity ratio (`jaxlink.analysis.stroke.outputs`); else empty.
+    - `outputs`: with a full turn, per slider or rocker the stroke or swing, its dead centres (and
+      flat positions), the time ratio and the velocity ratio (`jaxlink.analysis.stroke.outputs`);
+      else empty.
+    - `change_points`: with a full turn, the inputs (rad, in the turn from `start`) where a dyad's
+      links come into line and two assembly branches cross (`_change_points`): the *flat
+      positions*, where the linkage can switch branch and an output's rate may jump.
     """
 
     full_turn: bool
@@ -61,6 +69,7 @@ class Motion:
     upper: float | None
     transmission: list
     outputs: list = dataclasses.field(default_factory=list)
+    change_points: list = dataclasses.field(default_factory=list)
 
 
 def _cos_mu(mech, dyads, j, sigma, q_ref, phi, p):
@@ -263,7 +272,8 @@ def motion(mech: Mechanism, p=None, *, samples: int = 3600) -> Motion | None:
             upper, lower = up[0], down[0]
         else:
             bp = branch_points(mech, phis, _Path(q_all, res), p)
-            toggles = np.sort(bp.input[np.asarray(bp.kind) == TOGGLE])
+            kind = np.asarray(bp.kind)  # a gap between two assembled samples: two toggles
+            toggles = np.sort(np.concatenate([bp.input[(kind == TOGGLE) | (kind == GAP)], bp.end[kind == GAP]]))
             ahead, behind = toggles[toggles > start], toggles[toggles < start + 2 * np.pi]
             upper = float(ahead[0]) if ahead.size else None
             lower = float(behind[-1] - 2 * np.pi) if behind.size else None
@@ -304,12 +314,66 @@ def motion(mech: Mechanism, p=None, *, samples: int = 3600) -> Motion | None:
                           "unknowns": tuple(mech.unknown_names[u] for u in d.unknowns),
                           "min": mu_min, "min_at": float(best_x[2 * i + 1]), "max": mu_max,
                           "max_at": float(best_x[2 * i]), "worst": min(mu_min, np.pi - mu_max)})
-    outs = []
+    outs: list = []
+    flats: list = []
     if full:
         from .stroke import outputs
 
-        outs = outputs(mech, dyads, sigma, q0, phis, p)
-    return Motion(full, lower, upper, trans, outs)
+        flats = _change_points(mech, sigma, q0, phis, p)
+        outs = outputs(mech, dyads, sigma, q0, phis, p, flats)
+    return Motion(full, lower, upper, trans, outs, flats)
+
+
+def _margin_minimum(mech, sigma, q_ref, lo, hi, p, j):
+    """The minimum of dyad j's reach margin S in [lo, hi] (S′ < 0 at lo, > 0 at hi): the root of S′
+    by the branch points' bracketed Newton iteration (S″ by forward-mode AD). `(x, S(x))`."""
+    from ..solvers.branch_points import _jets, _root, _secant
+
+    dyads = _dyads.classify(mech)
+
+    def f(x):
+        return _dyads.reach_margins(mech, dyads, sigma, q_ref, x, p)[j]
+
+    def F(x):
+        return _jets(f, x)[1:]
+
+    dlo, dhi = F(lo)[0], F(hi)[0]
+    x = _root(F, lo, hi, dlo, dhi, _secant(lo, hi, dlo, dhi), jnp.asarray(True))[0]
+    return x, f(x)
+
+
+def _change_points(mech, sigma, q_ref, phis, p) -> list:
+    """The change points of a full turn sampled by `phis` (N + 1,: the start again at the end) on
+    the branches σ: the inputs where a dyad's reach margin S touches zero (its links in line, two
+    branches crossing; `jaxlink.solvers.branch_points`), sorted, in [phis[0], phis[-1]).
+
+    Each local minimum of a dyad's margin on the samples (periodic) whose parabola through it and
+    its two neighbours reaches below a quarter of the neighbours' mean (S ≈ c (φ − φ*)² predicts
+    zero; a minimum well above zero, a crank-rocker's least transmission angle, does not) is
+    located by Newton's method on S′ in the bracket of its two neighbours, and kept where S
+    there is below the singular threshold (10 √eps)²: to a few ulp of the input, also where it
+    falls exactly on a sample (a change point at the start)."""
+    from ..solvers.branch_points import singular_ratio_default
+
+    m = np.asarray(margins_blocked(mech, sigma, q_ref, phis[:-1], p), dtype=float)  # (N, D)
+    h = float(phis[1] - phis[0])
+    thr2 = singular_ratio_default(np.asarray(p).dtype) ** 2
+    prev, nxt = np.roll(m, 1, 0), np.roll(m, -1, 0)
+    a, b = 0.5 * (prev + nxt) - m, 0.5 * (nxt - prev)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        vertex = np.where(a > 0, m - b * b / (4 * a), m)
+    ks, js = np.nonzero((m <= prev) & (m <= nxt) & (vertex <= 0.125 * (prev + nxt)))
+    found: list = []
+    for k, j in zip(ks, js):
+        lo, hi = float(phis[0]) + (k - 1) * h, float(phis[0]) + (k + 1) * h
+        x, S = (float(v) for v in traced("motion_margin_minimum", _margin_minimum, (
+            _arg(mech, p), sigma, q_ref, np.asarray(lo, p.dtype), np.asarray(hi, p.dtype), p), (int(j),)))
+        if abs(S) <= thr2:
+            x = float(phis[0]) + float(np.mod(x - float(phis[0]), 2 * np.pi))
+            x = float(phis[0]) if x >= float(phis[0]) + 2 * np.pi - 1e-12 else x
+            if all(abs(math.remainder(x - y, 2 * np.pi)) > 1e-9 for y in found):
+                found.append(x)
+    return sorted(found)
 
 
 class _Path(NamedTuple):

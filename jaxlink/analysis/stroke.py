@@ -12,7 +12,17 @@ derivatives by forward-mode AD: q, q′ = dq/dφ, q″) every interval where q�
 it is located by Newton's method on q′ (q″ its derivative), safeguarded by bisection in the
 bracket, until the step is at the rounding of the input (measured within 1e-15 rad of the closed
 forms, tests/test_dyad_kinds.py). The *stroke* (slider, m) or *swing* (rocker, rad) is the
-largest minus the least value of q over the turn, both taken at dead centres.
+largest minus the least value of q over the turn, both taken at dead centres or flat positions.
+
+**Flat positions.** At a change point of the turn (a dyad's links in line where its margin only
+touches zero: a four-bar with s + l = p + q folding flat; `jaxlink.analysis.motion` locates them)
+the closed form on its fixed sides goes on along the other branch, and an output's velocity may
+jump there. Where it jumps across zero the output has an extreme that is not a dead centre (no
+root of q′: a kink) — a *flat position*, at the change point's input. Its interval is split at
+`FLAT_STEP` either side of the change point, the sign change across it is not searched for a
+root, and the value there is the output's limit from either side (`_flat_values`), so that the
+stroke and the time ratio are the closed form's (a change-point four-bar: to 1e-11, against
+1.5e-6° and 3.6e-8 in the ratio when the kink was searched as a root of q′).
 
 **Time ratio.** Between its least value (at input φ₋) and its largest (at φ₊) the output rises
 while the input turns by (φ₊ − φ₋) mod 2π and falls back during the rest of the turn:
@@ -157,13 +167,70 @@ def _extremes(ev, grid, v, col, sign):
     return np.where(samp < best, samp, best) * sign, np.where(samp < best, grid[k], best_x)
 
 
-def outputs(mech: Mechanism, dyads, sigma, q0, phis, p) -> list:
+def _with_flats(ev, grid, q, v, flats, angle):
+    """The turn's samples `grid` (N + 1,: the start again at the end) with two inputs at
+    `FLAT_STEP` either side of every flat position in `flats` (periodic: one at the start adds
+    its sides at the turn's end and beginning) and the samples nearer to one than that left out
+    (the closed form's rate is not defined at a change point): `(x, q, q′, across)`, `x` sorted
+    over one turn and closed (its first input again, a turn on, at the end), the angles unwrapped
+    onto the samples' turn, `across` per interval whether a flat position lies inside it."""
+    if not flats:
+        return grid, q, v, np.zeros(len(grid) - 1, bool)
+    turn = grid[-1] - grid[0]
+    flats = np.asarray(flats, float)
+    sides = np.concatenate([flats - FLAT_STEP, flats + FLAT_STEP])
+    sides = grid[0] + np.mod(sides - grid[0], turn)
+    base = grid[:-1]
+    dist = np.abs(np.remainder(base[:, None] - flats[None, :] + turn / 2, turn) - turn / 2)
+    far = np.all(dist > FLAT_STEP, axis=1)
+    m = q.shape[1]
+    qs, vs = np.empty((len(sides), m)), np.empty((len(sides), m))
+    for j in range(m):
+        qs[:, j], vs[:, j], _ = ev(sides, np.full(len(sides), j))
+    near = np.clip(np.searchsorted(grid, sides), 0, len(grid) - 1)  # unwrapped like the sample beside it
+    qs = np.where(angle, qs + 2 * np.pi * np.round((q[near] - qs) / (2 * np.pi)), qs)
+    x = np.concatenate([base[far], sides])
+    order = np.argsort(x, kind="stable")
+    x, qa, va = x[order], np.concatenate([q[:-1][far], qs])[order], np.concatenate([v[:-1][far], vs])[order]
+    x = np.append(x, x[0] + turn)
+    qa, va = np.vstack([qa, qa[:1] + (q[-1] - q[0])]), np.vstack([va, va[:1]])
+    inside = [np.any((flats > x[i]) & (flats < x[i + 1]) | (flats + turn > x[i]) & (flats + turn < x[i + 1]))
+              for i in range(len(x) - 1)]
+    return x, qa, va, np.asarray(inside)
+
+
+FLAT_STEP = 1e-4
+"""The distance (rad) either side of a flat position (a change point) at which the output is read:
+the closed form is smooth on either side, but not at the change point itself, where the margin
+S ≈ c (φ − φ*)² under its square root is rounding (its value there is off by about √eps). At
+this distance S is about 1e-8 c, its rounding 1e-8 of it, and the value q(φ*), continuous, comes
+from either side to second order (`_flat_values`: the error ~ q‴ FLAT_STEP³ / 6)."""
+
+
+def _flat_values(ev, x, col):
+    """The value of output `col[i]` at the flat position `x[i]`: the mean of its second-order
+    Taylor extrapolations from `FLAT_STEP` on either side (q − δ q′ + δ² q″ / 2, δ signed)."""
+    est = []
+    for d in (-FLAT_STEP, FLAT_STEP):
+        qd, vd, ad = ev(x + d, col)
+        est.append(qd - d * vd + 0.5 * d * d * ad)
+    lo, hi = est
+    hi = hi + 2 * np.pi * np.round((lo - hi) / (2 * np.pi))  # an angle wrapped between the sides (a slider's
+    return 0.5 * (lo + hi)  # two estimates differ by far less than 2π: no shift)
+
+
+def outputs(mech: Mechanism, dyads, sigma, q0, phis, p, flats=()) -> list:
     """The outputs' numbers over the full turn sampled by `phis` (N + 1,: the start again at the
-    end) on the branches σ (the closed form with reference `q0`), design `p` (SI). One dict per
-    output, in unknown order: `name`, `kind` ("slider" | "rocker"), `min`, `max`, `stroke`
-    (SI), `dead_centres` (a list of (input, value) in input order), `min_at`, `max_at` (the dead
-    centres of the least and largest value), `rise`, `fall` (input angles, rad), `time_ratio`,
-    `velocity_min`, `velocity_min_at`, `velocity_max`, `velocity_max_at`."""
+    end) on the branches σ (the closed form with reference `q0`), design `p` (SI). `flats`: the
+    turn's change points (`jaxlink.analysis.motion`), where the closed form on its fixed sides
+    goes on along the other branch and an output's rate may jump. One dict per output, in
+    unknown order: `name`, `kind` ("slider" | "rocker"), `min`, `max`, `stroke` (SI),
+    `dead_centres` (a list of (input, value) in input order, where the rate is zero),
+    `flat_positions` (the change points where the rate jumps across zero: an extreme of the output
+    that is not a dead centre, (input, value)), `min_at`, `max_at` (the dead centre or flat
+    position of the least and largest value), `min_flat`, `max_flat` (whether that is a flat
+    position), `rise`, `fall` (input angles, rad), `time_ratio`, `velocity_min`,
+    `velocity_min_at`, `velocity_max`, `velocity_max_at`."""
     del dyads  # unused (the jets classify the structure themselves)
     names, idx = output_columns(mech)
     if not names:
@@ -176,22 +243,35 @@ def outputs(mech: Mechanism, dyads, sigma, q0, phis, p) -> list:
     angle = np.array([mech.unknown_kinds[i] == "angle" for i in idx])
     q = np.where(angle, np.unwrap(q, axis=0), q)
     keep = ~angle | (np.abs(q[-1] - q[0]) < np.pi)  # a rocker comes back; a crank turns
-    # dead centres: q′ changes sign on an interval (or is zero at a sample)
-    ks, cs = np.nonzero((v[:-1] * v[1:] < 0) | ((v[:-1] == 0) & (v[1:] != 0)))
-    roots = _zeros(ev, grid[ks], grid[ks + 1], cs) if ks.size else np.zeros(0)
-    vals = ev(roots, cs)[0] if ks.size else np.zeros(0)
     ext, ext_at = _extremes(ev, grid, v, np.concatenate([cols, cols]), np.repeat([1.0, -1.0], m))
     vmin, vmin_at, vmax, vmax_at = ext[:m], ext_at[:m], ext[m:], ext_at[m:]
+    # dead centres: q′ changes sign on an interval (or is zero at a sample); a flat position splits
+    # its interval at FLAT_STEP either side of it, and a sign change across it is a jump, not a root
+    x, qx, vx, across = _with_flats(ev, grid, q, v, list(flats), angle)
+    change = (vx[:-1] * vx[1:] < 0) | ((vx[:-1] == 0) & (vx[1:] != 0))
+    ks, cs = np.nonzero(change & ~across[:, None])
+    roots = _zeros(ev, x[ks], x[ks + 1], cs) if ks.size else np.zeros(0)
+    vals = ev(roots, cs)[0] if ks.size else np.zeros(0)
+    fk, fc = np.nonzero(change & across[:, None])  # the rate jumps across zero at a flat position
+    both = np.concatenate([np.asarray(flats, float), np.asarray(flats, float) + (grid[-1] - grid[0])])
+    fx = np.array([float(both[(both > x[k]) & (both < x[k + 1])][0]) for k in fk]) if fk.size else np.zeros(0)
+    fvals = _flat_values(ev, fx, fc) if fk.size else np.zeros(0)
     out = []
     for j, name in enumerate(names):
         if not keep[j]:
             continue
-        mine = cs == j
-        at, val = roots[mine], vals[mine]
+        mine, flat = cs == j, fc == j
+        at = np.concatenate([roots[mine], fx[flat]])
+        val = np.concatenate([vals[mine], fvals[flat]])
+        near = np.concatenate([qx[ks[mine], j], qx[fk[flat], j]])
+        is_flat = np.concatenate([np.zeros(mine.sum(), bool), np.ones(flat.sum(), bool)])
+        order = np.argsort(at, kind="stable")
+        at, val, near, is_flat = at[order], val[order], near[order], is_flat[order]
         if angle[j]:  # the refined values near the unwrapped samples
-            near = q[ks[mine], j]
             val = val + 2 * np.pi * np.round((near - val) / (2 * np.pi))
-        entry = {"name": name, "kind": "rocker" if angle[j] else "slider", "dead_centres": list(zip(at, val)),
+        entry = {"name": name, "kind": "rocker" if angle[j] else "slider",
+                 "dead_centres": list(zip(at[~is_flat], val[~is_flat])),
+                 "flat_positions": list(zip(at[is_flat], val[is_flat])),
                  "velocity_min": float(vmin[j]), "velocity_min_at": float(vmin_at[j]),
                  "velocity_max": float(vmax[j]), "velocity_max_at": float(vmax_at[j])}
         if at.size >= 2:
@@ -200,9 +280,11 @@ def outputs(mech: Mechanism, dyads, sigma, q0, phis, p) -> list:
             fall = 2 * np.pi - rise
             entry.update(min=float(val[lo]), max=float(val[hi]), stroke=float(val[hi] - val[lo]),
                          min_at=float(at[lo]), max_at=float(at[hi]), rise=rise, fall=fall,
-                         time_ratio=max(rise, fall) / min(rise, fall))
+                         time_ratio=max(rise, fall) / min(rise, fall), min_flat=bool(is_flat[lo]),
+                         max_flat=bool(is_flat[hi]))
         else:  # no dead centre: a constant output (no stroke)
             entry.update(min=float(q[:, j].min()), max=float(q[:, j].max()), stroke=float(np.ptp(q[:, j])),
-                         min_at=None, max_at=None, rise=None, fall=None, time_ratio=None)
+                         min_at=None, max_at=None, rise=None, fall=None, time_ratio=None, min_flat=False,
+                         max_flat=False)
         out.append(entry)
     return out

@@ -162,12 +162,14 @@ def units_from_args(mech, args):
     return file_units(mech) if getattr(args, "units", "si") == "file" else None
 
 
-def branch_point_warnings(table) -> None:
-    """The located branch points as warnings on standard error."""
-    from ..report.kinematics import branch_point_text
+def branch_point_warnings(table) -> int:
+    """The located branch points as warnings on standard error; returns how many are gaps (the
+    command's exit status is then 1: the linkage cannot be driven through the rows asked for)."""
+    from ..report.kinematics import branch_point_text, gaps
 
     for b, line in zip(table.branch_points, branch_point_text(table, table.input_kind, table.change_points)):
         print(f"{'note' if b.smooth else 'warning'}: {line}", file=sys.stderr)
+    return len(gaps(table))
 
 
 def load_from_args(args):
@@ -358,7 +360,9 @@ def register(sub) -> None:
             "solves) at constant input speed. A position that did not assemble is nan in every solved "
             "column (and is left out of the summary and the plots); at a singular one (dead centre, "
             "toggle) the positions are given and the rates are nan. Exit status 1 when some position "
-            "did not converge (the warning lists the input ranges). --units file writes the same columns in "
+            "did not converge (the warning lists the input ranges) or the linkage cannot be assembled "
+            "between two rows that both assemble (a gap: the warning names its two toggles; columns "
+            "gap_from_deg, gap_to_deg). --units file writes the same columns in "
             "the file's length and angle units (P_x_mm, phi3_deg, …); --export OUT.dxf|OUT.svg (or --plot "
             "OUT.dxf) writes the paths and the linkage as geometry in the file's length unit."
         ),
@@ -605,7 +609,7 @@ def cmd_kinematics(args) -> int:
 
     table = _report.kinematics_table(mech, phis, omega=omega, outputs=outputs, dtype=dtype, input_values=values,
                                      rpm=getattr(args, "rpm", None), change_points=args.change_points)
-    branch_point_warnings(table)
+    gaps = branch_point_warnings(table)
     bad = int((~table.converged).sum())
     info = sys.stderr if args.csv == "-" else sys.stdout  # `--csv -`: the table alone on standard output
     print(grid_text(mech, args), file=info)
@@ -654,4 +658,4 @@ def cmd_kinematics(args) -> int:
         print(f"warning: {bad} of {len(phis)} positions did not converge (converged = 0 in the table): "
               + _report.failure_summary(table), file=sys.stderr)
         return 1
-    return 0
+    return 1 if gaps else 0

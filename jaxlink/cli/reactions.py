@@ -3,7 +3,8 @@ over the input positions.
 
 The table, CSV and plot are made by `jaxlink/report/reactions.py` (its docstring lists the CSV
 columns). Rows where the kinematics did not converge or the kinetostatic system is singular hold
-`nan` and name their result (and the exit status is 1; the warning lists the input ranges).
+`nan` and name their result (and the exit status is 1; the warning lists the input ranges); so is
+a gap between two rows that both assemble (the warning names its two toggles).
 """
 
 from __future__ import annotations
@@ -40,7 +41,8 @@ def register(sub) -> None:
             "J: J_Fx_N, J_Fy_N (force on the second listed body from the first); drive_torque_N_m (on the "
             "input body, counter-clockwise +) or, for a length input, drive_force_N (+ pushes towards a "
             "larger input); result (converged, or why not: the position solve's code such as "
-            "cannot_assemble, or singular). Rows that cannot be solved hold nan and make the exit status 1. "
+            "cannot_assemble, or singular). Rows that cannot be solved hold nan and make the exit status 1, "
+            "as does a gap between two rows (the linkage cannot be assembled between them: two toggles). "
             "Give the speed with --rpm or --omega (default 1 rad/s; a length input: --omega in m/s)."
         ),
     )
@@ -65,7 +67,7 @@ def cmd_reactions(args) -> int:
     units = units_from_args(mech, args)
     table = reactions_table(mech, phis, omega=omega, dtype=dtype, input_values=values,
                             rpm=getattr(args, "rpm", None), change_points=args.change_points)
-    branch_point_warnings(table)
+    gaps = branch_point_warnings(table)
     info = sys.stderr if args.csv == "-" else sys.stdout  # `--csv -`: the table alone on standard output
     print(grid_text(mech, args), file=info)
     if args.csv:
@@ -84,4 +86,4 @@ def cmd_reactions(args) -> int:
         print(f"warning: {int(bad.sum())} of {len(phis)} positions have no reactions (nan in the table): "
               + failure_summary(table), file=sys.stderr)
         return 1
-    return 0
+    return 1 if gaps else 0

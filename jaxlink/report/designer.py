@@ -34,8 +34,15 @@ def lines(mech, fbs, m, lu: str) -> list:
         x = 0.0 if abs(x) < 1e-12 else x  # a limit at 0 found to rounding
         return f"{np.degrees(x):.{digits}g}°" if deg else f"{x:.{digits}g} rad"
 
+    def where_(x):  # within one revolution [0, 360°)
+        x = float(np.mod(x, 2 * np.pi))
+        return ang(0.0 if x > 2 * np.pi - 1e-12 else x, 6)
+
     if m.full_turn:
-        out.append(f"motion      {name} turns fully (on the guesses' branch)")
+        flats = " and ".join(where_(x) for x in m.change_points)
+        through = (f", through the flat position{'s' if len(m.change_points) > 1 else ''} at {name} = {flats} (a "
+                   "change point: links in line, where the linkage can switch branch)") if m.change_points else ""
+        out.append(f"motion      {name} turns fully (on the guesses' branch){through}")
     elif m.lower is not None and m.upper is not None:
         out.append(f"motion      {name} from {ang(m.lower)} to {ang(m.upper)} (limit positions: toggles), a range "
                    f"of {ang(m.upper - m.lower)}")
@@ -71,7 +78,15 @@ def _output_line(o, name, ang, where, length_factor, lu) -> str:
     head = f"{o['kind']} {o['name']}: {what} {val(o['stroke'])} ({val(o['min'], 8)} … {val(o['max'], 8)})"
     if o["time_ratio"] is None:
         return f"{head}, no dead centre; {vel}"
-    return (f"{head}, dead centres at {name} = {where(o['min_at'])} and {where(o['max_at'])}; "
+    flat = (o.get("min_flat", False), o.get("max_flat", False))
+    if not any(flat):
+        ends = f"dead centres at {name} = {where(o['min_at'])} and {where(o['max_at'])}"
+    else:  # an extreme at a change point: the rate jumps across zero there, it is not a dead centre
+        kinds = ["flat position (change point, the rate jumps)" if f else "dead centre" for f in flat]
+        ends = (f"{kinds[0]} at {name} = {where(o['min_at'])} and {kinds[1]} at {where(o['max_at'])}"
+                if flat[0] != flat[1] else f"flat positions (change points, the rate jumps) at {name} = "
+                f"{where(o['min_at'])} and {where(o['max_at'])}")
+    return (f"{head}, {ends}; "
             f"rise {ang(o['rise'], 8)}, fall {ang(o['fall'], 8)}: time ratio {o['time_ratio']:.10g}; {vel}")
 
 
@@ -99,12 +114,15 @@ def to_json(mech, fbs, m) -> dict:
             f"min_{u}": _f(o["min"]), f"max_{u}": _f(o["max"]),
             "min_at_rad": _f(o["min_at"]), "max_at_rad": _f(o["max_at"]),
             "dead_centres": [{"input_rad": float(x), f"value_{u}": float(y)} for x, y in o["dead_centres"]],
+            "flat_positions": [{"input_rad": float(x), f"value_{u}": float(y)} for x, y in o.get("flat_positions", [])],
+            "min_at_flat": bool(o.get("min_flat", False)), "max_at_flat": bool(o.get("max_flat", False)),
             "rise_rad": _f(o["rise"]), "fall_rad": _f(o["fall"]), "time_ratio": _f(o["time_ratio"]),
             f"velocity_ratio_min{v}": _f(o["velocity_min"]), "velocity_ratio_min_at_rad": _f(o["velocity_min_at"]),
             f"velocity_ratio_max{v}": _f(o["velocity_max"]), "velocity_ratio_max_at_rad": _f(o["velocity_max_at"]),
         })
     out["motion"] = {
         "full_turn": bool(m.full_turn), "lower_rad": _f(m.lower), "upper_rad": _f(m.upper),
+        "change_points_rad": [float(x) for x in m.change_points],
         "transmission": [{"loop": t["loop"], "unknowns": list(t["unknowns"]), "min_rad": float(t["min"]),
                           "min_at_rad": float(t["min_at"]), "max_rad": float(t["max"]),
                           "max_at_rad": float(t["max_at"]), "worst_rad": float(t["worst"])} for t in m.transmission],

@@ -8,7 +8,9 @@ transfer functions μ = dq/dφ, ν = d²q/dφ² (`jaxlink/analysis/transfer.py`)
 `residual_m` (max |Φ| at the returned q) and `result` (the name of the solver's code, `RESULTS`);
 only where a change point was located between two rows (`jaxlink.branch_points`):
 `change_point_deg` (`_m` for a length input), its input on the row nearest to it, `nan` on the
-others (files of paths without one keep their columns).
+others; only where a gap was located (both rows assembled, the linkage not between them: two
+toggles the rows step over): `gap_from_deg` and `gap_to_deg` (`_m`), its two toggles in the rows'
+order, on the row before it (files of paths without either keep their columns).
 
 Positions that did not assemble (result neither `converged` nor `singular`) are not data: every
 solved quantity of their row is `nan`; at a `singular` position (a dead centre or toggle, assembled
@@ -189,9 +191,10 @@ def kinematics_table(mech: Mechanism, phis, *, omega: float = 1.0, outputs=OUTPU
 @dataclasses.dataclass(frozen=True)
 class BranchPoint:
     """A branch point located between rows `row` and `row + 1`: `value` as the input column prints
-    it (degrees or metres), `kind` ("change point" or "toggle"), `dyad` (index in solve order),
-    `smooth` (a change point crossed on the branch whose velocity is continuous), `nearest` (the
-    row nearest to it)."""
+    it (degrees or metres), `kind` ("change point", "toggle" or "gap"), `dyad` (index in solve
+    order), `smooth` (a change point crossed on the branch whose velocity is continuous), `nearest`
+    (the row nearest to it; for a gap, `row`). A gap runs from the toggle `value` to the toggle
+    `end` (in the rows' order): the dyad cannot be assembled between them, both rows can."""
 
     value: float
     kind: str
@@ -201,6 +204,7 @@ class BranchPoint:
     nearest: int
     label: str = ""  # the dyad as the file names it: its loop and its two unknowns
     closing: bool = False  # between the last row and the first (a full turn)
+    end: float | None = None  # a gap's second toggle
 
 
 def _assembled(result):
@@ -224,15 +228,19 @@ def located_branch_points(mech: Mechanism, phis, q, result, p, input_values, can
     bp = branch_points(mech, phis, sol, p, candidates=candidates)
     out = []
     phis = np.asarray(phis, dtype=float)
-    for k, j in np.argwhere(bp.kind != 0):
-        x = float(bp.input[k, j])
-        # as printed: the input column's unit, by the same map as the rows (degrees or metres)
+
+    def printed(k, x):  # as printed: the input column's unit, by the same map as the rows (degrees or metres)
         span = phis[k + 1] - phis[k]
         t = (x - phis[k]) / span if span != 0 else 0.0
-        value = float(vals[k] + t * (vals[k + 1] - vals[k]))
-        nearest = int(k if abs(x - phis[k]) <= abs(x - phis[k + 1]) else k + 1) % n
-        out.append(BranchPoint(value, KINDS[int(bp.kind[k, j])], int(j), int(k), bool(bp.smooth[k, j]), nearest,
-                               _dyad_label(mech, int(j)), bool(k + 1 == n)))
+        return float(vals[k] + t * (vals[k + 1] - vals[k]))
+
+    for k, j in np.argwhere(bp.kind != 0):
+        x = float(bp.input[k, j])
+        kind = KINDS[int(bp.kind[k, j])]
+        nearest = int(k if abs(x - phis[k]) <= abs(x - phis[k + 1]) or kind == "gap" else k + 1) % n
+        end = printed(k, float(bp.end[k, j])) if kind == "gap" else None
+        out.append(BranchPoint(printed(k, x), kind, int(j), int(k), bool(bp.smooth[k, j]), nearest,
+                               _dyad_label(mech, int(j)), bool(k + 1 == n), end))
     return out
 
 
@@ -249,20 +257,30 @@ def _dyad_label(mech: Mechanism, j: int) -> str:
 
 def _branch_point_columns(mech: Mechanism, located: list, cols: list, data: list):
     """`change_point_deg` (`_m` for a length input), added only where some change point was
-    located: on the row nearest to each, its input; nan elsewhere. (A toggle is not a column: the
-    rows past it are already `cannot_assemble`; the summary and the warning name it.)"""
+    located: on the row nearest to each, its input; nan elsewhere. `gap_from_deg`, `gap_to_deg`
+    only where some gap was located: on the row before each, its two toggles. (A toggle is not a
+    column: the rows past it are already `cannot_assemble`; the summary and the warning name it.)"""
     unit = "deg" if mech.input_kind == "angle" else "m"
     n = len(data[0])
-    for kind in ("change point",):
-        here = [b for b in located if b.kind == kind]
-        if not here:
-            continue
+    here = [b for b in located if b.kind == "change point"]
+    if here:
         col = np.full(n, np.nan)
         for b in here:
             col[b.nearest] = b.value
-        cols = cols + [f"{kind.replace(' ', '_')}_{unit}"]
-        data = data + [col]
+        cols, data = cols + [f"change_point_{unit}"], data + [col]
+    gaps = [b for b in located if b.kind == "gap"]
+    if gaps:
+        lo, hi = np.full(n, np.nan), np.full(n, np.nan)
+        for b in gaps:
+            lo[b.row % n], hi[b.row % n] = b.value, b.end
+        cols, data = cols + [f"gap_from_{unit}", f"gap_to_{unit}"], data + [lo, hi]
     return cols, data
+
+
+def gaps(table_or_list) -> list:
+    """The located gaps (`BranchPoint`s of kind "gap"): where the linkage cannot be driven from one
+    row to the next although both assemble."""
+    return [b for b in getattr(table_or_list, "branch_points", table_or_list) if b.kind == "gap"]
 
 
 def branch_point_text(table_or_list, input_kind: str, change_points: str = "keep",
@@ -276,7 +294,13 @@ def branch_point_text(table_or_list, input_kind: str, change_points: str = "keep
         who = b.label or f"dyad {b.dyad + 1}"
         rows = "the last row and the first" if b.closing else f"rows {b.row + 1} and {b.row + 2}"
         where = f"{b.kind} at input {b.value * factor:.10g}{unit} ({who}, between {rows})"
-        if b.kind == "toggle":
+        if b.kind == "gap":
+            assert b.end is not None
+            lines.append(f"gap from input {b.value * factor:.10g}{unit} to {b.end * factor:.10g}{unit} ({who}, "
+                         f"between {rows}): the linkage cannot be assembled there, two toggles (limit positions) "
+                         "between two rows that assemble; it cannot be driven from one row to the other (no "
+                         "--change-points continues through it)")
+        elif b.kind == "toggle":
             lines.append(f"{where}: a limit position, the linkage cannot be driven past it")
         elif b.smooth:
             lines.append(f"{where}: the solve continues smoothly through it (the branch whose velocity is "
@@ -374,8 +398,9 @@ def write_json(path: str, mech: Mechanism, table: KinematicsTable, units: FileUn
                designer: dict | None = None) -> None:
     """The run's summary as JSON to `path` (`-`: standard output): the input and speed, how many
     positions converged (per result code), every column's least and largest value over the
-    assembled rows (named and valued as in the CSV: `units`), and `designer` (the designer's
-    numbers, `jaxlink.report.designer.to_json`, or null)."""
+    assembled rows (named and valued as in the CSV: `units`), the branch points located between
+    rows (`branch_points_json`) and `designer` (the designer's numbers,
+    `jaxlink.report.designer.to_json`, or null)."""
     import json
 
     columns, data = convert(table.columns, table.data, units)
@@ -399,6 +424,7 @@ def write_json(path: str, mech: Mechanism, table: KinematicsTable, units: FileUn
         "positions": {"count": int(len(data)), "converged": int(table.converged.sum()),
                       "results": {RESULTS.name(int(c)): int(n) for c, n in zip(codes, counts)}},
         "columns": cols,
+        "branch_points": branch_points_json(table, units),
         "designer": designer,
     }
     text = json.dumps(doc, indent=2, allow_nan=False) + "\n"
@@ -407,6 +433,18 @@ def write_json(path: str, mech: Mechanism, table: KinematicsTable, units: FileUn
         return
     with open(path, "w") as fh:
         fh.write(text)
+
+
+def branch_points_json(table, units: FileUnits | None = None) -> list:
+    """The located branch points as JSON objects: `kind` ("change point", "toggle", "gap"),
+    `input` (as the input column: degrees, or the length unit of `units`; a gap's first toggle),
+    `end` (a gap's second toggle, else null), `dyad` (its loop and unknowns), `rows` (the two rows,
+    counted from 1, it lies between) and `smooth` (a change point crossed smoothly)."""
+    _, factor = input_unit_text(table.input_kind, units)
+    n = len(table.data)
+    return [{"kind": b.kind, "input": b.value * factor, "end": None if b.end is None else b.end * factor,
+             "dyad": b.label, "rows": [b.row + 1, (b.row + 1) % n + 1], "smooth": b.smooth}
+            for b in table.branch_points]
 
 
 def failure_summary(table: KinematicsTable) -> str:
@@ -433,7 +471,7 @@ def print_summary(table: KinematicsTable, out: TextIO, every_row_hint: bool = Tr
     width = max(len(c) for c in columns)
     out.write(f"{'column':<{width}}  {'min':>14} {'max':>14}\n")
     for j, c in enumerate(columns):
-        if c in ("converged", "result", f"residual_{lu}") or c.startswith("change_point_"):
+        if c in ("converged", "result", f"residual_{lu}") or c.startswith(("change_point_", "gap_")):
             continue
         col = data[:, j]
         col = col[np.isfinite(col)]

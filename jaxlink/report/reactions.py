@@ -9,7 +9,8 @@ the code of the row (`converged`; the position solve's code, e.g. `cannot_assemb
 kinematics did not converge; `singular` where the kinetostatic system is singular). Rows that are
 not `converged` hold `nan`: they are left out of the summary and are gaps in the plot. Where a
 change point was located between two rows, `change_point_deg` (`_m` for a length input) comes
-before `result`, as in `jaxlink kinematics` (`report/kinematics.py`). With `units` (`--units file`,
+before `result`, as in `jaxlink kinematics` (`report/kinematics.py`); where a gap was (both rows
+assembled, the linkage not between them), `gap_from_deg` and `gap_to_deg`. With `units` (`--units file`,
 `report/units.py`) the CSV and the summary are in the file's units: `input_deg` (`input_rad` in a
 file in radians), the forces in N, `drive_torque_N_mm` (N·cm, N·m: force × the file's length unit).
 """

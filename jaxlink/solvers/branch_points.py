@@ -16,16 +16,23 @@ a smooth (polynomial) function of the input along a path, meets zero tells what 
   closed form on a kept side σ goes on along the *other* smooth branch (its velocity jumps); the
   smooth continuation flips σ there;
 - a **toggle** (limit position): S crosses zero, S ≈ c (φ − φ*); past it the dyad cannot be
-  assembled and the input cannot go on.
+  assembled and the input cannot go on;
+- a **gap**: two toggles between two samples that both assemble, S dipping below zero between
+  them (a window narrower than the samples' spacing: a four-bar just off s + l = p + q). Its
+  minimum looks like a change point's from the samples; only its value tells them apart.
 
 Between two consecutive samples k, k+1 (φ along the path, both assembled, σ of sample k for the
 dyads solved before) a change point is looked for where S′ goes from < 0 to ≥ 0 (a minimum of S
 inside) and located as the root of S′ by Newton's method on S′ (S″ by forward-mode AD),
-safeguarded by bisection in the bracket; it is a change point when the sine there is below
+safeguarded by bisection in the bracket; it is a gap when S there is below −max(singular_ratio²,
+`MARGIN_SLACK`) (negative by more than rounding; the slack is the searches' certificate's, so that
+a design it certifies has no gap here), its toggles then located as the roots of S in the two
+brackets either side of the minimum; else a change point when the sine there is below
 `singular_ratio` (the same threshold as a `singular` position). A toggle is looked for between an
 assembled and a not assembled sample where S changes sign, located as the root of S the same way.
-Both roots are simple, so Newton converges quadratically: the location is exact to a few ulp of
-the input (measured within 1e-15 rad of the closed forms, tests/test_branch_points.py).
+The roots are simple, so Newton converges quadratically: the location is exact to a few ulp of
+the input (measured within 1e-15 rad of the closed forms, gaps' toggles within 2e-13 rad,
+tests/test_branch_points.py).
 
 `locate` is pure and batched over the intervals (`vmap`, one `while_loop` per interval, which
 stops at once where there is nothing to locate): no raising, a `kind` code per (interval, dyad).
@@ -49,9 +56,13 @@ import numpy as np
 from ..model.mechanism import Mechanism
 from . import dyads as _dyads
 
-NONE, CHANGE_POINT, TOGGLE = 0, 1, 2
-KINDS = {NONE: "none", CHANGE_POINT: "change point", TOGGLE: "toggle"}
+NONE, CHANGE_POINT, TOGGLE, GAP = 0, 1, 2, 3
+KINDS = {NONE: "none", CHANGE_POINT: "change point", TOGGLE: "toggle", GAP: "gap"}
 MAX_ITERATIONS = 60  # safeguarded Newton per interval (bisection alone reaches 2^-60 of the interval)
+#: a reach margin this much below zero still counts as assembled (rounding at an exact toggle or
+#: change point): the searches' certificate (`jaxlink.analysis.feasibility`) and, in float64, the
+#: depth below which a minimum of the margin between two samples is a gap rather than a change point
+MARGIN_SLACK = 1e-12
 
 
 class BranchPoints(NamedTuple):
@@ -64,12 +75,18 @@ class BranchPoints(NamedTuple):
       differs between the two samples: the branch whose velocity is continuous); False where it
       kept its side (the closed form's default: the other branch, its velocity jumps).
     - `step`: the last Newton correction of the location, an estimate of its error (same unit).
+    - `end`: at a gap, its second toggle (where the dyad assembles again, in the path's order);
+      `input` is then the first. NaN elsewhere.
+
+    `kind` `GAP` (3): both samples assemble but the dyad does not between them, from the toggle
+    `input` to the toggle `end` (a window narrower than the samples' spacing; not a change point).
     """
 
     input: jax.Array | np.ndarray
     kind: jax.Array | np.ndarray
     smooth: jax.Array | np.ndarray
     step: jax.Array | np.ndarray
+    end: jax.Array | np.ndarray
 
 
 def margin(mech: Mechanism, dyads, j: int, sigma, q_ref, phi, p):
@@ -154,6 +171,7 @@ def locate(mech: Mechanism, dyads, sigmas, q, phis, p, assembled, singular_ratio
     D = len(dyads)
     a, b, ok_a, ok_b, sig, qr = _interval_ends(phis, q, sigmas, assembled)
     thr2 = float(singular_ratio) ** 2
+    slack = max(thr2, MARGIN_SLACK)  # a minimum of S below −slack is a gap (two toggles)
 
     def one_dyad(j):
         def interval(sg, qq, x0, x1, oa, ob):
@@ -176,10 +194,25 @@ def locate(mech: Mechanism, dyads, sigmas, q, phis, p, assembled, singular_ratio
                 return jnp.where(change, d1, v), jnp.where(change, d2, d1)
 
             x, step = _root(F, lo, hi, F_lo, F_hi, _secant(lo, hi, F_lo, F_hi), change | toggle)
-            is_change = change & (f(x) <= thr2)
-            kind = jnp.where(is_change, CHANGE_POINT, jnp.where(toggle, TOGGLE, NONE)).astype(jnp.int8)
+            S_x = f(x)
+            # a minimum below zero by more than rounding is a window that cannot be assembled: a gap
+            is_gap = change & (S_x < -slack)
+            is_change = change & (S_x <= thr2) & ~is_gap
+
+            def G(y):  # (S, S′): the gap's two toggles are roots of S on either side of its minimum
+                return jax.jvp(f, (y,), (jnp.ones_like(y),))
+
+            g_lo, st_lo = _root(G, lo, x, S_lo, S_x, _secant(lo, x, S_lo, S_x), is_gap)
+            g_hi, st_hi = _root(G, x, hi, S_x, S_hi, _secant(x, hi, S_x, S_hi), is_gap)
+            forward = x1 >= x0  # the gap's toggles in the path's order: `input` reached first
+            first, second = jnp.where(forward, g_lo, g_hi), jnp.where(forward, g_hi, g_lo)
+            kind = jnp.where(is_gap, GAP, jnp.where(is_change, CHANGE_POINT, jnp.where(toggle, TOGGLE, NONE)))
+            kind = kind.astype(jnp.int8)
             found = kind != NONE
-            return jnp.where(found, x, jnp.nan), kind, jnp.where(found, step, jnp.nan)
+            x = jnp.where(is_gap, first, x)
+            step = jnp.where(is_gap, jnp.maximum(st_lo, st_hi), step)
+            return (jnp.where(found, x, jnp.nan), kind, jnp.where(found, step, jnp.nan),
+                    jnp.where(is_gap, second, jnp.nan))
 
         return jax.vmap(interval)(sig, qr, a, b, ok_a, ok_b)
 
@@ -187,18 +220,17 @@ def locate(mech: Mechanism, dyads, sigmas, q, phis, p, assembled, singular_ratio
     for j in range(D):
         if only is not None and j != only:
             n = a.shape[0]
-            cols.append((jnp.full((n,), jnp.nan, dtype), jnp.zeros((n,), jnp.int8), jnp.full((n,), jnp.nan, dtype)))
+            nan = jnp.full((n,), jnp.nan, dtype)
+            cols.append((nan, jnp.zeros((n,), jnp.int8), nan, nan))
         else:
             cols.append(one_dyad(j))
     if D == 0:
         n = a.shape[0]
         empty = jnp.zeros((n, 0), dtype)
-        return BranchPoints(empty, jnp.zeros((n, 0), jnp.int8), jnp.zeros((n, 0), bool), empty)
-    x = jnp.stack([c[0] for c in cols], axis=1)
-    kind = jnp.stack([c[1] for c in cols], axis=1)
-    step = jnp.stack([c[2] for c in cols], axis=1)
+        return BranchPoints(empty, jnp.zeros((n, 0), jnp.int8), jnp.zeros((n, 0), bool), empty, empty)
+    x, kind, step, end = (jnp.stack([c[i] for c in cols], axis=1) for i in range(4))
     smooth = (kind == CHANGE_POINT) & (sigmas[:-1] != sigmas[1:])
-    return BranchPoints(x, kind, smooth, step)
+    return BranchPoints(x, kind, smooth, step, end)
 
 
 def smooth_sides(mech: Mechanism, dyads, sigma0, q_ref, phis, phi_ref, p, tol, singular_ratio: float):
@@ -322,8 +354,8 @@ def branch_points(mech: Mechanism, phis, solution, p=None, *, singular_ratio: fl
     N = phis.shape[0]
     dyads = _dyads.classify(mech)
     D = 0 if dyads is None else len(dyads)
-    empty = BranchPoints(np.full((max(N - 1, 0), D), np.nan, dtype), np.zeros((max(N - 1, 0), D), np.int8),
-                         np.zeros((max(N - 1, 0), D), bool), np.full((max(N - 1, 0), D), np.nan, dtype))
+    nan = np.full((max(N - 1, 0), D), np.nan, dtype)
+    empty = BranchPoints(nan, np.zeros((max(N - 1, 0), D), np.int8), np.zeros((max(N - 1, 0), D), bool), nan, nan)
     if D == 0 or N < 2:
         return empty
     assembled = jnp.asarray((res == 0) | (res == 2))
