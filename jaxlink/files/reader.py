@@ -3,7 +3,8 @@
 Every error names the file, the line (found in the text that was parsed) and the key.
 
 **Domains.** Every number is checked where it is read (`NUMBER_LIMIT` as written, then the
-domain of what it is in SI, `DOMAINS`): a value outside them is refused with the file, line, key,
+domain of what it is in SI, `DOMAINS` of `jaxlink/model/domains.py`, which the batched evaluators
+also hold every design to): a value outside them is refused with the file, line, key,
 the value and the allowed range. A `--set` value is checked the same way and blamed on `--set`.
 What a value is follows from its kind and its use: a parameter that stands alone as the LENGTH of
 a term `NAME @ ANGLE` of a loop is a link length; any other length (a coordinate, an offset, a
@@ -22,6 +23,8 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..errors import MechanismError
+from ..model.domains import DOMAINS as DOMAINS  # the one definition (re-exported)
+from ..model.domains import link_lengths as _link_lengths
 from ..model.mechanism import Mechanism
 from . import expr as _expr
 from .bodies import read_bodies
@@ -34,10 +37,6 @@ LENGTH_UNITS = {"m": 1.0, "mm": 1e-3, "cm": 1e-2}
 ANGLE_UNITS = {"rad": 1.0, "deg": math.pi / 180.0}
 #: largest magnitude of any number written in a mechanism file (in its units)
 NUMBER_LIMIT = 1e15
-#: SI domain of each kind of value: (smallest non-zero magnitude, largest magnitude). A link length
-#: from a nanometre to 1000 km (or 0); any other length (a coordinate, an offset) within ±1000 km,
-#: however small; angles within ±1e4 rad (about 1600 turns), pure numbers within ±1e9.
-DOMAINS = {"link length": (1e-9, 1e6), "length": (0.0, 1e6), "angle": (0.0, 1e4), "number": (0.0, 1e9)}
 _SI_UNIT = {"length": "m", "angle": "rad", "number": ""}
 KNOWN_TABLES = {
     "mechanism", "parameters", "input", "unknowns", "loops", "points",
@@ -383,8 +382,7 @@ def loads(text: str, *, file: str = "<string>", overrides: Mapping[str, float] |
                        f"is {rng}" + (" in magnitude" if lo else ""))
     fac: dict[str, float] = {"length": units.length, "angle": units.angle, "number": 1.0}
     # link lengths: parameters standing alone as the LENGTH of a term `NAME @ ANGLE` of a loop
-    links = {t.length.name for _, terms in loops for t in terms
-             if t.polar and isinstance(t.length, _expr.Name) and t.length.name in pvalues}
+    links, _signed = _link_lengths((loops, points), pvalues)
     for n in pnames:
         in_domain(n, pvalues[n], kinds[n] or "number", lambda m, _n=n: blame(_n, m),
                   "link length" if n in links and kinds[n] == "length" else None)
@@ -394,18 +392,11 @@ def loads(text: str, *, file: str = "<string>", overrides: Mapping[str, float] |
     p_si = np.asarray([pvalues[n] * fac[kinds[n] or "number"] for n in pnames], dtype=np.float64)
     q_si = np.asarray([guesses[n] * fac[kinds[n] or "number"] for n in guesses], dtype=np.float64)
 
-    # a parameter standing alone as the LENGTH of a term is a link length: it must be >= 0
-    for _, group in (("loops", loops), ("points", points)):
-        for _lname, terms in group:
-            for term in terms:
-                if term.polar and isinstance(term.length, _expr.Name) and term.length.name in pvalues:
-                    pn = term.length.name
-                    if pvalues[pn] < 0:
-                        raise blame(
-                            pn,
-                            f"length '{pn}' = {pvalues[pn]} is negative; a link length must be ≥ 0 "
-                            "(put the sign in front of the term instead: \"-{pn} @ ...\")".replace("{pn}", pn),
-                        )
+    # a parameter standing alone as the LENGTH of a term (of a loop or a point) must be >= 0
+    for pn in pnames:
+        if pn in _signed and pvalues[pn] < 0:
+            raise blame(pn, f"length '{pn}' = {pvalues[pn]} is negative; a link length must be ≥ 0 "
+                            f"(put the sign in front of the term instead: \"-{pn} @ ...\")")
 
     input_start_si = float(input_start) * fac[kinds[input_name] or "number"]
     body_model = read_bodies(data, file=file, err=err, kinds=kinds, length_unit=units.length,

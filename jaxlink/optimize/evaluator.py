@@ -10,7 +10,9 @@ units) and a circuit index c (which branch signs of the dyads; 0 = the file's). 
    Newton continuation; differentiable in p by implicit differentiation);
 4. the point's path (and its input derivatives if the objective needs them, `_kinematics`),
    with the solved unknowns q and the parameters p (`PathData`);
-5. the objective. A design is *feasible* iff the start and every position converged, the
+5. the objective. A design is *feasible* iff every parameter is within its domain
+   (`jaxlink.model.domains`, what the file reader and `--set` accept: bounds [-5, 5] on a link
+   length evaluate no negative link), the start and every position converged, the
    path's pieces (points and their derivatives) are finite and, for a mechanism made of dyads,
    no dyad is about to open an unassemblable window between two checked positions (the reach
    margin interpolated between the samples stays ≥ 0: `jaxlink.analysis.feasibility.screen`);
@@ -37,6 +39,7 @@ import numpy as np
 from ..analysis import feasibility as _feasibility
 from ..analysis.transfer import transfer_one
 from ..errors import MechanismError
+from ..model import domains as _domains
 from ..solvers import dyads as _dyads
 from ..solvers.assemble import solve_path
 from ..solvers.options import NewtonOptions, default_rtol
@@ -145,7 +148,7 @@ class Evaluator:
         q0, ok0 = self.start(p, c)
         q0 = jax.lax.stop_gradient(q0)
         sol = solve_path(self.mech, phis, p, q0, options=self.options)
-        feasible = ok0 & jnp.all(sol.converged)
+        feasible = ok0 & jnp.all(sol.converged) & _domains.inside(self.mech, p)  # a value the file could hold
         if screen and self.between:  # no window opening between two checked positions
             feasible = feasible & self._screened(jax.lax.stop_gradient(p), q0, phis)
         lf = self.mech.units.length

@@ -150,7 +150,7 @@ def manifest(mech, rep: ToleranceReport, *, wall_time: float, files: list) -> di
         "margin_drop_linear": (rep.margin_drop if rep.margin_drop is not None and math.isfinite(rep.margin_drop)
                                else None),
         "monte_carlo": None if mc is None else {"samples": mc.samples, "feasible": mc.feasible,
-                                                "infeasible": mc.infeasible,
+                                                "infeasible": mc.infeasible, "outside_domain": mc.outside,
                                                 "disagree": int(np.count_nonzero(~mc.agree)),
                                                 "capability": capability_json(mc)},
         "worst_case": worst_case_json(rep),
@@ -241,7 +241,8 @@ def summary(mech, rep: ToleranceReport) -> str:
                          + (f" {mcq[q]:11.4g}" if mcq is not None else "") + f"  {wc.status[q]}")
     if mc is not None:
         lines.append(f"Monte Carlo: {mc.samples} samples, {mc.feasible} feasible, {mc.infeasible} infeasible "
-                     f"(feasibility: {rep.certificate})")
+                     + (f"({mc.outside} with a value outside its domain) " if mc.outside else "")
+                     + f"(feasibility: {rep.certificate})")
         for q, (name, lo, hi, _i) in enumerate(mc.limits):
             cp = f"Cp {mc.cp[q]:.3g}, " if math.isfinite(mc.cp[q]) else ""
             lines.append(f"  {name} in [{lo:g}, {hi:g}]: {mc.percent_out[q]:.3g} % of the feasible samples out of "

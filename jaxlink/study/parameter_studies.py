@@ -28,6 +28,7 @@ import time
 import numpy as np
 
 from .inputs import StudyInputs
+from .responses import outside_warning
 from .sampling import SampleReport, _Evaluator, _study, _units
 
 
@@ -84,6 +85,9 @@ def parameter_study(mech, inputs: StudyInputs | None = None, *, chunk=None, opti
         warnings.append(f"{bad} of {len(feasible)} designs do not assemble over the whole cycle on the nominal's "
                         f"branch ({study.responses.certificate}): kept and flagged (feasible = 0), their responses "
                         "left empty")
+    outside = study.responses.outside(values)
+    if outside:
+        warnings.append(outside_warning(outside, len(values)))
     labels = tuple((name, unit) for (name, unit, k) in ev.labels if k is None)
     timings = {"evaluate": ev.seconds, "total": time.perf_counter() - t0}
     return SampleReport(inputs, inputs.parameters, _units(mech, inputs), np.asarray(study.x0), values, feasible,

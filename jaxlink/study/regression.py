@@ -42,6 +42,7 @@ from ..errors import MechanismError
 from .correlation import correlate
 from .design import to_values, unit_blocks
 from .inputs import StudyInputs
+from .responses import outside_warning
 
 #: the coefficients, in the order of `RegressionIndices`
 COEFFICIENTS = ("pearson", "spearman", "src", "srrc", "pcc", "prcc")
@@ -213,6 +214,9 @@ def regression(mech, inputs: StudyInputs | None = None, *, samples: int | None =
     else:
         warnings.append(f"only {good} of {n} designs are feasible (at least {T + 3} needed): the responses' "
                         "coefficients are not computed (only the feasibility's)")
+    outside = study.responses.outside(x)
+    if outside:
+        warnings.append(outside_warning(outside, n))
     if inputs.correlation:
         warnings.append("the inputs are correlated ([study.correlation]): a coefficient mixes an input's own effect "
                         "with those of the inputs correlated with it (PCC/PRCC remove the others' linear effect)")

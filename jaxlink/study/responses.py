@@ -24,7 +24,9 @@ file's `[input] start` φ₀.
      (`jaxlink.analysis.transfer`), times ω and ω² when `rpm` is given (a constant input speed),
      refined the same way;
    - `deviation` is computed from the curves by the caller (max over the cycle of |P − P_nominal|);
-4. **feasibility**: the start and every position converged (assembled, not singular) and, for a
+4. **feasibility**: every parameter within its domain (`jaxlink.model.domains`, what the file
+   reader and `--set` accept: a link length ≥ 0, …; a design outside it is infeasible, counted
+   by the studies: `outside`), the start and every position converged (assembled, not singular) and, for a
    mechanism of dyads, the reach margin's minimum over the whole turn, refined between the
    samples (`jaxlink.analysis.feasibility.certify`), is ≥ 0 on the nominal's branches: the
    design assembles over the whole cycle and stays on its branch, not only at the samples. A
@@ -43,6 +45,7 @@ from ..analysis import feasibility as _feasibility
 from ..analysis import stroke as _stroke
 from ..analysis.transfer import transfer_one
 from ..errors import MechanismError
+from ..model import domains as _domains
 from ..solvers import dyads as _dyads
 from ..solvers.assemble import solve, solve_path
 from ..solvers.options import NewtonOptions, default_rtol
@@ -146,7 +149,17 @@ class Responses:
         tol = default_rtol(p.dtype) * self.mech.length_scale(p)
         sig = jnp.asarray(self.sigma, p.dtype)
         q0, _ = closed_form_start(self.mech, self.dyads, self.q_file, self.phi0, p, sig, tol)
-        return _feasibility.certify(self.mech, self.dyads, sig, q0, jnp.asarray(self.phis, p.dtype), p).certified
+        cert = _feasibility.certify(self.mech, self.dyads, sig, q0, jnp.asarray(self.phis, p.dtype), p).certified
+        return cert & _domains.inside(self.mech, p)
+
+    def outside(self, x, base=None) -> int:
+        """How many of the designs `x` (n, T) (file units) have a value outside its domain
+        (`jaxlink.model.domains`: a negative link length, …): counted infeasible by `single`."""
+        x = np.asarray(x, dtype=float).reshape(-1, len(self.index))
+        p = np.broadcast_to(np.asarray(self.mech.parameters if base is None else base, float),
+                            (len(x), len(self.mech.parameters))).copy()
+        p[:, self.index] = x * self.factor
+        return int(np.count_nonzero(~_domains.inside(self.mech, p)))
 
     def params(self, x, base=None):
         """The full parameter vector (SI) with the toleranced ones set to `x` (file units); the
@@ -179,7 +192,7 @@ class Responses:
             q0, ok = continuation_start(mech, self.q_file, mech.parameters, self.phi0, p, tol)
         q0 = jax.lax.stop_gradient(q0)
         sol = solve_path(mech, phis, p, q0, options=self.options, points=True)
-        feasible = ok & jnp.all(sol.converged)
+        feasible = ok & jnp.all(sol.converged) & _domains.inside(mech, p)  # a value the file could hold
         margin = jnp.asarray(jnp.inf, dtype)
         if self.dyads is not None:
             sig, ps = jnp.asarray(self.sigma, dtype), jax.lax.stop_gradient(p)
@@ -212,6 +225,12 @@ class Responses:
         good = jnp.isfinite(values)
         feasible = feasible & jnp.all(good)
         return jnp.where(good, values, 0.0), feasible, margin
+
+
+def outside_warning(outside: int, n: int, what: str = "designs") -> str:
+    """The studies' line for the `outside` of `n` designs with a value outside its domain."""
+    return (f"{outside} of {n} {what} have a value outside its domain (a negative link length, …: what the file and "
+            "--set refuse; jaxlink/model/domains.py): counted infeasible, not evaluated as designs")
 
 
 def _peak(y):

@@ -34,7 +34,7 @@ from ..errors import MechanismError
 from .correlation import correlate
 from .design import grid_shape, grid_values, to_values, unit_blocks
 from .inputs import StudyInputs
-from .responses import unit_names
+from .responses import outside_warning, unit_names
 from .robust import RobustMap, robust_evaluator
 from .sobol import SobolAccumulator, SobolIndices, bootstrap_counts
 from .tolerance import Study, study_for
@@ -269,6 +269,9 @@ def sample(mech, inputs: StudyInputs | None = None, *, samples: int | None = Non
         warnings.append(f"{bad} of {len(feasible)} designs ({100 * bad / len(feasible):.3g} %) do not assemble over "
                         f"the whole cycle on the nominal's branch ({study.responses.certificate}): kept and flagged "
                         "(feasible = 0), their responses left empty")
+    outside = study.responses.outside(values)
+    if outside:
+        warnings.append(outside_warning(outside, len(values)))
     labels = tuple((name, unit) for (name, unit, k) in ev.labels if k is None)
     timings = {"evaluate": ev.seconds, "total": time.perf_counter() - t0}
     robust = None
@@ -316,7 +319,7 @@ def sensitivity(mech, inputs: StudyInputs | None = None, *, samples: int | None 
     per = max(1, study.chunk // E)
     resp: SobolAccumulator | None = None
     feas = SobolAccumulator(1, D, counts, second_order=second)
-    drawn = ok_draws = complete = 0
+    drawn = ok_draws = complete = outside = 0
     t_est = 0.0
     start = 0
     done = 0
@@ -328,6 +331,7 @@ def sensitivity(mech, inputs: StudyInputs | None = None, *, samples: int | None 
         resp.restore(state["responses"])
         feas.restore(state["feasibility"])
         drawn, ok_draws, complete, start = state["drawn"], state["ok_draws"], state["complete"], state["start"]
+        outside = int(state.get("outside", 0))
         if progress is not None:
             progress(start * E)
     def designs(u):
@@ -344,8 +348,10 @@ def sensitivity(mech, inputs: StudyInputs | None = None, *, samples: int | None 
             x.append(ba.reshape(-1, T))
         return np.concatenate(x)
 
-    def estimate(ci, n, y, ok):
-        nonlocal resp, drawn, ok_draws, complete, start, t_est
+    def estimate(job):
+        nonlocal resp, drawn, ok_draws, complete, start, t_est, outside
+        ci, n, submitted, out = job
+        y, ok = ev.finish(submitted)
         t1 = time.perf_counter()
         if resp is None:
             assert ev.nominal is not None
@@ -360,11 +366,13 @@ def sensitivity(mech, inputs: StudyInputs | None = None, *, samples: int | None 
         drawn += 2 * n
         ok_draws += int(okb[:2].sum())
         complete += int(w.sum())
+        outside += out
         start += n
         t_est += time.perf_counter() - t1
         if checkpoint is not None:
             checkpoint.save(ci + 1, {"nominal": ev.nominal, "responses": resp.state(), "feasibility": feas.state(),
-                                    "drawn": drawn, "ok_draws": ok_draws, "complete": complete, "start": start})
+                                    "drawn": drawn, "ok_draws": ok_draws, "complete": complete, "start": start,
+                                    "outside": outside})
         if progress is not None:
             progress(n * E)
 
@@ -375,15 +383,16 @@ def sensitivity(mech, inputs: StudyInputs | None = None, *, samples: int | None 
     for ci, u in enumerate(unit_blocks(inputs.sampler, 2 * T, N, inputs.seed, per)):
         if ci < done:
             continue
-        job = (ci, len(u), ev.submit(designs(u)))
+        xd = designs(u)
+        job = (ci, len(u), ev.submit(xd), study.responses.outside(xd))
         if not overlap:
-            estimate(job[0], job[1], *ev.finish(job[2]))
+            estimate(job)
             continue
         if pending is not None:
-            estimate(pending[0], pending[1], *ev.finish(pending[2]))
+            estimate(pending)
         pending = job
     if pending is not None:
-        estimate(pending[0], pending[1], *ev.finish(pending[2]))
+        estimate(pending)
     assert resp is not None and ev.nominal is not None
     t1 = time.perf_counter()
     warnings = []
@@ -398,6 +407,8 @@ def sensitivity(mech, inputs: StudyInputs | None = None, *, samples: int | None 
             f"{N - complete} of {N} base samples have an infeasible design among their {E}: the responses' indices "
             f"are computed over the {complete} others — conditional on feasibility, an approximation (the feasible "
             "region is not a product of the ranges); the feasibility's own indices say which parameters drive it")
+    if outside:
+        warnings.append(outside_warning(outside, N * E))
     fi = feas.result(inputs.confidence)
     t_est += time.perf_counter() - t1
     timings = {"evaluate": ev.seconds, "estimate": t_est, "total": time.perf_counter() - t0}

@@ -50,7 +50,7 @@ from . import reuse
 from .distributions import deviations
 from .inputs import StudyInputs
 from .moments import Moments
-from .responses import Responses
+from .responses import Responses, outside_warning
 from .second_order import SecondOrder, second_order_stats
 from .worstcase import WorstCase, worst_case
 
@@ -94,7 +94,10 @@ class MonteCarlo(NamedTuple):
     `histogram` (S, bins + 2) the feasible samples' deviations of the S scalar responses (the
     metrics, in the order of the labels) counted in `bins` equal bins over [−w, w] (w =
     `histogram_width` (S,)), with the counts below and above first and last (`moments.Moments`:
-    the streamed histogram the quantiles come from); None when there is no scalar response."""
+    the streamed histogram the quantiles come from); None when there is no scalar response.
+
+    `outside`: of the `infeasible`, the samples with a value outside its domain
+    (`jaxlink.model.domains`: a tolerance wider than the link draws a negative length)."""
 
     samples: int
     feasible: int
@@ -116,6 +119,7 @@ class MonteCarlo(NamedTuple):
     cpk: np.ndarray = np.zeros(0)
     histogram: np.ndarray | None = None
     histogram_width: np.ndarray | None = None
+    outside: int = 0
 
 
 class ToleranceReport(NamedTuple):
@@ -340,7 +344,7 @@ class Study:
         spec_low = np.asarray([lo for (_, lo, _, _) in limits])
         spec_high = np.asarray([hi for (_, _, hi, _) in limits])
         out_of_spec = np.zeros(len(limits), np.int64)
-        feasible = infeasible = 0
+        feasible = infeasible = outside = 0
         blocks = -(-n // BLOCK)
         per = self.chunk // BLOCK
         done = 0
@@ -350,6 +354,7 @@ class Study:
             mom.restore(state["moments"])
             dev_max, dev_sum = state["deviation_max"], state["deviation_sum"]
             feasible, infeasible = state["feasible"], state["infeasible"]
+            outside = int(state.get("outside", 0))
             out_of_spec = np.asarray(state.get("out_of_spec", out_of_spec), np.int64)
             if progress is not None:
                 progress(min(n, done * self.chunk))
@@ -370,6 +375,7 @@ class Study:
             w[:take] = ok
             feasible += int(ok.sum())
             infeasible += int(take - ok.sum())
+            outside += r.outside(x[:take])
             d = v - jnp.asarray(nominal)
             mom.update(d, w)
             if K and ok.any():
@@ -381,7 +387,8 @@ class Study:
                 out_of_spec += (((vs < spec_low) | (vs > spec_high)) & ok[:, None]).sum(axis=0)
             if checkpoint is not None:
                 checkpoint.save(c + 1, {"moments": mom.state(), "deviation_max": dev_max, "deviation_sum": dev_sum,
-                                        "feasible": feasible, "infeasible": infeasible, "out_of_spec": out_of_spec})
+                                        "feasible": feasible, "infeasible": infeasible, "out_of_spec": out_of_spec,
+                                        "outside": outside})
             if progress is not None:
                 progress(take)
         M = len(nominal)
@@ -390,12 +397,13 @@ class Study:
         hist = (mom.hist[scalar].copy(), mom.width[scalar].copy()) if scalar else (None, None)
         if mom.n == 0:
             z = np.zeros(M)
-            return MonteCarlo(n, 0, infeasible, z, z, z, z, z, z, z, dev_max, dev_sum, np.ones(M, bool), *cap, *hist)
+            return MonteCarlo(n, 0, infeasible, z, z, z, z, z, z, z, dev_max, dev_sum, np.ones(M, bool), *cap,
+                              *hist)._replace(outside=outside)
         std, se, me = mom.std, mom.std_error, mom.mean_error
         agree = agreement(mom.mean, std, me, se, mom.n, nominal, first, second)
         return MonteCarlo(n, feasible, infeasible, mom.mean, std, se, me, mom.quantile(QUANTILES[0]),
                           mom.quantile(QUANTILES[1]), np.maximum(np.abs(mom.low), np.abs(mom.high)),
-                          dev_max, dev_sum / max(feasible, 1), agree, *cap, *hist)
+                          dev_max, dev_sum / max(feasible, 1), agree, *cap, *hist)._replace(outside=outside)
 
 
 def agreement(mean_shift, std, mean_error, std_error, n: int, nominal, first: FirstOrder,
@@ -599,6 +607,8 @@ def tolerance(mech, inputs: StudyInputs | None = None, *, samples: int | None = 
                 f"{mc.infeasible} of {mc.samples} Monte Carlo samples ({100 * mc.infeasible / mc.samples:.3g} %) do "
                 f"not assemble over the whole cycle on the nominal's branch ({r.certificate}); the statistics are "
                 f"those of the {mc.feasible} feasible samples")
+        if mc.outside:
+            warnings.append(outside_warning(mc.outside, mc.samples, "Monte Carlo samples"))
         if mc.feasible == 0:
             warnings.append("no Monte Carlo sample is feasible: the Monte Carlo statistics are empty (zeros)")
         bad = np.flatnonzero(~mc.agree)

@@ -51,19 +51,21 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..cache import compiled
+from ..model.domains import joints_inside
 from . import checkpoint as _ckpt
 from . import distance as _dist
 from . import size as _size
 from . import spread as _spread
 from . import transmission as _tm
 from .assembly import Assembly, certify
+from .mechanism import placed_pose
 from .polish import BACK
 from .polish import polish as _polish
 from .polish import program as _polish_program
 from .polish import program_timed as _polish_program_timed
 from .sortnet import sort_first
 from .target import Target, arclength_resample
-from .topology import CRANK, Topology, as_arrays
+from .topology import CRANK, Topology, as_arrays, bodies
 from .tracer import trace, trace_exact
 
 SCREEN_T = 64
@@ -585,7 +587,24 @@ def score(topo: Topology, pose: np.ndarray, start: float, span: float, target: T
           n_trace: int, n_points: int) -> tuple[_dist.Match, Assembly]:
     """The exact distance and the assembly check of one candidate (float64). A timed target: the
     ordered distance (`distance.match_ordered`) of the traced point at start + (t_i − t_0) to point
-    i, the check over that interval (a closed target: the whole turn)."""
+    i, the check over that interval (a closed target: the whole turn). A candidate whose file would
+    hold a value outside its domain (`in_domain`) does not pass the check (`asm.ok` False)."""
+    m, asm = _scored(topo, pose, start, span, target, n_trace=n_trace, n_points=n_points)
+    if asm.ok and np.isfinite(m.distance) and not in_domain(topo, pose, start, m, target):
+        asm = asm._replace(ok=False)
+    return m, asm
+
+
+def in_domain(topo: Topology, pose: np.ndarray, start: float, m: _dist.Match, target: Target) -> bool:
+    """Whether the candidate placed onto the target (`mechanism.placed_pose`, in the target's unit,
+    as its file writes it: mm when the target names none) holds values a file can
+    (`jaxlink.model.domains.joints_inside`: no link shorter than a nanometre, nothing beyond 1000 km)."""
+    unit = {"m": 1.0, "mm": 1e-3, "cm": 1e-2}.get(target.unit, 1e-3)
+    return joints_inside(placed_pose(topo, pose, start, m) * unit, bodies(topo))
+
+
+def _scored(topo: Topology, pose: np.ndarray, start: float, span: float, target: Target, *,
+            n_trace: int, n_points: int) -> tuple[_dist.Match, Assembly]:
     asm = certify(topo, pose, *certified_interval(start, span, target))
     if target.timed:
         t = np.asarray(target.inputs, float)
