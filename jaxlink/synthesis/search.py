@@ -583,9 +583,11 @@ def interval_offsets(start: float, span: float, n: int, closed: bool) -> np.ndar
 
 def score(topo: Topology, pose: np.ndarray, start: float, span: float, target: Target, *,
           n_trace: int, n_points: int) -> tuple[_dist.Match, Assembly]:
-    """The exact distance and the assembly check of one candidate (float64). A timed target: the
-    ordered distance (`distance.match_ordered`) of the traced point at start + (t_i − t_0) to point
-    i, the check over that interval (a closed target: the whole turn)."""
+    """The exact distance and the assembly check of one candidate (float64): the phase-free distance
+    (`distance.match`, at `distance.N_FINE` points whatever `n_points`, the surrogate's count) of the
+    path traced at `n_trace` inputs. A timed target: the ordered distance (`distance.match_ordered`)
+    of the traced point at start + (t_i − t_0) to point i, the check over that interval (a closed
+    target: the whole turn)."""
     asm = certify(topo, pose, *certified_interval(start, span, target))
     if target.timed:
         t = np.asarray(target.inputs, float)
@@ -597,7 +599,7 @@ def score(topo: Topology, pose: np.ndarray, start: float, span: float, target: T
     pos, marg = trace_exact(topo, pose, th)
     if not np.all(marg > 0):
         return _dist.Match(np.inf, 0.0, 1.0, np.zeros(2)), asm
-    return _dist.match(pos[:, topo.traced], target.points, closed=target.closed, n=n_points), asm
+    return _dist.match(pos[:, topo.traced], target.points, closed=target.closed), asm
 
 
 def certified_interval(start: float, span: float, target: Target) -> tuple[float, float]:
