@@ -16,9 +16,10 @@ def register(sub) -> None:
             "Stephenson six-bars, eight-bars; with --sliders also their variants with sliders on frame guides, "
             "the slider-crank first; with --levers their variants with a slotted lever) whose traced point "
             "follows TARGET (a .csv of x, y, a .npy (N, 2) "
-            "array or an .svg path) up to translation, rotation and scale, scored by the symmetric chamfer "
-            "distance of the "
-            "normalised curves (docs/methods/synthesis.md). Writes the best mechanism as a sketch file that "
+            "array or an .svg path) up to translation, rotation and scale, ranked by the symmetric chamfer "
+            "distance of the normalised curves' points to each other's polyline (independent of where the crank's "
+            "turn starts), LInK's 2000-point metric beside it (docs/methods/synthesis.md). Writes the best "
+            "mechanism as a sketch file that "
             "`jaxlink kinematics` replays, every topology's best, a JSON of the ranked designs and a plot."
         ),
     )
@@ -66,7 +67,8 @@ def register(sub) -> None:
     p.add_argument("--samples", type=int, default=8192, metavar="N",
                    help="random candidates per topology and round (default 8192)")
     p.add_argument("--points", type=int, default=200, metavar="N",
-                   help="points of the arclength resampling in the distance (default 200)")
+                   help="points of the target's resampling in the float64 polish and the size's frame (default 200; "
+                        "the reported distance and LInK's metric take 2000 of each curve)")
     p.add_argument("--count", type=int, default=1000, metavar="N",
                    help="crank positions the reported curve is traced at (default 1000)")
     p.add_argument("--flip-y", action="store_true", help="mirror the target's y (an SVG drawn with y down)")

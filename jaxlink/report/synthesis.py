@@ -10,7 +10,8 @@ import numpy as np
 
 
 def table(res) -> str:
-    """One line per design: topology, joints, links, distance, crank interval, time found."""
+    """One line per design: topology, joints, links, distance (phase-free, the ranking), LInK's metric
+    (`link2000`; "-" for a timed target), size, least transmission angle, crank interval, time found."""
     t = res.target
     kind = (f"timed over {abs(np.degrees(t.inputs[-1] - t.inputs[0])):.6g}° (distance: the ordered one)" if t.timed
             else "closed" if t.closed else "open")
@@ -21,10 +22,11 @@ def table(res) -> str:
     lines = [f"target      {t.source}: {len(t.points)} points, {kind}" + (f", in {t.unit}" if t.unit else ""),
              f"extent      {res.extent:.6g}{unit} (the largest distance between two target points: the unit of "
              f"`size`, the longest link or the frame pivot furthest from the target's centre){bound}",
-             f"{'rank':>4}  {'topology':<26}{'joints':>7}{'links':>6}{'distance':>11}{'size':>7}{'mu_deg':>8}"
-             f"{'start_deg':>11}{'stop_deg':>11}{'found_s':>9}  pareto"]
+             f"{'rank':>4}  {'topology':<26}{'joints':>7}{'links':>6}{'distance':>11}{'link2000':>10}{'size':>7}"
+             f"{'mu_deg':>8}{'start_deg':>11}{'stop_deg':>11}{'found_s':>9}  pareto"]
     for i, d in enumerate(res.designs, 1):
-        lines.append(f"{i:>4}  {d.topology:<26}{d.joints:>7}{d.links:>6}{d.distance:>11.5f}{d.size:>7.2f}"
+        link = "-" if np.isnan(d.link_chamfer_2000) else f"{d.link_chamfer_2000:.5f}"
+        lines.append(f"{i:>4}  {d.topology:<26}{d.joints:>7}{d.links:>6}{d.distance:>11.5f}{link:>10}{d.size:>7.2f}"
                      f"{d.transmission_deg:>8.1f}"
                      f"{d.start_deg:>11.3f}{d.stop_deg:>11.3f}{d.found_s:>9.1f}  {'*' if d.pareto else ''}")
     lines.append(f"wall time   {res.wall_s:.1f} s")
@@ -43,7 +45,9 @@ def to_json(res) -> dict:
         "interrupted": res.interrupted,
         "designs": [{
             "rank": i, "topology": d.topology, "joints": d.joints, "links": d.links,
-            "distance": d.distance, "start_deg": d.start_deg, "stop_deg": d.stop_deg, "count": d.n_inputs,
+            "distance": d.distance,
+            "link_chamfer_2000": None if np.isnan(d.link_chamfer_2000) else d.link_chamfer_2000,
+            "start_deg": d.start_deg, "stop_deg": d.stop_deg, "count": d.n_inputs,
             "scale": d.scale, "rotation_deg": d.rotation_deg, "translation": list(d.translation),
             "margin": d.margin, "size": d.size, "transmission_deg": d.transmission_deg, "lengths": d.lengths,
             "found_s": d.found_s, "pareto": d.pareto,

@@ -1,8 +1,9 @@
 """Path synthesis: a linkage — its topology and its dimensions — whose point follows a target path.
 
 - `target`: the target curve read from CSV, NPY or SVG (timed: each point at an input angle); arclength resampling;
-- `distance`: the field's distance (symmetric chamfer of the normalised curves at the best
-  rotation), the placement, the ordered distance, the smooth surrogate;
+- `distance`: the distance (the phase-free symmetric chamfer of the normalised curves at the best
+  rotation, `match`), LInK's metric (`link_chamfer`), the placement, the ordered distance, the
+  smooth surrogate;
 - `topology`: one-DOF revolute linkages grown by dyads (four-bar, Watt and Stephenson six-bars, eight-bars);
 - `tracer`: batched (JAX) and exact (NumPy) tracing from a pose, the dyads' reach margins;
 - `assembly`: the check that a candidate assembles over its whole interval on its branch;
@@ -19,6 +20,7 @@ from .api import Design as Design
 from .api import Synthesis as Synthesis
 from .api import synthesize as synthesize
 from .distance import Match as Match
+from .distance import link_chamfer as link_chamfer
 from .distance import match as match
 from .search import block_caps as block_caps
 from .search import default_blocks as default_blocks

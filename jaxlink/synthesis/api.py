@@ -38,7 +38,12 @@ class Design(NamedTuple):
     """One answer, in the target's coordinates and unit.
 
     - `topology`: its name; `joints`, `links` (the frame counted as a link);
-    - `distance`: the distance to the target (`jaxlink.synthesis.distance`, n = `n_points`);
+    - `distance`: the phase-free distance to the target (`jaxlink.synthesis.distance.match`: each
+      point of either curve to the other's polyline, 2000 points; it does not depend on where the
+      crank's turn starts), what the designs are ranked by;
+    - `link_chamfer_2000`: LInK's metric of the same curve (`distance.link_chamfer`: the point
+      chamfer of both curves resampled to 2000 points, at the best rotation), to compare with
+      LInK's published numbers; nan for a timed target;
     - `start_deg`, `stop_deg`: the crank's angle (the file's input, degrees) at the traced interval's
       ends (a closed target: a whole turn, `stop_deg` = `start_deg` + 360); `n_inputs`: the inputs
       the distance was computed at (a closed target: `n_inputs` steps of 360/n_inputs degrees from
@@ -81,6 +86,7 @@ class Design(NamedTuple):
     at_inputs: np.ndarray | None = None
     size: float = float("nan")
     transmission_deg: float = float("nan")
+    link_chamfer_2000: float = float("nan")
 
 
 class Synthesis(NamedTuple):
@@ -125,7 +131,8 @@ def _design(c: Candidate, target: Target, n_trace: int, name: str) -> Design:
                   start + math.degrees(span), n_trace, float(m.scale), math.degrees(m.rotation),
                   (float(m.translation[0]), float(m.translation[1])), float(c.assembly.margin),
                   {k: v * m.scale for k, v in lengths(c.topology, c.pose).items()}, sk, curve, c.found_s, False,
-                  inputs_deg, at_inputs, float(c.size), mu_deg)
+                  inputs_deg, at_inputs, float(c.size), mu_deg,
+                  float("nan") if target.timed else _dist.link_chamfer(curve, target.points, closed=target.closed))
 
 
 def _timed_points(c: Candidate, target: Target, m: _dist.Match, start_deg: float):

@@ -585,10 +585,12 @@ def interval_offsets(start: float, span: float, n: int, closed: bool) -> np.ndar
 
 def score(topo: Topology, pose: np.ndarray, start: float, span: float, target: Target, *,
           n_trace: int, n_points: int) -> tuple[_dist.Match, Assembly]:
-    """The exact distance and the assembly check of one candidate (float64). A timed target: the
-    ordered distance (`distance.match_ordered`) of the traced point at start + (t_i − t_0) to point
-    i, the check over that interval (a closed target: the whole turn). A candidate whose file would
-    hold a value outside its domain (`in_domain`) does not pass the check (`asm.ok` False)."""
+    """The exact distance and the assembly check of one candidate (float64): the phase-free distance
+    (`distance.match`, at `distance.N_FINE` points whatever `n_points`, the surrogate's count) of the
+    path traced at `n_trace` inputs. A timed target: the ordered distance (`distance.match_ordered`)
+    of the traced point at start + (t_i − t_0) to point i, the check over that interval (a closed
+    target: the whole turn). A candidate whose file would hold a value outside its domain
+    (`in_domain`) does not pass the check (`asm.ok` False)."""
     m, asm = _scored(topo, pose, start, span, target, n_trace=n_trace, n_points=n_points)
     if asm.ok and np.isfinite(m.distance) and not in_domain(topo, pose, start, m, target):
         asm = asm._replace(ok=False)
@@ -616,7 +618,7 @@ def _scored(topo: Topology, pose: np.ndarray, start: float, span: float, target:
     pos, marg = trace_exact(topo, pose, th)
     if not np.all(marg > 0):
         return _dist.Match(np.inf, 0.0, 1.0, np.zeros(2)), asm
-    return _dist.match(pos[:, topo.traced], target.points, closed=target.closed, n=n_points), asm
+    return _dist.match(pos[:, topo.traced], target.points, closed=target.closed), asm
 
 
 def certified_interval(start: float, span: float, target: Target) -> tuple[float, float]:
