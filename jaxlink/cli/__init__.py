@@ -8,18 +8,20 @@ One error path: bad input (a file, an option, an output that cannot be written) 
 `MechanismError` (or an `OSError` of the output), printed here as one line on standard error with
 exit status 2; a valid request that cannot be solved (an unassemblable design) returns 1 from its
 handler. Anything else is a bug: one "internal error" line (the traceback with `--debug`) and exit
-status 3. A closed output pipe (`jaxlink scenes | head -1`) ends quietly.
+status 3. A closed standard output (`jaxlink scenes | head -1`, `kinematics --csv x.csv | true`) stops
+nothing: what is printed is dropped, the files asked for are written (`pipe.py`).
 """
 
 from __future__ import annotations
 
 import argparse
+import contextlib
 import difflib
 import importlib
-import os
 import sys
 
 from ..errors import MechanismError
+from .pipe import quiet_closed_pipes
 
 # Modules that add sub-commands (each has `register(subparsers)`).
 COMMAND_MODULES = (
@@ -72,6 +74,13 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
+    """Run the command of `argv` (default: the command line's); its exit status. Standard output
+    and error closing early (`| head -1`) stop nothing (`pipe.py`)."""
+    with quiet_closed_pipes():
+        return _main(argv)
+
+
+def _main(argv: list[str] | None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     name = f"jaxlink {args.command}"
@@ -87,11 +96,11 @@ def main(argv: list[str] | None = None) -> int:
     except MechanismError as exc:
         print(f"{name}: error: {exc}", file=sys.stderr)
         return 2
-    except BrokenPipeError:
-        # the reader of our output went away (`| head`): not an error; silence the flush at exit
-        devnull = os.open(os.devnull, os.O_WRONLY)
-        os.dup2(devnull, sys.stdout.fileno())
-        return 0
+    except BrokenPipeError:  # not from standard output or error (`pipe.py`): an output that is a pipe
+        with contextlib.suppress(OSError):
+            print(f"{name}: error: an output's reader went away before the command ended; what it had to "
+                  "write may be missing", file=sys.stderr)
+        return 2
     except OSError as exc:  # an input or output file that cannot be read or written
         where = f": {exc.filename}" if getattr(exc, "filename", None) else ""
         print(f"{name}: error: {exc.strerror or exc}{where}", file=sys.stderr)

@@ -95,12 +95,14 @@ def check_output(option: str, path: str | None, formats: tuple | None = None) ->
 
 @contextlib.contextmanager
 def writing(option: str, path: str):
-    """Turn an error while writing an output (a full disk, a closed pipe's reader gone is not one)
-    into a `MechanismError` naming the option and the file."""
+    """Turn an error while writing an output (a full disk) into a `MechanismError` naming the option
+    and the file. An output that is a pipe whose reader went away (`--csv /dev/stdout | head -1`)
+    is not one: the rest of it is dropped, nobody reads it, and the command goes on to its other
+    outputs (standard output itself: `pipe.py`)."""
     try:
         yield
     except BrokenPipeError:
-        raise
+        return
     except OSError as exc:
         raise MechanismError(f"{option} {path}: cannot write: {exc.strerror or exc}") from None
 
