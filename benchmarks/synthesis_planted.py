@@ -17,7 +17,10 @@ samplings of the planted curve itself that are half a sample apart — the exact
 × `--inputs` inputs) resampled by arclength to the n = 200 points of the distance, and the same
 curve resampled at the arclength positions shifted by half a spacing (closed: s = (k + ½) L / n,
 k = 0 … n − 1; open: s = (k + ½) L / (n − 1), k = 0 … n − 2), both normalised, at the best
-rotation. A design is **recovered** when its D ≤ `--factor` × the floor (2 by default).
+rotation. A design is **recovered** when its D ≤ `--factor` × the floor (2 by default). D is the
+synthesis's phase-free distance (to the other curve's polyline: the planted curve itself scores
+near 0 whatever its samples' start); LInK's 2000-point metric of the same design is printed beside
+it (`link2000`, `link_chamfer_2000` in the JSON).
 
 The planted eight-bars' topology (their last dyad between two moving joints) is not among the
 default set (whose eight-bars end their last dyad at a frame pivot or the crank pin); with
@@ -128,7 +131,8 @@ def case(cls: str, k: int, rng: np.random.Generator, args) -> dict:
     b = r.best
     row = {"class": cls, "case": k, "closed": closed, "planted": topo.name, "planted_joints": topo.n_joints,
            "planted_links": topo.n_links, "span_deg": float(np.degrees(span)),
-           "found": b.topology, "found_joints": b.joints, "distance": b.distance, "floor": fl,
+           "found": b.topology, "found_joints": b.joints, "distance": b.distance,
+           "link_chamfer_2000": b.link_chamfer_2000, "floor": fl,
            "ratio": b.distance / fl, "recovered": bool(b.distance <= args.factor * fl), "time_s": wall,
            "found_s": b.found_s}
     if cls == "8" and args.eight_given:
@@ -173,7 +177,7 @@ def main() -> int:
     print(f"compiled (closed and open{given}) in {compile_s:.1f} s", flush=True)
     rows = []
     print(f"{'class':<6}{'case':<5}{'curve':<7}{'planted':<34}{'pj':>3}{'found':<27}{'fj':>3}"
-          f"{'distance':>10}{'floor':>9}{'ratio':>7}{'rec':>5}{'time_s':>8}")
+          f"{'distance':>10}{'link2000':>10}{'floor':>9}{'ratio':>7}{'rec':>5}{'time_s':>8}")
     for ci, cls in enumerate(classes):
         rng = np.random.default_rng([args.seed, ci])
         for k in range(args.count):
@@ -183,7 +187,8 @@ def main() -> int:
                      if "given_distance" in row else "")
             print(f"{cls:<6}{k:<5}{'closed' if row['closed'] else 'open':<7}{row['planted']:<34}"
                   f"{row['planted_joints']:>3} {row['found']:<26}{row['found_joints']:>3}{row['distance']:>10.4f}"
-                  f"{row['floor']:>9.4f}{row['ratio']:>7.2f}{'yes' if row['recovered'] else 'no':>5}"
+                  f"{row['link_chamfer_2000']:>10.4f}{row['floor']:>9.4f}{row['ratio']:>7.2f}"
+                  f"{'yes' if row['recovered'] else 'no':>5}"
                   f"{row['time_s']:>8.1f}{extra}", flush=True)
     summary = {}
     for cls in classes:
