@@ -45,17 +45,68 @@ def test_a_search_without_budget_stops_by_itself_and_by_time(tmp_path):
     ev = Evaluator(problem_from(plain(tmp_path), {"samples": 72, "report_samples": 720}), chunk=64)
     small = dict(starts=4, presample=128, iterations=1000, patience=10)
     res = run(ev, "gradient", seed=0, **small)
-    assert res.complete and res.budget is None and res.value is not None
-    # it stopped on no improvement, long before 1000 iterations
+    from jaxlink.optimize.searches.gradient import AUTO_BUDGET
+
+    assert res.complete and res.value is not None
+    # it stopped on no improvement, long before 1000 iterations and its default budget of evaluations
     assert res.evaluations < 128 * 2 * 3 + 1000 * 4 * 2 * 5
+    assert res.extra["stopped_by"] == "converged" and res.budget == AUTO_BUDGET > res.evaluations
     assert res.trace and all(a["objective"] > b["objective"] for a, b in zip(res.trace, res.trace[1:]))
     assert res.search_wall_s >= 0 and res.compile_s >= 0
-    # without a budget or a time, a default time limit (it stopped before reaching it)
-    assert res.extra.get("time_limit_s") == 75.0 and "stopped" not in res.extra
+    # no time limit unless one is given
+    assert "time_limit_s" not in res.extra and "time_limit_s" not in res.to_json()
     timed = run(ev, "gradient", seed=0, time=1e-3, starts=4, presample=128)
-    assert timed.complete and timed.extra.get("stopped") == "time"
+    assert timed.complete and timed.extra["stopped_by"] == "time_limit" and timed.extra["time_limit_s"] == 1e-3
+    assert timed.to_json()["stopped_by"] == "time_limit"
     assert timed.evaluations < res.evaluations
     assert np.isfinite(res.value)
+
+
+class _SlowClock:
+    """A machine under load, for the runner: every reading of the clock `step` seconds after the
+    one before."""
+
+    def __init__(self, step: float):
+        self.t, self.step = 0.0, step
+
+    def perf_counter(self) -> float:
+        self.t += self.step
+        return self.t
+
+
+def test_the_default_search_gives_the_same_design_under_load(tmp_path, monkeypatch):
+    """The default search (no budget, no time) counts evaluations, iterations and its presample:
+    on a machine whose clock runs 30 s per reading it ends at exactly the design of a quiet run
+    (with the old default, a 75 s limit whose 30 % ended the presample, it ended at another one,
+    stopped by the time)."""
+    from jaxlink.optimize.searches import runner
+
+    ev = Evaluator(problem_from(plain(tmp_path), {"samples": 72, "report_samples": 720}), chunk=64)
+    small = dict(starts=4, presample=128, iterations=30)
+    quiet = run(ev, "gradient", seed=0, **small)
+    monkeypatch.setattr(runner, "_time", _SlowClock(30.0))
+    loaded = run(ev, "gradient", seed=0, **small)
+    assert loaded.best_file_text() == quiet.best_file_text()
+    assert (loaded.value, loaded.evaluations) == (quiet.value, quiet.evaluations)
+    assert loaded.extra["stopped_by"] == quiet.extra["stopped_by"] != "time_limit"
+
+
+def test_a_time_limit_starts_no_chunk_that_cannot_fit(tmp_path, monkeypatch):
+    """With a time limit, a chunk starts only if one as long as the last fits in the time left.
+    The clock at 10 s a reading (warm programs: no compilation): the check before chunk 1 reads
+    10 s, chunk 1 takes 10 s; the check before chunk 2 reads 40 s, + 10 s fits in 55 s; chunk 3
+    would not (70 s): two chunks, stopped by the time limit (the old rule, 'stop once 55 s of steps
+    are spent', ran six)."""
+    from jaxlink.optimize.searches import runner
+
+    ev = Evaluator(problem_from(plain(tmp_path), {"samples": 72, "report_samples": 720}), chunk=64)
+    small = dict(starts=4, presample=512, iterations=30)
+    two = run(ev, "gradient", seed=0, stop_after_chunks=2, **small)  # also compiles every program
+    run(ev, "gradient", seed=0, **small)
+    monkeypatch.setattr(runner, "_time", _SlowClock(10.0))
+    capped = run(ev, "gradient", seed=0, time=55.0, **small)
+    assert capped.extra["stopped_by"] == "time_limit" and capped.extra["time_limit_s"] == 55.0
+    assert capped.evaluations == two.evaluations and capped.wall_s == 20.0
 
 
 def test_icp_places_a_moved_path_back_from_any_turn():

@@ -135,7 +135,7 @@ def test_planted_lever_design_is_recovered_and_replayed(tmp_path):
     f.write_text("x_mm,y_mm\n" + "\n".join(f"{float(x)!r},{float(y)!r}" for x, y in target))
     out_dir = tmp_path / "syn"
     assert cli_main(["synthesize", str(f), "--closed", "--topologies", "four-bar,four-bar+lever-J4", "--rounds", "2",
-                     "--samples", "2048", "--time-limit", "5", "--count", "400", "--no-plot",
+                     "--samples", "2048", "--quick", "--count", "400", "--no-plot",
                      "--out", str(out_dir)]) == 0
     res = json.loads((out_dir / "synthesis.json").read_text())
     best = res["designs"][0]

@@ -27,7 +27,7 @@ pytestmark = pytest.mark.xdist_group("synthesis_resume")
 # tests/test_synthesis_size.py: compiled once)
 K = np.linspace(0, 2 * np.pi, 120, endpoint=False)
 TARGET = np.stack([(1 + 0.6 * np.cos(K)) * np.cos(K), (1 + 0.6 * np.cos(K)) * np.sin(K)], axis=1)
-OPTS = dict(topologies=["four-bar"], rounds=3, time_limit=3, samples=4096, count=300, finish=1, seed=5)
+OPTS = dict(topologies=["four-bar"], rounds=3, quick=True, samples=4096, count=300, finish=1, seed=5)
 
 
 class Stop(Exception):
@@ -202,7 +202,7 @@ def test_the_command_writes_its_state_and_resumes(whole, tmp_path, monkeypatch, 
     is an error."""
     csv = tmp_path / "t.csv"
     np.savetxt(csv, TARGET, delimiter=",", header="x,y", comments="")
-    args = ["synthesize", str(csv), "--closed", "--topologies", "four-bar", "--rounds", "2", "--time-limit", "3",
+    args = ["synthesize", str(csv), "--closed", "--topologies", "four-bar", "--rounds", "2", "--quick",
             "--samples", "4096", "--count", "300", "--no-plot"]
     out = tmp_path / "run"
     assert main([*args, "--out", str(out)]) == 0

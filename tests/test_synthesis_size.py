@@ -68,7 +68,7 @@ def test_reported_size_is_the_written_file_s(tmp_path):
     f = tmp_path / "target.csv"
     f.write_text("x_mm,y_mm\n" + "\n".join(f"{float(x)!r},{float(y)!r}" for x, y in target))
     out = tmp_path / "syn"
-    assert cli_main(["synthesize", str(f), "--topologies", "four-bar", "--time-limit", "1", "--no-plot",
+    assert cli_main(["synthesize", str(f), "--topologies", "four-bar", "--rounds", "1", "--quick", "--no-plot",
                      "--out", str(out)]) == 0
     res = json.loads((out / "synthesis.json").read_text())
     assert res["max_size"] is None and abs(res["target"]["extent"] - pdist(target).max()) < 1e-9
@@ -104,22 +104,22 @@ def test_bounded_searches_keep_every_design_within_the_bounds():
     each another, farther design that assembles; bounds that are no positive number, or no angle
     between 0 and 90°, are refused."""
     tgt = make_target(_planted_target(), closed=True)
-    free = synthesize(tgt, topologies=["four-bar"], time_limit=3, rounds=2, samples=4096)
+    free = synthesize(tgt, topologies=["four-bar"], quick=True, rounds=2, samples=4096)
     assert free.max_size is None and free.min_transmission is None
     assert free.best.size > 1.0 and free.best.transmission_deg < 45 and free.best.distance < 0.02
-    small = synthesize(tgt, topologies=["four-bar"], time_limit=3, rounds=2, samples=4096, max_size=0.8)
+    small = synthesize(tgt, topologies=["four-bar"], quick=True, rounds=2, samples=4096, max_size=0.8)
     assert small.max_size == 0.8 and small.designs
     for d in small.designs:
         assert d.size <= 0.8 and d.margin > 0 and np.isfinite(d.distance)
     assert small.best.distance > free.best.distance  # the bound costs accuracy here: it bites
-    steep = synthesize(tgt, topologies=["four-bar"], time_limit=3, rounds=2, samples=4096, min_transmission=50)
+    steep = synthesize(tgt, topologies=["four-bar"], quick=True, rounds=2, samples=4096, min_transmission=50)
     assert steep.min_transmission == 50 and steep.designs
     for d in steep.designs:
         assert d.transmission_deg >= 50 and d.margin > 0 and np.isfinite(d.distance)
     assert steep.best.distance > free.best.distance
     for bad in (0, -1.0, float("nan"), float("inf"), True, "2"):
         with pytest.raises(MechanismError, match="max_size"):
-            synthesize(tgt, topologies=["four-bar"], time_limit=1, rounds=1, max_size=bad)
+            synthesize(tgt, topologies=["four-bar"], quick=True, rounds=1, max_size=bad)
     for bad in (0, 90, -5.0, float("nan"), True, "40"):
         with pytest.raises(MechanismError, match="min_transmission"):
-            synthesize(tgt, topologies=["four-bar"], time_limit=1, rounds=1, min_transmission=bad)
+            synthesize(tgt, topologies=["four-bar"], quick=True, rounds=1, min_transmission=bad)

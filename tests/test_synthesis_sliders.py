@@ -157,7 +157,7 @@ def test_planted_slider_crank_is_recovered_and_replayed(tmp_path):
     f.write_text("x_mm,y_mm\n" + "\n".join(f"{float(x)!r},{float(y)!r}" for x, y in target))
     out_dir = tmp_path / "syn"
     assert cli_main(["synthesize", str(f), "--topologies", "slider-crank", "--rounds", "3", "--samples", "2048",
-                     "--time-limit", "5", "--count", "400", "--out", str(out_dir)]) == 0
+                     "--quick", "--count", "400", "--out", str(out_dir)]) == 0
     res = json.loads((out_dir / "synthesis.json").read_text())
     best = res["designs"][0]
     assert best["topology"] == "slider-crank" and best["joints"] == 4 and best["links"] == 4

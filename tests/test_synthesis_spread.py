@@ -82,9 +82,9 @@ def test_programs_given_later_compute_the_same_bits_and_are_asked_for_once():
     assert np.array_equal(now(x, np.float64(1.5))[0], np.sin(x) * 1.5)
 
 
-# a quick search (time limit <= 15 s): its refinement's blocks are of at most REFINE_BLOCK_QUICK = 64 slots, so
+# a quick search: its refinement's blocks are of at most REFINE_BLOCK_QUICK = 64 slots, so
 # 80 slots make two blocks of 40 (each device gets screen, rank and refinement blocks)
-_SEARCH = dict(closed=True, topologies=["four-bar"], time_limit=0.1, rounds=2, count=400, samples=2048, refine=80)
+_SEARCH = dict(closed=True, topologies=["four-bar"], quick=True, rounds=2, count=400, samples=2048, refine=80)
 
 _TWO_DEVICES = r"""
 import sys, jax, numpy as np
@@ -118,7 +118,7 @@ def test_rounds_are_exact():
     lines: list[str] = []
     # a short search polishes only when asked (`finish`)
     one = synthesize(_arc(), log=lines.append, **dict(_SEARCH, refine=8, finish=2))
-    assert [x.split(":")[0] for x in lines if x.startswith("round")] == ["round 1", "round 2 (polish)"]  # past 0.1 s
+    assert [x.split(":")[0] for x in lines if x.startswith("round")] == ["round 1", "round 2 (polish)"]
     assert lines[1].startswith("polished ") and lines[2].startswith("round 2")  # the first polish after round 1
     assert one.designs and np.isfinite(one.best.distance)
     with pytest.raises(MechanismError, match="rounds"):
@@ -244,3 +244,97 @@ def test_the_blocks_option_is_the_default_path_and_other_blocks_are_other_progra
     for bad in ((0, 64, 8), (1024, 64), "abc", (1.5, 64, 8), (True, 64, 8), 8):
         with pytest.raises(MechanismError, match="blocks = .*three whole numbers"):
             synthesize(_arc(), blocks=bad, **kw)
+
+
+class _SlowClock:
+    """A machine under load, for the search: every reading of the clock `step` seconds after the
+    one before (`time.perf_counter` of jaxlink.synthesis.search and .api)."""
+
+    def __init__(self, step: float):
+        self.t, self.step = 0.0, step
+
+    def perf_counter(self) -> float:
+        self.t += self.step
+        return self.t
+
+
+def test_the_default_search_gives_the_same_designs_under_load(monkeypatch):
+    """A search given no rounds and no time limit runs `DEFAULT_ROUNDS` rounds: on a machine whose
+    clock runs 30 s a reading it ends at the designs of a quiet run, bit for bit (with the former
+    default, a 60 s limit, the loaded run stopped after one round where the quiet one went on)."""
+    import types
+
+    from jaxlink.synthesis import api as A
+    from jaxlink.synthesis import search as S
+    from jaxlink.synthesis.api import synthesize
+
+    kw = dict(_SEARCH, refine=8, finish=0)  # test_rounds_are_exact's programs
+    del kw["rounds"]
+    quiet = synthesize(_arc(), **kw)
+    slow = _SlowClock(30.0)
+    monkeypatch.setattr(S, "time", types.SimpleNamespace(perf_counter=slow.perf_counter))
+    monkeypatch.setattr(A, "time", types.SimpleNamespace(perf_counter=slow.perf_counter))
+    loaded = synthesize(_arc(), **kw)
+    assert _designs(loaded) == _designs(quiet) and quiet.designs
+    assert (loaded.rounds, loaded.stopped_by) == (quiet.rounds, quiet.stopped_by) == (S.DEFAULT_ROUNDS, "rounds")
+
+
+def test_a_time_limit_caps_the_rounds_and_says_so(monkeypatch, tmp_path):
+    """With `rounds` and a time limit, the limit is a cap: the next round starts only if 1.25 times
+    the last of its kind fits (here the clock passes the limit in round 1: one round of three), and
+    the result says it stopped at the limit, in the JSON too (the former rule ran the three rounds
+    whatever the time)."""
+    import json
+    import types
+
+    from jaxlink.report.synthesis import to_json
+    from jaxlink.synthesis import search as S
+    from jaxlink.synthesis.api import synthesize
+
+    real = S.time.perf_counter
+    jump = [0.0]
+
+    def score(*args, real_score=S.score, **kw):
+        jump[0] = 1e4  # the limit (1000 s) passes during round 1's scoring
+        return real_score(*args, **kw)
+
+    kw = dict(_SEARCH, refine=8, finish=0, rounds=3, time_limit=1000.0)
+    monkeypatch.setattr(S, "time", types.SimpleNamespace(perf_counter=lambda: real() + jump[0]))
+    monkeypatch.setattr(S, "score", score)
+    lines: list[str] = []
+    r = synthesize(_arc(), log=lines.append, **kw)
+    assert [x.split(":")[0] for x in lines if x.startswith("round")] == ["round 1"]
+    assert r.designs and (r.rounds, r.stopped_by, r.time_limit) == (1, "time_limit", 1000.0)
+    doc = json.loads(json.dumps(to_json(r)))
+    assert (doc["rounds"], doc["stopped_by"], doc["time_limit_s"]) == (1, "time_limit", 1000.0)
+
+
+def test_a_batch_past_its_deadline_is_abandoned_between_blocks():
+    """`spread.Blocked` with a `deadline`: the blocks before it computed (the same bits as without
+    one), then `OutOfTime` between two blocks — the search abandons the round there, keeping the
+    rounds done (a run overruns its limit by a block, not by a round)."""
+    import time
+
+    import jax
+    import jax.numpy as jnp
+
+    from jaxlink.synthesis.spread import Blocked, OutOfTime, layout
+
+    calls: list[int] = []
+    prog = jax.jit(lambda x: (jnp.sin(x),)).lower(jax.ShapeDtypeStruct((4, 3), np.float64)).compile()
+
+    def counted(x):
+        calls.append(1)
+        return prog(x)
+
+    x = np.random.default_rng(0).normal(size=(12, 3))
+    free = Blocked([counted], (0,), None, layout(), 12, 4)
+    want = free(x)
+    assert len(calls) == 3
+    late = Blocked([counted], (0,), None, layout(), 12, 4)
+    late.deadline = time.perf_counter() + 3600.0
+    assert late(x)[0].tobytes() == want[0].tobytes() and len(calls) == 6
+    late.deadline = time.perf_counter() - 1.0
+    with pytest.raises(OutOfTime):
+        late(x)
+    assert len(calls) == 6  # nothing computed past it

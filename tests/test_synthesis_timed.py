@@ -122,7 +122,7 @@ def test_planted_timed_four_bar_recovered_and_replayed(tmp_path):
     _write(f, ["theta_deg", "x_mm", "y_mm"], [[123.0 + 5 * i, x, y] for i, (x, y) in enumerate(pts)])
     out_dir = tmp_path / "syn"
     assert cli_main(["synthesize", str(f), "--topologies", "four-bar", "--rounds", "2", "--samples", "2048",
-                     "--time-limit", "5", "--out", str(out_dir)]) == 0
+                     "--quick", "--out", str(out_dir)]) == 0
     res = json.loads((out_dir / "synthesis.json").read_text())
     best = res["designs"][0]
     assert res["target"]["timed"] and best["distance"] <= 0.01
@@ -144,7 +144,7 @@ def test_timed_search_keeps_the_timing():
     t = np.sort(rng.uniform(0, 1.5 * np.pi, 24))
     pts = trace_exact(FOUR_BAR, POSE, 0.7 + t - t[0])[0][:, FOUR_BAR.traced] * 30 + [5, 7]
     tgt = make_target(pts, inputs=t + 2.0)
-    r = synthesize(tgt, topologies=["four-bar"], time_limit=5, rounds=2, samples=2048)
+    r = synthesize(tgt, topologies=["four-bar"], quick=True, rounds=2, samples=2048)
     b = r.best
     assert b.distance <= 0.01 and len(b.inputs_deg) == 24
     assert np.allclose(np.diff(b.inputs_deg), np.degrees(np.diff(t)), rtol=0, atol=1e-9)

@@ -30,11 +30,13 @@ def register(sub) -> None:
                    help="search method")
     p.add_argument("--budget", type=int, default=None,
                    help="mechanism evaluations allowed (default: [optimize] budget; else the gradient search "
-                        "chooses its sizes from the problem and stops when no start improves, the others 10000)")
+                        "chooses its sizes from the problem and stops when no start improves or after 400000, "
+                        "the others 10000): a count, the same result on any machine")
     p.add_argument("--time", type=float, default=None, metavar="SECONDS",
-                   help="stop the search after this wall time, compilation included (default: [optimize] time; "
-                        "else, without a budget, the gradient search stops when no start improves and after 75 s "
-                        "at the latest; the others have no limit)")
+                   help="a cap on the search's wall time, compilation and the final report included: a chunk "
+                        "starts only if one as long as the last fits (default: [optimize] time, else none). "
+                        "When it stops the search, the summary and the JSON (stopped_by) say so, and the result "
+                        "depends on the machine's speed")
     p.add_argument("--seed", type=int, default=None, help="random seed (default: [optimize] seed, else 0)")
     p.add_argument("--out", metavar="OUT.json", help="write the result JSON here (and checkpoint beside it)")
     p.add_argument("--resume", action="store_true", help="continue the interrupted search of --out")
@@ -82,6 +84,10 @@ def _distributed(args) -> bool:
 
     index, _ = initialize_distributed(args.coordinator, args.num_processes, args.process_id)
     return index == 0
+
+
+_STOPPED = {"budget": "at the budget (the evaluations allowed)", "iterations": "after its iterations",
+            "converged": "by itself: no start improves", "interrupted": "interrupted"}
 
 
 def cmd_optimize(args) -> int:
@@ -148,11 +154,12 @@ def cmd_optimize(args) -> int:
     print(f"evaluations {result.evaluations} ({result.designs} designs, "
           f"{100 * result.infeasible_fraction:.1f} % infeasible), {result.wall_s:.2f} s "
           f"({result.search_wall_s:.2f} s searching, {result.compile_s:.2f} s compiling)")
-    if result.extra.get("stopped") == "time":
-        limit = result.extra.get("time_limit_s", time_s)
-        print(f"stopped     at the time limit ({limit:g} s" + (", the default without --budget; --time SECONDS "
-                                                                "for longer" if "time_limit_s" in result.extra
-                                                                else "") + ")")
+    stopped_by = result.extra.get("stopped_by")
+    if stopped_by == "time_limit":
+        print(f"stopped     at the time limit ({result.extra['time_limit_s']:g} s): the result depends on the "
+              "machine's speed; a --budget (or no --time) for one that does not")
+    elif stopped_by is not None:
+        print(f"stopped     {_STOPPED.get(stopped_by, stopped_by)}")
     if args.out:
         print(f"wrote {args.out}" + (f" and {result.best_file} (the best design: jaxlink kinematics "
                                      f"{result.best_file})" if result.best_file else ""))

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import sys
 from pathlib import Path
+from typing import Any
 
 
 def register(sub) -> None:
@@ -31,13 +32,21 @@ def register(sub) -> None:
                    help="a closed loop, matched by a whole crank turn")
     g.add_argument("--open", dest="closed", action="store_const", const=False,
                    help="an open path, matched by a sub-interval of the crank turn")
-    p.add_argument("--time-limit", type=float, default=60.0, metavar="S",
-                   help="seconds for the search (default 60; at least one round runs, another only if 1.25 times "
-                        "the last one's time fits; the float64 polishes use the time left and stop at the limit)")
+    p.add_argument("--time-limit", type=float, default=None, metavar="S",
+                   help="a cap on the search's seconds, compiling included (default: none). A round starts only if "
+                        "1.25 times the last one's time fits, a round still running at 1.05 times the limit is "
+                        "abandoned (the rounds done are the answer), the float64 polishes stop at the limit; alone, "
+                        "rounds go on while one fits. When it stops the search the summary and the JSON "
+                        "(stopped_by) say so: the designs then depend on the machine's speed")
     p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
     p.add_argument("--rounds", type=int, default=None, metavar="N",
-                   help="run exactly N rounds (polishing rounds counted) whatever the time: a result that does "
-                        "not depend on the machine's speed (--time-limit then only chooses the compile level)")
+                   help="search rounds, full and polishing alternating (default 2 without --time-limit: a full "
+                        "round and a polishing one): designs that do not depend on the machine's speed unless a "
+                        "--time-limit stops the search first")
+    p.add_argument("--quick", action="store_true", default=None,
+                   help="the quick programs: a closed or timed target's screen compiled at XLA's lowest level, no "
+                        "final float64 polish, the refinement in blocks of 64 (less compiling, longer rounds: for "
+                        "short searches; default: when a --time-limit of at most 15 s is given)")
     p.add_argument("--max-links", type=int, default=8,
                    help="most links, the frame counted (default 8: the eight-bars too; 6: the four-bar and "
                         "six-bars, a round about half as long; 10: the 27 ten-bars too, 12 joints, a round "
@@ -104,9 +113,9 @@ def cmd_synthesize(args) -> int:
 
     if args.points < 8 or args.count < 8 or args.samples < 1:
         raise MechanismError("--points and --count must be >= 8, --samples >= 1")
-    if not 0 < args.time_limit < float("inf"):  # nan too
-        raise MechanismError(f"--time-limit {args.time_limit:g}: a finite number of seconds above 0 (--rounds N "
-                             "for a search independent of the time)")
+    if args.time_limit is not None and not 0 < args.time_limit < float("inf"):  # nan too
+        raise MechanismError(f"--time-limit {args.time_limit:g}: a finite number of seconds above 0 (or no "
+                             "--time-limit: --rounds N, by default 2)")
     tgt = load_target(args.target, closed=args.closed, flip_y=args.flip_y)
     names = [n.strip() for n in args.topologies.split(",") if n.strip()] if args.topologies else None
     state = None
@@ -117,12 +126,14 @@ def cmd_synthesize(args) -> int:
         state.parent.mkdir(parents=True, exist_ok=True)
     elif args.resume:
         raise MechanismError("--resume is for a search in one process")
+    quick: dict[str, Any] = {"quick": True} if args.quick else {}
     try:
         res = synthesize(tgt, time_limit=args.time_limit, seed=args.seed, rounds=args.rounds,
                          max_links=args.max_links, topologies=names, n_points=args.points, count=args.count,
                          samples=args.samples, sliders=args.sliders, levers=args.levers,
                          max_size=args.max_size,
                          min_transmission=args.min_transmission, checkpoint=state, resume=args.resume,
+                         **quick,
                          log=(lambda s: print(s, file=sys.stderr)) if printer else None)
     except KeyboardInterrupt:
         if state is not None and state.exists():
@@ -138,8 +149,13 @@ def cmd_synthesize(args) -> int:
     if not res.designs:
         bounds = ([f"--max-size {args.max_size:g}"] if args.max_size is not None else []) + (
             [f"--min-transmission {args.min_transmission:g}"] if args.min_transmission is not None else [])
+        if res.stopped_by == "time_limit" and res.rounds == 0:
+            print(f"no design: the time limit ({args.time_limit:g} s) ended the search in its first round "
+                  f"({res.wall_s:.1f} s, compiling included); give a longer --time-limit, or none", file=sys.stderr)
+            return 130 if res.interrupted else 1
         print("no design assembled over its interval" + (f" within {' and '.join(bounds)}" if bounds else "")
-              + ": give more --time-limit or --samples" + (", or looser bounds" if bounds else ""), file=sys.stderr)
+              + ": give more --rounds, --time-limit or --samples" + (", or looser bounds" if bounds else ""),
+              file=sys.stderr)
         return 130 if res.interrupted else 1
     print(table(res))
     for f in write_all(args.out, res, plot_it=not args.no_plot):

@@ -29,7 +29,10 @@ def table(res) -> str:
         lines.append(f"{i:>4}  {d.topology:<26}{d.joints:>7}{d.links:>6}{d.distance:>11.5f}{link:>10}{d.size:>7.2f}"
                      f"{d.transmission_deg:>8.1f}"
                      f"{d.start_deg:>11.3f}{d.stop_deg:>11.3f}{d.found_s:>9.1f}  {'*' if d.pareto else ''}")
-    lines.append(f"wall time   {res.wall_s:.1f} s")
+    lines.append(f"wall time   {res.wall_s:.1f} s, {res.rounds} round{'s' if res.rounds != 1 else ''}")
+    if res.stopped_by == "time_limit":
+        lines.append(f"stopped     at the time limit ({res.time_limit:g} s): the designs depend on the machine's "
+                     "speed; --rounds N without --time-limit for designs that do not")
     return "\n".join(lines)
 
 
@@ -43,6 +46,9 @@ def to_json(res) -> dict:
         "min_transmission_deg": res.min_transmission,
         "wall_s": res.wall_s,
         "interrupted": res.interrupted,
+        "rounds": res.rounds,
+        "stopped_by": res.stopped_by,
+        "time_limit_s": res.time_limit,
         "designs": [{
             "rank": i, "topology": d.topology, "joints": d.joints, "links": d.links,
             "distance": d.distance,

@@ -94,7 +94,10 @@ class Synthesis(NamedTuple):
     `max_size`: the bound on the designs' size (None: none); `extent`: the target's extent (its
     largest distance between two points, in its unit: the size's unit); `min_transmission`: the
     least transmission angle asked for (degrees; None: none); `interrupted`: the search was stopped
-    (Ctrl-C) and these are the designs of its rounds until then (`synthesize(checkpoint=...)`)."""
+    (Ctrl-C) and these are the designs of its rounds until then (`synthesize(checkpoint=...)`);
+    `rounds`: the rounds done; `stopped_by`: "rounds" (the rounds asked for, or the default
+    `search.DEFAULT_ROUNDS`, were done: the designs do not depend on the machine) or "time_limit"
+    (the time limit stopped the search: they do); `time_limit`: the limit given (s; None: none)."""
 
     target: Target
     designs: list[Design]
@@ -103,6 +106,9 @@ class Synthesis(NamedTuple):
     extent: float = float("nan")
     min_transmission: float | None = None
     interrupted: bool = False
+    rounds: int = 0
+    stopped_by: str = "rounds"
+    time_limit: float | None = None
 
     @property
     def best(self) -> Design:
@@ -147,13 +153,13 @@ def _timed_points(c: Candidate, target: Target, m: _dist.Match, start_deg: float
     return start_deg + np.degrees(dt), at
 
 
-def _blocks_of(options: dict, time_limit: float) -> tuple[int, ...]:
+def _blocks_of(options: dict, time_limit: float | None) -> tuple[int, ...]:
     """The blocks' caps a search with these `search.search` options and time limit takes."""
     given = checked_blocks(options.get("blocks"))
     return default_blocks(quick_of(time_limit, options.get("quick"))) if given is None else given
 
 
-def synthesize(target: Any, *, closed: bool | None = None, time_limit: float = 60.0, seed: int = 0,
+def synthesize(target: Any, *, closed: bool | None = None, time_limit: float | None = None, seed: int = 0,
                rounds: int | None = None, max_links: int = 8, sliders: bool = False, levers: bool = False,
                topologies: list[str | Topology] | None = None,
                n_points: int = _dist.N_POINTS, count: int = 1000, samples: int = 8192, name: str = "synthesized",
@@ -161,7 +167,8 @@ def synthesize(target: Any, *, closed: bool | None = None, time_limit: float = 6
                log: Callable[[str], None] | None = None, checkpoint: str | Path | None = None,
                resume: bool = False, **search_options) -> Synthesis:
     """Find linkages whose traced point follows `target` (a path to a .csv/.npy/.svg file, an
-    (N, 2) array or a `Target`), up to `max_links` links, within about `time_limit` seconds.
+    (N, 2) array or a `Target`), up to `max_links` links, in `rounds` search rounds or within
+    `time_limit` seconds.
     `closed`: match a closed loop over a whole crank turn, or an open path over a sub-interval
     (default: from the target, `jaxlink.synthesis.target`). `topologies`: the topologies to search, each
     the name of a built-in one (`jaxlink.synthesis.topology.topologies`) or a `Topology` (e.g. one
@@ -172,11 +179,17 @@ def synthesize(target: Any, *, closed: bool | None = None, time_limit: float = 6
     moving joint sliding in its slot, as in the Whitworth quick return).
     Returns the best design of each topology, best first (`Synthesis.best`); `seed` makes it
     repeatable for a given number of rounds: `rounds` = N runs exactly N rounds (the polishing
-    rounds counted, `search.search`) whatever the time, `time_limit` then only choosing the
-    programs' compile level (quick at ≤ 15 s), so that the result is the same on any machine, any
-    number of devices, any number of processes. Spread over this process's devices, and over the
-    processes of a `jax.distributed` group (`jaxlink.optimize.initialize_distributed`, called first
-    in every process): every process returns the same designs (`search`).
+    rounds counted, `search.search`; default `search.DEFAULT_ROUNDS` = 2 when no `time_limit` is
+    given), so that the result is the same on any machine, any number of devices, any number of
+    processes. `time_limit` (seconds, compiling included; default none) is a cap: with `rounds`,
+    a round starts only if 1.25 times the last one of its kind fits in the time left; alone, the
+    rounds go on while one fits; in one process a round still running at 1.05 times the limit is
+    abandoned (the rounds done are the answer: none done, none). When it stops the search,
+    `Synthesis.stopped_by` is "time_limit" and the designs depend on the machine's speed. A limit
+    of at most 15 s also chooses the quick programs (`search.quick_of`). Spread over this
+    process's devices, and over the processes of a `jax.distributed` group
+    (`jaxlink.optimize.initialize_distributed`, called first in every process): every process
+    returns the same designs (`search`).
     `max_size` K: only designs whose links are at most K times the target's extent (its largest
     distance between two points) and whose frame pivots are within K times it of the target's
     centre (`jaxlink.synthesis.size`; each design's `size` is reported either way).
@@ -193,10 +206,10 @@ def synthesize(target: Any, *, closed: bool | None = None, time_limit: float = 6
     Computes in float64 for the answers (NumPy) whatever JAX's x64 setting."""
     if rounds is not None and (isinstance(rounds, bool) or not isinstance(rounds, (int, np.integer)) or rounds < 1):
         raise MechanismError(f"rounds = {rounds!r}: the number of rounds must be a whole number, at least 1")
-    if isinstance(time_limit, bool) or not isinstance(time_limit, (int, float, np.integer, np.floating)) or not (
-            0 < time_limit < np.inf):
-        raise MechanismError(f"time_limit = {time_limit!r}: a finite number of seconds above 0 (an infinite one "
-                             "would never end the search; use `rounds` for a search independent of the time)")
+    if time_limit is not None and (isinstance(time_limit, bool) or not isinstance(
+            time_limit, (int, float, np.integer, np.floating)) or not 0 < time_limit < np.inf):
+        raise MechanismError(f"time_limit = {time_limit!r}: a finite number of seconds above 0, or None for no "
+                             "limit (the search then runs `rounds` rounds, by default 2)")
     if isinstance(max_links, bool) or not isinstance(max_links, (int, np.integer)) or max_links < 4:
         raise MechanismError(f"max_links = {max_links!r}: a whole number of links, at least 4 (the four-bar, "
                              "the frame counted)")
@@ -256,15 +269,17 @@ def synthesize(target: Any, *, closed: bool | None = None, time_limit: float = 6
     fp = _checkpoint.fingerprint(tgt, topos, seed=seed, rounds=rounds, samples=samples, count=count,
                                  n_points=n_points, max_size=max_size, min_transmission=min_transmission,
                                  time_limit=time_limit if rounds is None else quick_of(time_limit, None),
+                                 cap=time_limit is not None and rounds is not None,
                                  options=sorted(search_options.items()),
                                  # the blocks' caps (the platform's unless given): the answer's bits depend on them
                                  blocks=_blocks_of(search_options, time_limit)) if checkpoint is not None else ""
     if checkpoint is not None and not resume:
         Path(checkpoint).unlink(missing_ok=True)  # an earlier search's state is never this one's
     interrupted = False
+    status: dict = {}
     try:
         found = search(tgt, topos, time_limit=time_limit, seed=seed, rounds=rounds, samples=samples,
-                       n_trace=count, n_points=n_points, t0=t0, log=log,
+                       n_trace=count, n_points=n_points, t0=t0, log=log, status=status,
                        max_size=None if max_size is None else float(max_size),
                        min_transmission=None if min_transmission is None else float(min_transmission),
                        checkpoint=checkpoint, resume=bool(resume), fingerprint=fp, **search_options)
@@ -275,6 +290,7 @@ def synthesize(target: Any, *, closed: bool | None = None, time_limit: float = 6
             raise
         found = sorted(saved["found"], key=lambda c: c.match.distance)
         interrupted = True
+        status = {"rounds": int(saved["rnd"]), "stopped_by": "interrupted"}
         if log is not None:
             log(f"interrupted: the designs of the {saved['rnd']} rounds done")
     best: dict[str, Candidate] = {}
@@ -288,4 +304,5 @@ def synthesize(target: Any, *, closed: bool | None = None, time_limit: float = 6
                for d in designs]
     return Synthesis(tgt, designs, time.perf_counter() - t0, None if max_size is None else float(max_size),
                      _size.extent(tgt.points), None if min_transmission is None else float(min_transmission),
-                     interrupted)
+                     interrupted, int(status.get("rounds", 0)), str(status.get("stopped_by", "rounds")),
+                     None if time_limit is None else float(time_limit))

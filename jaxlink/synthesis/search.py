@@ -118,12 +118,25 @@ ACCEL_BLOCKS = (8192, 2048, 512)
 #: a search of at most this time limit (s) is `quick` unless told (`quick_of`)
 QUICK_S = 15.0
 
+#: the rounds of a search given neither `rounds` nor a time limit: a full round and a polishing
+#: round (then the final polishes), about what the former default limit of 60 s ran on a quiet
+#: 2-core CPU with the 16 topologies up to eight links; a count, the same designs on any machine
+DEFAULT_ROUNDS = 2
 
-def quick_of(time_limit: float, quick: bool | None) -> bool:
+#: a time-limited search in one process abandons a round still running at this many times its
+#: limit (`spread.Blocked`'s deadline, between blocks), keeping the rounds done: a run overruns its
+#: limit by at most 10 %, the last block's time and the designs' writing included
+ABANDON_AT = 1.05
+
+
+def quick_of(time_limit: float | None, quick: bool | None) -> bool:
     """Whether a search with this time limit is `quick` (if given, else a time limit of at most
-    `QUICK_S`): a closed or timed target's screen compiled at XLA's lowest level, no final polish by default,
-    the refinement's blocks of `REFINE_BLOCK_QUICK` (`programs`, `search`)."""
-    return time_limit <= QUICK_S if quick is None else bool(quick)
+    `QUICK_S`; no time limit: not quick): a closed or timed target's screen compiled at XLA's lowest
+    level, no final polish by default, the refinement's blocks of `REFINE_BLOCK_QUICK` (`programs`,
+    `search`)."""
+    if quick is not None:
+        return bool(quick)
+    return time_limit is not None and time_limit <= QUICK_S
 
 
 def checked_blocks(blocks) -> tuple[int, int, int] | None:
@@ -743,27 +756,35 @@ def _polish_slots(elites, elite_vals, n_slots, jitter, closed, rng):
     return stix, np.asarray(poses0, np.float32), np.asarray(arcs0, np.float32)
 
 
-def search(target: Target, topos: list[Topology], *, time_limit: float, seed: int = 0,
+def search(target: Target, topos: list[Topology], *, time_limit: float | None = None, seed: int = 0,
            rounds: int | None = None, samples: int = 8192, screen_keep: int = 128, refine: int = 8,
            steps: int = 300, n_trace: int = 1000, n_points: int = _dist.N_POINTS, per_topology: int = 2,
            lr: float = 0.01, jitter: float = 0.02, quick: bool | None = None, t0: float | None = None,
            finish: int | None = None, max_size: float | None = None, min_transmission: float | None = None,
            log=None, checkpoint=None, resume: bool = False, fingerprint: str = "",
-           blocks: tuple[int, int, int] | None = None) -> list[Candidate]:
-    """Rounds of screen → rank → refine → score until `time_limit` seconds (at least one round).
-    `quick` (`programs`; default: when `time_limit` ≤ 15 s) trades run time for compile time.
-    After each full round, and whenever the time left is too short for another full round but not
-    for a refinement, a polishing round refines the best found again (`_polish_slots`).
-    `rounds`: exactly that many rounds (the polishing ones counted), full and polishing alternating,
-    the time limit ignored (it still chooses `quick`): the same result on any machine, any number
-    of devices or processes. Several processes (`jax.distributed`): each computes its share of
-    every batch, all hold the same results, process 0's clock decides the rounds (`spread`).
+           blocks: tuple[int, int, int] | None = None, status: dict | None = None) -> list[Candidate]:
+    """Rounds of screen → rank → refine → score: `rounds` of them, or until `time_limit` seconds.
+    `rounds` (default `DEFAULT_ROUNDS` when no `time_limit` is given): that many rounds (the
+    polishing ones counted), full and polishing alternating: the same result on any machine, any
+    number of devices or processes. `time_limit` (seconds, compiling included; default none): a
+    cap. With `rounds` too, a round starts only if `ROUND_MARGIN` times the last one of its kind
+    fits in the time left; alone, the rounds go on while one fits (after each full round, and
+    whenever the time left is too short for another full round but not for a refinement, a
+    polishing round refines the best found again, `_polish_slots`). In one process a round still
+    running at `ABANDON_AT` times the limit is abandoned between two blocks (the rounds done are
+    the answer; none done: no answer). A search stopped by its limit depends on the machine's
+    speed. `status` (a dict, if given) receives `rounds` (the rounds done) and `stopped_by`:
+    "rounds" (they were done) or "time_limit" (the limit stopped a round, its scoring or a polish).
+    `quick` (`programs`; default: when a `time_limit` ≤ 15 s is given) trades run time for compile
+    time. Several processes (`jax.distributed`): each computes its share of every batch, all hold
+    the same results, process 0's clock decides the rounds (`spread`).
     `finish` (default 4, 0 when `quick`: a short search has no time to compile the polish): after
     every round that round's best candidate, and after the last round up to `finish` more
     (`_to_polish`), are polished in float64 (`polish`) while the time limit leaves room
     (`_polish_starts`: in one process each polish stops at the limit, so the time a slow round
-    leaves is spent polishing; with `rounds`: always, each to its end); in one process, while time
-    is left after those, the next best (within twice the best unpolished distance) too.
+    leaves is spent polishing; without a time limit: always, each to its end); in one process,
+    with a time limit and no `rounds`, while time is left after those, the next best (within
+    twice the best unpolished distance) too.
     Each polished candidate is scored like the others and added beside its original.
     `max_size` K: every answer's size (`size.design_size`) at most K — its links at most K times the
     target's extent, its frame pivots within K times it of the target's centre —, the screen, the
@@ -781,6 +802,15 @@ def search(target: Target, topos: list[Topology], *, time_limit: float, seed: in
     `min_transmission`), best first."""
     if rounds is not None and (isinstance(rounds, bool) or not isinstance(rounds, (int, np.integer)) or rounds < 1):
         raise ValueError(f"rounds = {rounds!r}: a whole number of rounds, at least 1")
+    if time_limit is not None and (isinstance(time_limit, bool) or not isinstance(
+            time_limit, (int, float, np.integer, np.floating)) or not 0 < time_limit < np.inf):
+        raise ValueError(f"time_limit = {time_limit!r}: a finite number of seconds above 0, or None")
+    if rounds is None and time_limit is None:
+        rounds = DEFAULT_ROUNDS
+    capped = time_limit is not None
+    limit = float(time_limit) if time_limit is not None else np.inf  # the cap (s)
+    status = {} if status is None else status
+    status.update(rounds=0, stopped_by="rounds")
     if finish is not None and (isinstance(finish, bool) or not isinstance(finish, (int, np.integer)) or finish < 0):
         raise ValueError(f"finish = {finish!r}: a whole number of candidates to polish, at least 0")
     if isinstance(per_topology, bool) or not isinstance(per_topology, (int, np.integer)) or per_topology < 1:
@@ -838,9 +868,10 @@ def search(target: Target, topos: list[Topology], *, time_limit: float, seed: in
     t_polish = None  # the seconds one float64 polish took (the time kept free for the last ones)
 
     origins: set[int] = set()  # the candidates polished (by id)
-    # a time-limited search in one process: its polishes stop at the limit, and the time left after
-    # the final ones polishes further candidates (several processes must polish alike: `_polish_starts`)
-    cut = rounds is None and jax.process_count() == 1
+    # a time-limited search in one process: its polishes stop at the limit, a round still running at
+    # `ABANDON_AT` times it is abandoned, and without `rounds` the time left after the final polishes
+    # polishes further candidates (several processes must polish alike: `_polish_starts`)
+    cut = capped and jax.process_count() == 1
 
     def save(stage: str, **extra) -> None:
         if path is None:
@@ -873,7 +904,7 @@ def search(target: Target, topos: list[Topology], *, time_limit: float, seed: in
         t1 = time.perf_counter()
         origins.add(id(c))
         ti = topos.index(c.topology)
-        deadline = began + time_limit - SCORE_RESERVE_S if cut else None
+        deadline = began + limit - SCORE_RESERVE_S if cut else None
         new = _polished(c, arr.parents[ti], arr.active[ti], int(arr.traced[ti]), target, n_trace, n_points, began,
                         sliders, max_size if sized else None, min_transmission, deadline)
         if new is not None:
@@ -888,104 +919,129 @@ def search(target: Target, topos: list[Topology], *, time_limit: float, seed: in
         nonlocal polish
         if rounds is not None:
             polish = bool(elites) and not polish  # as below when time is no limit
-            return rnd >= rounds
-        nxt = _spread.agreed(_next_round(time_limit - (now - began), full_dur, polish_dur, bool(elites), polish))
+            if rnd >= rounds:
+                return True
+            # with a time limit too: the next round only if 1.25 times its kind's last fits (process 0's clock)
+            if capped and _spread.agreed(int(ROUND_MARGIN * (polish_dur if polish else full_dur)
+                                             > limit - (now - began))):
+                status["stopped_by"] = "time_limit"
+                return True
+            return False
+        nxt = _spread.agreed(_next_round(limit - (now - began), full_dur, polish_dur, bool(elites), polish))
         # process 0's clock decides for all
         polish = nxt == 1
+        if nxt < 0:
+            status["stopped_by"] = "time_limit"
         return nxt < 0
 
     done = saved is not None and (saved["stage"] != "rounds" or last_round(time.perf_counter()))
+    if cut:  # a round still running at `ABANDON_AT` times the limit is abandoned (`spread.Blocked`)
+        for blocked in prog:
+            if blocked is not None:
+                blocked.deadline = began + ABANDON_AT * limit
     round_start = time.perf_counter()
     while not done:
-        rnd += 1
-        n_before = len(found)
-        clock: dict[str, float] = {}  # the round's phases (s), for the log
-        if polish:
-            stix, poses0, arcs0 = _polish_slots(elites, elite_vals, len(stix), jitter, closed or timed, rng)
-            rank_ok = np.ones(len(stix), bool)
-        elif timed:
-            t_screen = time.perf_counter()
-            stix, poses0, arcs0, rank_ok = _full_slots_timed(prog, key, arr, nsl, screen_target, elites, jitter, rng,
-                                                             bounds)
-            clock["screen"] = time.perf_counter() - t_screen
-            key = jax.random.fold_in(key, rnd)
-        else:
-            stix, poses0, arcs0, rank_ok = _full_slots(prog, key, arr, samples, screen_keep, refine, tdesc,
-                                                       trank, flag, arcs_all, closed, elites, jitter, rng, bounds,
-                                                       clock)
-            key = jax.random.fold_in(key, rnd)
-        t_ref = time.perf_counter()
-        if timed:
-            p, a, v = prog.refine(arr.parents[stix], arr.active[stix], arr.traced[stix], poses0, arcs0, rt, rw,
-                                  np.float32(lr), ru, bounds)
-        else:
-            p, a, v = prog.refine(arr.parents[stix], arr.active[stix], arr.traced[stix], poses0,
-                                  arcs0, ttarget, np.float32(lr), flag, _u(REFINE_T, closed), bounds)
-        p, a, v = np.asarray(p, float), np.asarray(a, float), np.asarray(v)
-        t_score = time.perf_counter()
-        clock["refine"] = t_score - t_ref
-        for ti in range(len(topos)):
-            idx = np.flatnonzero((stix == ti) & np.isfinite(v) & rank_ok)
-            pool = [(v[i], p[i].astype(np.float32), a[i].astype(np.float32)) for i in idx]
-            pool += elite_vals.get(ti, [])
-            pool.sort(key=lambda e: e[0])
-            if pool:
-                elite_vals[ti] = pool[:2]
-                elites[ti] = [(e[1], e[2]) for e in pool[:2]]
-        # the exact scoring after the search's first design stops at the time limit (one process)
-        stop = began + time_limit - SCORE_RESERVE_S if cut and found else None
-
-        def scored(ti: int, stop=stop) -> list[Candidate]:
-            """Topology `ti`'s refined candidates scored in the surrogate's order until `per_topology`
-            pass, trying at most SCORE_TRIES times as many: the best by the surrogate can all fail
-            the exact check (a four-bar pushed to a dead centre on letter R's corners), the next
-            ones not; none after `stop` (a `time.perf_counter()` time)."""
-            idx = np.flatnonzero(stix == ti)
-            idx = idx[np.isfinite(v[idx]) & rank_ok[idx]]
-            kept: list[Candidate] = []
-            for i in idx[np.argsort(v[idx])][:SCORE_TRIES * per_topology]:
-                if len(kept) >= per_topology or (stop is not None and time.perf_counter() >= stop):
-                    break
-                start = float(a[i, 0])
-                span = (float(target.inputs[-1] - target.inputs[0]) if target.inputs is not None
-                        else 2 * np.pi if closed else float(a[i, 1]))
-                m, asm = score(topos[ti], p[i], start, span, target, n_trace=n_trace, n_points=n_points)
-                sz = size_of(topos[ti], p[i], m, target, n_points, frame)
-                if np.isfinite(m.distance) and asm.ok and (not sized or sz <= bound) and (
-                        floor == 0 or keeps_transmission(topos[ti], p[i], start, span, target, floor)):
-                    kept.append(Candidate(topos[ti], p[i], start, span, m, asm, time.perf_counter() - began,
-                                          size=sz))
-            return kept
-
-        # the topologies side by side (NumPy and SciPy's k-d trees release the interpreter), the most
-        # promising first (the least surrogate value: what a stop at the time limit keeps); the
-        # candidates added in topology order (each topology's the same whatever the threads)
-        ok_v = np.where(np.isfinite(v) & rank_ok, v, np.inf)
-        first = sorted(range(len(topos)), key=lambda ti: float(np.min(ok_v[stix == ti], initial=np.inf)))
-        with ThreadPoolExecutor(SCORE_THREADS) as ex:
-            futures = {ti: ex.submit(scored, ti) for ti in first}
+        try:
+            rnd += 1
+            n_before = len(found)
+            clock: dict[str, float] = {}  # the round's phases (s), for the log
+            if polish:
+                stix, poses0, arcs0 = _polish_slots(elites, elite_vals, len(stix), jitter, closed or timed, rng)
+                rank_ok = np.ones(len(stix), bool)
+            elif timed:
+                t_screen = time.perf_counter()
+                stix, poses0, arcs0, rank_ok = _full_slots_timed(prog, key, arr, nsl, screen_target, elites, jitter,
+                                                                 rng, bounds)
+                clock["screen"] = time.perf_counter() - t_screen
+                key = jax.random.fold_in(key, rnd)
+            else:
+                stix, poses0, arcs0, rank_ok = _full_slots(prog, key, arr, samples, screen_keep, refine, tdesc,
+                                                           trank, flag, arcs_all, closed, elites, jitter, rng, bounds,
+                                                           clock)
+                key = jax.random.fold_in(key, rnd)
+            t_ref = time.perf_counter()
+            if timed:
+                p, a, v = prog.refine(arr.parents[stix], arr.active[stix], arr.traced[stix], poses0, arcs0, rt, rw,
+                                      np.float32(lr), ru, bounds)
+            else:
+                p, a, v = prog.refine(arr.parents[stix], arr.active[stix], arr.traced[stix], poses0,
+                                      arcs0, ttarget, np.float32(lr), flag, _u(REFINE_T, closed), bounds)
+            p, a, v = np.asarray(p, float), np.asarray(a, float), np.asarray(v)
+            t_score = time.perf_counter()
+            clock["refine"] = t_score - t_ref
             for ti in range(len(topos)):
-                found.extend(futures[ti].result())
-        if log is not None:
-            best = min((c.match.distance for c in found), default=float("inf"))
-            clock["score"] = time.perf_counter() - t_score
-            phases = ", ".join(f"{what} {sec:.1f} s" for what, sec in clock.items())
-            log(f"round {rnd}{' (polish)' if polish else ''}: {len(found)} candidates, best distance {best:.4f}, "
-                f"{time.perf_counter() - began:.1f} s ({phases})")
-        now = time.perf_counter()
-        dur = now - round_start
-        if polish:
-            polish_dur = dur
-        else:
-            full_dur, polish_dur = dur, now - t_ref  # the compiling is done before the first round
-        if finish > 0:  # this round's best, polished in float64 if time is left (`_polish_starts`)
-            mine = _to_polish(found[n_before:], origins, 1, min((c.match.distance for c in found), default=np.inf))
-            guess = polish_dur if t_polish is None else t_polish  # before the first: the round's refinement
-            if mine and _polish_starts(time_limit - (now - began), guess, rounds is not None):
-                polish_one(mine[0])
-        save("rounds")
-        now = round_start = time.perf_counter()
-        done = last_round(now)
+                idx = np.flatnonzero((stix == ti) & np.isfinite(v) & rank_ok)
+                pool = [(v[i], p[i].astype(np.float32), a[i].astype(np.float32)) for i in idx]
+                pool += elite_vals.get(ti, [])
+                pool.sort(key=lambda e: e[0])
+                if pool:
+                    elite_vals[ti] = pool[:2]
+                    elites[ti] = [(e[1], e[2]) for e in pool[:2]]
+            # the exact scoring after the search's first design stops at the time limit (one process)
+            stop = began + limit - SCORE_RESERVE_S if cut and found else None
+
+            def scored(ti: int, stop=stop) -> list[Candidate]:
+                """Topology `ti`'s refined candidates scored in the surrogate's order until `per_topology`
+                pass, trying at most SCORE_TRIES times as many: the best by the surrogate can all fail
+                the exact check (a four-bar pushed to a dead centre on letter R's corners), the next
+                ones not; none after `stop` (a `time.perf_counter()` time)."""
+                idx = np.flatnonzero(stix == ti)
+                idx = idx[np.isfinite(v[idx]) & rank_ok[idx]]
+                kept: list[Candidate] = []
+                for i in idx[np.argsort(v[idx])][:SCORE_TRIES * per_topology]:
+                    if len(kept) >= per_topology:
+                        break
+                    if stop is not None and time.perf_counter() >= stop:
+                        status["stopped_by"] = "time_limit"  # the scoring stopped by the limit
+                        break
+                    start = float(a[i, 0])
+                    span = (float(target.inputs[-1] - target.inputs[0]) if target.inputs is not None
+                            else 2 * np.pi if closed else float(a[i, 1]))
+                    m, asm = score(topos[ti], p[i], start, span, target, n_trace=n_trace, n_points=n_points)
+                    sz = size_of(topos[ti], p[i], m, target, n_points, frame)
+                    if np.isfinite(m.distance) and asm.ok and (not sized or sz <= bound) and (
+                            floor == 0 or keeps_transmission(topos[ti], p[i], start, span, target, floor)):
+                        kept.append(Candidate(topos[ti], p[i], start, span, m, asm, time.perf_counter() - began,
+                                              size=sz))
+                return kept
+
+            # the topologies side by side (NumPy and SciPy's k-d trees release the interpreter), the most
+            # promising first (the least surrogate value: what a stop at the time limit keeps); the
+            # candidates added in topology order (each topology's the same whatever the threads)
+            ok_v = np.where(np.isfinite(v) & rank_ok, v, np.inf)
+            first = sorted(range(len(topos)), key=lambda ti: float(np.min(ok_v[stix == ti], initial=np.inf)))
+            with ThreadPoolExecutor(SCORE_THREADS) as ex:
+                futures = {ti: ex.submit(scored, ti) for ti in first}
+                for ti in range(len(topos)):
+                    found.extend(futures[ti].result())
+            if log is not None:
+                best = min((c.match.distance for c in found), default=float("inf"))
+                clock["score"] = time.perf_counter() - t_score
+                phases = ", ".join(f"{what} {sec:.1f} s" for what, sec in clock.items())
+                log(f"round {rnd}{' (polish)' if polish else ''}: {len(found)} candidates, best distance {best:.4f}, "
+                    f"{time.perf_counter() - began:.1f} s ({phases})")
+            now = time.perf_counter()
+            dur = now - round_start
+            if polish:
+                polish_dur = dur
+            else:
+                full_dur, polish_dur = dur, now - t_ref  # the compiling is done before the first round
+            if finish > 0:  # this round's best, polished in float64 if time is left (`_polish_starts`)
+                mine = _to_polish(found[n_before:], origins, 1, min((c.match.distance for c in found), default=np.inf))
+                guess = polish_dur if t_polish is None else t_polish  # before the first: the round's refinement
+                if mine and _polish_starts(limit - (now - began), guess, not capped):
+                    polish_one(mine[0])
+            save("rounds")
+            now = round_start = time.perf_counter()
+            done = last_round(now)
+        except _spread.OutOfTime:
+            # abandoned at `ABANDON_AT` times the limit, in its screen, rank or refinement (before it
+            # changed the candidates or the elites): the rounds done are the answer
+            status["stopped_by"] = "time_limit"
+            if log is not None:
+                log(f"round {rnd} abandoned at {time.perf_counter() - began:.1f} s (the time limit: {limit:g} s)")
+            rnd -= 1
+            break
     if saved is not None and saved["stage"] != "rounds":  # resumed in the final polish (or after it)
         last, n_done = saved["last"], saved["n_done"]
     else:
@@ -995,18 +1051,19 @@ def search(target: Target, topos: list[Topology], *, time_limit: float, seed: in
         n_done = 0
         save("finish", last=last, n_done=0)
     for k in range(n_done, len(last)):
-        if not _polish_starts(time_limit - (time.perf_counter() - began), t_polish or 0.0, rounds is not None):
+        if not _polish_starts(limit - (time.perf_counter() - began), t_polish or 0.0, not capped):
             break
         polish_one(found[last[k]])
         save("finish", last=last, n_done=k + 1)
-    while finish > 0 and cut and _polish_starts(
-            time_limit - (time.perf_counter() - began), 0.0, False):  # time left: the next candidates too
+    while finish > 0 and cut and rounds is None and _polish_starts(
+            limit - (time.perf_counter() - began), 0.0, False):  # time left: the next candidates too
         more = _to_polish(found, origins, 1, min((c.match.distance for c in found if not c.polished), default=np.inf))
         if not more:
             break
         polish_one(more[0])
         save("finish", last=last, n_done=len(last))
     found.sort(key=lambda c: c.match.distance)
+    status["rounds"] = rnd
     return found
 
 
@@ -1039,8 +1096,8 @@ SCORE_RESERVE_S = 0.5
 
 
 def _polish_starts(left: float, guess: float, exact: bool) -> bool:
-    """Whether a float64 polish starts with `left` seconds of the time limit left: with `rounds`
-    (`exact`) always; in one process when at least `POLISH_MIN_S` is left (the polish stops at the
+    """Whether a float64 polish starts with `left` seconds of the time limit left: without a time
+    limit (`exact`) always; in one process when at least `POLISH_MIN_S` is left (the polish stops at the
     time limit less `SCORE_RESERVE_S`, `polish.polish`'s deadline, whatever it was expected to
     take); in several processes, which must polish alike, when one as long as `guess` (the last
     polish's time; before the first, the round's refinement) fits, as process 0's clock says."""

@@ -20,6 +20,7 @@ a decision made from the clock is process 0's (`agreed`).
 
 from __future__ import annotations
 
+import time
 from typing import Any, Callable, NamedTuple, Sequence
 
 import jax
@@ -62,6 +63,10 @@ def pad(x: np.ndarray, rows: int) -> np.ndarray:
     return np.concatenate([x, np.repeat(x[:1], rows - len(x), 0)])
 
 
+class OutOfTime(Exception):
+    """A batch abandoned between two blocks: the clock passed its `Blocked.deadline`."""
+
+
 class Blocked:
     """A batch of `n` rows computed block by block (`blocks(n, size)`: `size` is the block's rows)
     by `programs` (one compiled program per device of `where`, the same code, for one block).
@@ -69,7 +74,11 @@ class Blocked:
     one at `keyed` (a PRNG key, or None) is folded with each block's index; the others go whole to
     every block. The outputs (a tuple, candidate axis first) come back whole, in row order, on
     every process (NumPy arrays). `programs` may also be a function that returns them (waiting for
-    programs still compiling): called at their first use."""
+    programs still compiling): called at their first use. `deadline` (a `time.perf_counter()`
+    time, or None; one process only): the blocks are then computed a device's turn at a time, and
+    past it the batch is abandoned (`OutOfTime`) — the same bits for the blocks computed."""
+
+    deadline: float | None = None
 
     def __init__(self, programs: Sequence[Callable] | Callable[[], Sequence[Callable]], rows: tuple[int, ...],
                  keyed: int | None, where: Layout, n: int, size: int):
@@ -92,8 +101,13 @@ class Blocked:
         cut = {i: pad(args[i], k * size) for i in self.rows}
         whole: dict[tuple[int, int], jax.Array] = {}
         mine = self.where.mine(k)
-        pending = []
+        pending: list = []
         for j, blk in enumerate(mine):
+            if self.deadline is not None and j % len(devices) == 0:  # a turn of every device done
+                if pending:
+                    jax.block_until_ready(pending[-1])
+                if time.perf_counter() > self.deadline:
+                    raise OutOfTime(f"past the deadline after {j} of {len(mine)} blocks")
             d = j % len(devices)
             put = []
             for i, a in enumerate(args):

@@ -76,7 +76,11 @@ def residuals_and_jacobian(ev: Evaluator):
     return ev.compiled(("gradient.residuals_and_jacobian",), build)
 
 
-DEFAULT_TIME = 75.0  # s: the time limit of a search given neither a budget nor a time
+#: mechanism evaluations of a search given no budget (the sizes chosen from the problem): a count,
+#: so that the default search ends at the same design on any machine and under any load. Sized on
+#: the eight literature cases of benchmarks/fourbar-path from plain files (9 variables, 2 circuits,
+#: 360 samples), on 2 CPU cores: most stop by themselves (no start improves) before it
+AUTO_BUDGET = 400_000
 
 
 class GradientState(NamedTuple):
@@ -128,11 +132,11 @@ class Gradient(PresampledStarts):
 
     **Defaults from the problem** (`budget=None`: no budget given, neither as argument nor as
     `[optimize] budget`): `starts` = clip(5 V, 16, 64) for V variables, `presample` = 1024 V
-    designs (each on every circuit), `iterations` = 2000, no evaluation budget, and a time limit
-    of `DEFAULT_TIME` (75 s, compilation included: measured on the eight literature cases of
-    benchmarks/fourbar-path from plain files, every one reached its reference SSE within 47 s of
-    search on 2 CPU cores, docs/design-search.md). With `time` (seconds, `[optimize] time`), the
-    presample ends after 30 % of it and the search when it is spent (the runner stops there too).
+    designs (each on every circuit), `iterations` = 2000 and a budget of `AUTO_BUDGET` (400 000)
+    mechanism evaluations: counts only, so that the default search ends at the same design on
+    any machine. No time limit unless one is given: with `time` (seconds, `[optimize] time`), a
+    cap, the presample ends after 30 % of it and the runner stops the search before a chunk that
+    would not fit (`runner.run`; the result then depends on the machine's speed, and says so).
     Keys and arguments that are given override each of these.
     """
 
@@ -145,7 +149,7 @@ class Gradient(PresampledStarts):
         pr = ev.problem
         V = pr.n_variables
         self.auto = budget is None
-        self.ev, self.budget, self.seed = ev, (2**62 if budget is None else int(budget)), int(seed)
+        self.ev, self.budget, self.seed = ev, (AUTO_BUDGET if budget is None else int(budget)), int(seed)
         s = int(starts or pr.option("starts", int(np.clip(5 * V, 16, 64)) if self.auto else 16))
         self.S = -(-s // ev.n_devices) * ev.n_devices
         self.presample = min(int(presample or pr.option("presample", 1024 * V if self.auto else 8 * self.S)),
@@ -155,9 +159,8 @@ class Gradient(PresampledStarts):
         self.linesearch_steps = int(linesearch_steps)
         self.chunk_iterations = int(chunk_iterations)
         self.memory = int(memory)
-        # without a budget or a time, a time limit: the search stops by itself when no start
-        # improves, and at the latest after `DEFAULT_TIME` seconds
-        self.time = time if time is not None else pr.option("time", DEFAULT_TIME if self.auto else None)
+        # a time limit only when one is given (a cap: the presample ends after 30 % of it)
+        self.time = time if time is not None else pr.option("time", None)
         self.patience = patience if patience is not None else 40
         self.lane_patience, self.lane_drop = 10, 1e-2
         self.polish_iterations, self.polish_starts = 40, 8
@@ -167,6 +170,16 @@ class Gradient(PresampledStarts):
         from ..align import placement_of
 
         self.placement = placement_of(pr, ev) if pr.objective == "points" else None
+
+    def stop_reason(self, st: GradientState) -> str:
+        """Why the ended search `st` ended: "iterations" (`iterations` done), "budget" (the
+        evaluations left could not pay another trial) or "converged" (no start improves, every
+        start stopped, or no feasible design to start from)."""
+        if int(st.iteration) >= self.iterations:
+            return "iterations"
+        if int(st.progress.evaluations) + 3 * self.S > self.budget:
+            return "budget"
+        return "converged"
 
     def init(self) -> GradientState:
         S, V = self.S, self.ev.problem.n_variables
@@ -306,7 +319,6 @@ class Gradient(PresampledStarts):
             waiting = bool((st.queue >= 0).any())
             if (int(st.iteration) >= self.iterations or not st.active.any()
                     or int(st.progress.evaluations) + 2 * self.S > self.budget
-                    or (self.time is not None and float(st.progress.wall_s) >= float(self.time))
                     or (not waiting and int(st.stall) >= self.patience)):
                 st = st._replace(progress=st.progress._replace(done=np.bool_(True)))
                 break

@@ -54,13 +54,17 @@ def run(problem_or_evaluator: Problem | Evaluator, method: str, *, budget: int |
       later searches on it).
     - `method`: "uniform", "montecarlo" or "gradient" (`jaxlink.optimize.searches.searcher`).
     - `budget`: mechanism evaluations allowed; None (default): the gradient search chooses its
-      sizes from the problem and stops when no start improves, the others take 10000
-      (`searches.searcher`). `seed`: the random seed (same seed, same result).
-    - `time`: seconds of wall time (compilation included) after which the search stops (its
-      result is then `complete`, with `"stopped": "time"` in `extra`); the gradient search ends
-      its presample after 30 % of it. A search stopped by time depends on the machine's speed.
-      None: `[optimize] time`; without it and without a budget the gradient search takes 75 s
-      at most (`extra["time_limit_s"]`).
+      sizes from the problem, stops when no start improves and takes at most `AUTO_BUDGET`
+      (400 000), the others take 10000 (`searches.searcher`). Budgets are counts: `seed`, the
+      same seed, the same result, on any machine and under any load.
+    - `time`: a cap, in seconds of this call's wall time (compilation and the final report
+      included; None: `[optimize] time`, else none). A chunk starts only if one as long as the
+      last one fits in the time left (the final report's programs compile beside the search), so
+      the call ends within about a chunk's time of the cap; the gradient search also ends its
+      presample after 30 % of it. With a cap, `extra` holds `"time_limit_s"`. A search stopped
+      by it depends on the machine's speed.
+    - `extra["stopped_by"]` says what ended the search: "time_limit", "budget", "iterations" or
+      "converged" (the gradient search: no start improves), "interrupted" (`stop_after_chunks`).
     - `out`: the JSON document's path; the state is checkpointed beside it (`checkpoint_s`)
       (`OUT.state.npz`, `OUT.log.jsonl`, `OUT` rewritten with the best so far) and `OUT` ends
       with `SearchResult.to_json()`. `resume`: continue the interrupted search of `out`; it ends
@@ -88,6 +92,8 @@ def run(problem_or_evaluator: Problem | Evaluator, method: str, *, budget: int |
         budget = int(search.budget)  # type: ignore[attr-defined]  # the method's default
     extra = {"uniform": knobs.get("uniform", "grid")} if method == "uniform" else {}
     fp = _checkpoint.fingerprint(ev.problem, method, seed, budget, repr(sorted(knobs.items())) + f"|{time}")
+    if budget is None:
+        budget = int(search.budget)  # type: ignore[attr-defined]  # the gradient search's AUTO_BUDGET
     files = _checkpoint.paths(out) if out else None
     writer = jax.process_index() == 0  # several processes (distributed.py): process 0 writes
     st = search.init()
@@ -107,6 +113,16 @@ def run(problem_or_evaluator: Problem | Evaluator, method: str, *, budget: int |
     trace: list[dict] = []
     if saved is not None and files and files[2].exists():
         trace = traced(files[2])
+
+    # a time limit is a cap on this call's whole time, the final report included: the report's
+    # programs compile in a thread beside the search, and a chunk starts only if one as long as the
+    # last one (without its compilation) fits in the time left
+    t_call = _time.perf_counter()
+    warm = _report_ahead(ev) if time is not None else None
+    stepped = 0.0  # seconds of this call in `search.step`
+    last = 0.0  # the last chunk's seconds without compilation (the next one's estimate)
+    if time is not None:
+        extra["time_limit_s"] = float(time)
 
     def result(complete: bool) -> SearchResult:
         return summarized(ev, method, st.progress, seed=seed, budget=budget, complete=complete, extra=extra,
@@ -139,16 +155,20 @@ def run(problem_or_evaluator: Problem | Evaluator, method: str, *, budget: int |
         while not search.done(st):
             if stop_after_chunks is not None and chunks >= stop_after_chunks:
                 break
-            if time is not None and float(st.progress.wall_s) >= float(time):
-                timed_out = True
-                extra["stopped"] = "time"
-                break
+            if time is not None:
+                spent = float(st.progress.wall_s) + (_time.perf_counter() - t_call - stepped)
+                if spent + last > float(time):
+                    timed_out = True
+                    break
             t0 = _time.perf_counter()
             before = int(st.progress.evaluations)
             best_before = float(st.progress.best_value)
             with compile_clock() as clock:
                 st = search.step(st)
-            p = st.progress._replace(wall_s=np.float64(st.progress.wall_s + _time.perf_counter() - t0),
+            dt = _time.perf_counter() - t0
+            stepped += dt
+            last = max(0.0, dt - clock[0])
+            p = st.progress._replace(wall_s=np.float64(st.progress.wall_s + dt),
                                      compile_s=np.float64(st.progress.compile_s + clock[0]))
             st = st._replace(progress=p)
             if p.found and float(p.best_value) < best_before:
@@ -173,11 +193,15 @@ def run(problem_or_evaluator: Problem | Evaluator, method: str, *, budget: int |
     finally:
         if bar is not None:
             bar.close()
-    limit = time if time is not None else getattr(search, "time", None)
-    if time is None and limit is not None:
-        extra["time_limit_s"] = float(limit)  # the method's default limit
-    if limit is not None and float(st.progress.wall_s) >= float(limit):
-        extra["stopped"] = "time"
+    if timed_out:
+        extra["stopped_by"] = "time_limit"
+    elif not search.done(st):
+        extra["stopped_by"] = "interrupted"  # stop_after_chunks
+    else:
+        reason = getattr(search, "stop_reason", None)
+        extra["stopped_by"] = reason(st) if reason is not None else "budget"
+    if warm is not None:
+        warm.result()
     res = result(search.done(st) or timed_out)
     if files and writer:
         if res.parameters is not None and ev.mech.file and os.path.isfile(ev.mech.file):
@@ -186,6 +210,29 @@ def run(problem_or_evaluator: Problem | Evaluator, method: str, *, budget: int |
             res = dataclasses.replace(res, best_file=str(path))
         _checkpoint.write_json_atomic(files[0], res.to_json())
     return res
+
+
+def _report_ahead(ev: Evaluator):
+    """The final report's programs (`Evaluator.report` of the file's design: its re-solve and its
+    certificate) compiled in a thread while the search runs; the future's `result()` waits for them
+    (a time-limited search's report then runs warm within its limit)."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    pr = ev.problem
+    u = np.clip(pr.to_unit(pr.file_design()), 0.0, 1.0)
+    executor = ThreadPoolExecutor(max_workers=1, thread_name_prefix="jaxlink-report")
+    try:
+        return executor.submit(_quietly, ev.report, u, 0)
+    finally:
+        executor.shutdown(wait=False)
+
+
+def _quietly(fn, *args):
+    """`fn(*args)`, or None where it raises (a warm-up: the real call raises what it raises)."""
+    try:
+        return fn(*args)
+    except Exception:  # noqa: BLE001
+        return None
 
 
 def best_file_path(out) -> pathlib.Path:
