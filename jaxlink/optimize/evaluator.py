@@ -173,6 +173,18 @@ class Evaluator:
         est = _feasibility.screen(self.mech, self.dyads, self._branches(p, q0), q0, phis, p)
         return jnp.all(est >= -_feasibility.MARGIN_SLACK)
 
+    def margin_single(self, u, c):
+        """The screen's smallest conservative estimate of the reach margin between the search's
+        samples (`feasibility.screen`) of one design on circuit `c`, differentiable in u: the
+        design is screened feasible iff it is ≥ −`MARGIN_SLACK` (a mechanism of dyads on a
+        revolution only: `between`). The polish follows the feasibility boundary on it
+        (`searches/boundary.py`)."""
+        p = self.params(u)
+        q0 = jax.lax.stop_gradient(self.start(p, c)[0])
+        phis = jnp.asarray(self.problem.phis, u.dtype)
+        sigma = self._branches(jax.lax.stop_gradient(p), q0)
+        return _feasibility.least(_feasibility.screen(self.mech, self.dyads, sigma, q0, phis, p))
+
     def certificate_single(self, u, c):
         """The feasibility certificate (`feasibility.Certificate`) of one design on circuit `c` over
         the search's samples (a mechanism of dyads only)."""

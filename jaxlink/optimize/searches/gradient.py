@@ -8,8 +8,9 @@ u = (1 − cos πv)/2) runs from `starts` of them in lock step on `Evaluator.smo
 with exact gradients by implicit differentiation through the path solve; a start that stops or
 stalls is replaced by the next pooled design. Every trial also gives the exact objective, which
 decides the best. An objective with residuals (`points`) ends with Levenberg–Marquardt on the
-best designs (`Gradient._polished`). Compiled functions have fixed shapes (the chunk, half a
-chunk, `starts`, the polished starts): nothing recompiles per chunk or per iteration.
+best designs (`Gradient._polished`), which follows the feasibility boundary (`boundary.py`).
+Compiled functions have fixed shapes (the chunk, half a chunk, `starts`, the polished starts):
+nothing recompiles per chunk or per iteration.
 """
 
 from __future__ import annotations
@@ -22,6 +23,7 @@ import numpy as np
 
 from ..evaluator import Evaluator
 from ..sharding import pad_rows, put
+from . import boundary as _boundary
 from . import lbfgs
 from .base import (
     Batch,
@@ -128,7 +130,8 @@ class Gradient(PresampledStarts):
     **Arguments** (keyword, else `[optimize]`): `starts` (16), `presample` (8 × starts, at most
     a quarter of the budget), `iterations` (200), `memory` (10), `linesearch_steps` (10),
     `chunk_iterations` (5, iterations per checkpoint), `pool` (2 × starts: designs kept from
-    the presample, started in turn).
+    the presample, started in turn), `boundary` (True: the least-squares polish follows the
+    feasibility boundary, `boundary.py`; False: the polish as before it, for comparison).
 
     **Defaults from the problem** (`budget=None`: no budget given, neither as argument nor as
     `[optimize] budget`): `starts` = clip(5 V, 16, 64) for V variables, `presample` = 1024 V
@@ -145,7 +148,7 @@ class Gradient(PresampledStarts):
     def __init__(self, ev: Evaluator, *, budget: int | None, seed: int, starts: int | None = None,
                  presample: int | None = None, iterations: int | None = None, memory: int = 10,
                  linesearch_steps: int = 10, chunk_iterations: int = 5, time: float | None = None,
-                 patience: int | None = None, pool: int | None = None):
+                 patience: int | None = None, pool: int | None = None, boundary: bool = True):
         pr = ev.problem
         V = pr.n_variables
         self.auto = budget is None
@@ -164,6 +167,7 @@ class Gradient(PresampledStarts):
         self.patience = patience if patience is not None else 40
         self.lane_patience, self.lane_drop = 10, 1e-2
         self.polish_iterations, self.polish_starts = 40, 8
+        self.boundary = bool(boundary)  # the polish follows the feasibility boundary (boundary.py)
         # with a least-squares polish to follow, the search stops on a looser test (the polish
         # converges the last digits faster than L-BFGS crawls to them)
         self.drop = 1e-4 if ev.objective.residuals is not None else 1e-6
@@ -341,7 +345,10 @@ class Gradient(PresampledStarts):
         starts, in one batch: step dv = −(JᵀJ + λ diag JᵀJ)⁻¹ Jᵀr, accepted where Σr² drops (λ ÷ 3), else
         λ × 4; at most `polish_iterations`, each 1 + V evaluations per start (the Jacobian by
         forward mode). Where the least-squares structure is known this converges in a few steps
-        where L-BFGS on Σr² crawls."""
+        where L-BFGS on Σr² crawls. With `boundary` (a mechanism of dyads) each step keeps the
+        screen's margin ≥ `boundary.TARGET` to first order, and a trial near the boundary is
+        projected back onto it first (`boundary.py`): the polish slides along the feasibility
+        boundary instead of stopping where it touches it."""
         p, V = st.progress, st.v.shape[1]
         nd = self.ev.n_devices
         S = min(self.S, -(-self.polish_starts // nd) * nd)
@@ -352,15 +359,25 @@ class Gradient(PresampledStarts):
         order = np.argsort(np.where(np.isfinite(st.value), st.value, np.inf), kind="stable")[:S]
         v, c = st.v[order].copy(), st.c[order].copy()
         v[-1], c[-1] = lbfgs.v_of_u(p.best_u), p.best_circuit
-        fn = residuals_and_jacobian(self.ev)
+        # with the boundary followed (a mechanism of dyads on a revolution): the screen's margin
+        # m and its gradient a come with the residuals, the step keeps m ≥ TARGET to first order
+        # and a trial near the boundary is projected back onto it (`boundary.py`)
+        follow = self.boundary and self.ev.between
+        fn = _boundary.polish_call(self.ev) if follow else residuals_and_jacobian(self.ev)
+        # a projection onto the boundary: a margin value and gradient per design and Newton step
+        projection = 2 * S * _boundary.PROJECTION_STEPS
 
-        def call(p, v):
-            r, J, ok = (np.array(a) for a in fn(*put((jnp.asarray(v), jnp.asarray(c)), self.ev.sharding)))
+        def call(p, v, near=None):
+            args = (jnp.asarray(v), jnp.asarray(c)) + (() if near is None else (jnp.asarray(near),))
+            out = [np.array(a) for a in fn(*put(args, self.ev.sharding))]
+            if follow:
+                v, out = out[0], out[1:]
+            r, J, ok, *ma = out
             F = np.where(ok, np.sum(r * r, axis=1), np.inf)
-            p = counted(p, cost, ok)
-            return improved(p, np.asarray(lbfgs.u_of_v(jnp.asarray(v))), F, c), r, J, F
+            p = counted(p, cost + (projection if near is not None and near.any() else 0), ok)
+            return improved(p, np.asarray(lbfgs.u_of_v(jnp.asarray(v))), F, c), v, r, J, F, ma
 
-        p, r, J, F = call(p, v)
+        p, v, r, J, F, ma = call(p, v, np.zeros(S, bool) if follow else None)
         lam = np.full(S, 1e-3)
         live = np.isfinite(F)
         for _ in range(self.polish_iterations):
@@ -371,13 +388,23 @@ class Gradient(PresampledStarts):
             dg = np.maximum(np.diagonal(A, axis1=1, axis2=2), 1e-12 * np.max(np.abs(A), axis=(1, 2))[:, None] + 1e-300)
             M = A + lam[:, None, None] * (dg[:, :, None] * np.eye(V)[None])
             try:
-                dv = -np.linalg.solve(M, g[..., None])[..., 0]
+                if follow:
+                    dv, binds = _boundary.constrained(M, g, *ma)
+                else:
+                    dv = -np.linalg.solve(M, g[..., None])[..., 0]
             except np.linalg.LinAlgError:
                 break
             dv = np.where(live[:, None] & np.all(np.isfinite(dv), axis=1, keepdims=True), dv, 0.0)
-            p, r2, J2, F2 = call(p, v + dv)
+            near = None
+            if follow:  # the designs near the boundary are projected back onto it (if the budget allows)
+                near = live & (binds | (ma[0] < _boundary.NEAR))
+                if int(p.evaluations) + cost + projection > self.budget:
+                    near[:] = False
+            p, trial, r2, J2, F2, ma2 = call(p, v + dv, near)
             acc = live & (F2 < F)
-            v[acc], r[acc], J[acc] = (v + dv)[acc], r2[acc], J2[acc]
+            v[acc], r[acc], J[acc] = trial[acc], r2[acc], J2[acc]
+            for x, x2 in zip(ma, ma2):
+                x[acc] = x2[acc]
             small = acc & (F - F2 <= 1e-9 * F)
             F = np.where(acc, F2, F)
             lam = np.where(acc, lam / 3.0, lam * 4.0)
