@@ -251,3 +251,26 @@ def test_the_walk_covers_every_table():
     walked = {w[0].split(".")[0] for w in WALK}
     assert set(reader.KNOWN_TABLES) - names <= walked
     assert set(cam_scene._SCHEMA) | {"cam.geometry"} <= {w[0] for w in SCENE_WALK}
+
+
+@pytest.mark.parametrize("old, new, name, meant", [
+    ("variables = { a = [15, 25], b = [50, 70] }", "variables = { aa = [15, 25], b = [50, 70] }", "aa", "a"),
+    ("a = 0.05", "aa = 0.05", "aa", "a"),
+    ("a = 0.05", 'a = 0.05\n\n[study.ranges]\nbb = [50, 70]', "bb", "b"),
+])
+def test_a_misspelt_name_in_a_table_of_names(old, new, name, meant, tmp_path):
+    """The tables of names (a search's variables, a study's tolerances and ranges) name the
+    parameter a misspelt name was probably meant to be, on its line."""
+    from jaxlink.files.reader import load
+    from jaxlink.optimize.problem import check_table
+    from jaxlink.study.inputs import read_study
+
+    text, line = _misspelt(LOOP, old, new, name)
+    path = tmp_path / "walk.toml"
+    path.write_text(text, encoding="utf-8")
+    with pytest.raises(MechanismError) as info:
+        mech = load(str(path))
+        check_table(mech)
+        read_study(mech)
+    message = str(info.value)
+    assert f"{path}:{line}" in message and f"'{name}' is not a parameter (did you mean '{meant}'?)" in message, message

@@ -29,7 +29,7 @@ from typing import Any, Mapping
 import numpy as np
 
 from ..errors import MechanismError
-from ..files.keys import check_keys
+from ..files.keys import check_keys, suggest
 from ..model.mechanism import Mechanism
 
 #: domains of the integer keys: (smallest, largest)
@@ -251,7 +251,8 @@ def _problem_from(mech: Mechanism, overrides: Mapping[str, Any] | None, *, searc
     names, index, lo, hi, fac = [], [], [], [], []
     for name, bounds in variables.items():
         if name not in mech.parameter_names:
-            raise err(f"'{name}' is not a parameter; parameters: {', '.join(mech.parameter_names)}",
+            raise err(f"'{name}' is not a parameter{suggest(name, mech.parameter_names)}; "
+                      f"parameters: {', '.join(mech.parameter_names)}",
                       f"variables.{name}")
         if (not isinstance(bounds, (list, tuple)) or len(bounds) != 2
                 or not all(_finite(b) is not None for b in bounds)):

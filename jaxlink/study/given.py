@@ -8,6 +8,8 @@ from typing import Any, Callable
 
 import numpy as np
 
+from ..files.keys import suggest
+
 
 def _value(mech, name: str) -> float:
     """The file's value of parameter `name` (file units)."""
@@ -22,7 +24,8 @@ def _table(mech, t, key: str, err: Callable, what: str) -> dict:
         if name not in mech.parameter_names:
             derived = [d[0] for d in mech.derived]
             why = " (derived: vary the parameters it is computed from)" if name in derived else ""
-            raise err(mech, f"'{name}' is not a parameter{why}; parameters: {', '.join(mech.parameter_names)}",
+            raise err(mech, f"'{name}' is not a parameter{why}{suggest(name, mech.parameter_names)}; "
+                            f"parameters: {', '.join(mech.parameter_names)}",
                       f"{key}.{name}")
     return raw
 

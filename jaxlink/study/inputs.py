@@ -62,7 +62,7 @@ import math
 from typing import Any, Mapping, NamedTuple
 
 from ..errors import MechanismError
-from ..files.keys import check_keys
+from ..files.keys import check_keys, suggest
 from .distributions import DISTRIBUTIONS as _DISTRIBUTIONS
 from .distributions import sigma_per_half_width
 
@@ -375,7 +375,8 @@ def _ranges(mech, raw, levels_raw) -> tuple:
         if name not in mech.parameter_names:
             derived = [d[0] for d in mech.derived]
             why = " (derived: vary the parameters it is computed from)" if name in derived else ""
-            raise _err(mech, f"'{name}' is not a parameter{why}; parameters: {', '.join(mech.parameter_names)}", key)
+            raise _err(mech, f"'{name}' is not a parameter{why}{suggest(name, mech.parameter_names)}; "
+                           f"parameters: {', '.join(mech.parameter_names)}", key)
         if (not isinstance(entry, (list, tuple)) or len(entry) != 2
                 or any(isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) for v in entry)):
             raise _err(mech, f"a range is [low, high] (two finite numbers, file units), got {entry!r}", key)
@@ -435,7 +436,8 @@ def _tolerance(mech, name: str, entry, default_dist: str, default_k: float) -> t
     if name not in mech.parameter_names:
         derived = [d[0] for d in mech.derived]
         why = " (derived: tolerance the parameters it is computed from)" if name in derived else ""
-        raise _err(mech, f"'{name}' is not a parameter{why}; parameters: {', '.join(mech.parameter_names)}", key)
+        raise _err(mech, f"'{name}' is not a parameter{why}{suggest(name, mech.parameter_names)}; "
+                         f"parameters: {', '.join(mech.parameter_names)}", key)
     ratio = sigma_per_half_width(dist, k)  # σ / t
     if given[0] == "tol":
         t, sigma = value, value * ratio
