@@ -27,6 +27,7 @@ class RESULTS:
     | 5 | `not_assembled` | reactions | the kinematics did not converge at this position |
     | 6 | `step_size_too_small` | cam | the ODE step size underflowed |
     | 7 | `stopped` | cam | a monitor stopped the run early (e.g. jamming): not a failure |
+    | 8 | `imprecise` | kinematics table | float32 too near a singular position: outside the float32 tolerance |
 
     `RESULTS.name(code)` and `RESULTS.message(code)` read them; `names` and `messages` are the
     same as dictionaries.
@@ -45,9 +46,10 @@ class RESULTS:
     not_assembled = 5
     step_size_too_small = 6
     stopped = 7
+    imprecise = 8
 
     names = {0: "converged", 1: "max_steps", 2: "singular", 3: "cannot_assemble", 4: "nonfinite",
-             5: "not_assembled", 6: "step_size_too_small", 7: "stopped"}
+             5: "not_assembled", 6: "step_size_too_small", 7: "stopped", 8: "imprecise"}
     messages = {
         0: "converged",
         1: "max steps: the iteration did not reach its tolerance (Newton: or only on another assembly "
@@ -61,6 +63,9 @@ class RESULTS:
         6: "step size underflow or non-finite state: the problem is ill-posed at these parameters "
            "(check the stiffness and mass)",
         7: "stopped early by the monitor (e.g. jamming detected)",
+        8: "imprecise: in float32 too near a change point, toggle or dead centre (a dyad's links nearly in "
+           "line) for the float32 tolerance: the position is given, its rates are nan; use --dtype float64 "
+           "(float32's rounding is amplified by the inverse sine between the links, cubed for accelerations)",
     }
 
     @classmethod

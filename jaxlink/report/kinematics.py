@@ -32,11 +32,13 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from ..analysis import precision as _precision
 from ..analysis.transfer import transfer
 from ..cache import traced
 from ..model.mechanism import Mechanism
 from ..results import RESULTS, Solution
 from ..solvers import branch_points as _branch_points
+from ..solvers import dyads as _dyads
 from ..solvers.assemble import solve
 from ..solvers.options import NewtonOptions, default_rtol
 from . import grid as _grid
@@ -117,8 +119,8 @@ def kinematics_table(mech: Mechanism, phis, *, omega: float = 1.0, outputs=OUTPU
     order = 2 if {"acceleration", "rates"} & set(outputs) else (1 if "velocity" in outputs else 0)
     p = np.asarray(mech.parameters if p is None else p, dtype=dtype)
     phis_a = np.asarray(phis, dtype=dtype)
-    q, points, raw, resid, mu_, nu_, dpts, ddpts, scale, cand, sides = _traced_arrays(mech, phis_a, p, order,
-                                                                                       change_points)
+    q, points, raw, resid, mu_, nu_, dpts, ddpts, scale, cand, sides, margin = _traced_arrays(
+        mech, phis_a, p, order, change_points)
     result = _checked(np.asarray(raw).copy(), np.asarray(resid, dtype=float), float(scale), p)
     resid = np.asarray(resid, dtype=float)
     q = np.asarray(q)  # in the dtype of the solve (the drawing measures its rounding)
@@ -137,8 +139,12 @@ def kinematics_table(mech: Mechanism, phis, *, omega: float = 1.0, outputs=OUTPU
             if x is not None:
                 finite &= np.all(np.isfinite(x.reshape(len(result), -1)), axis=1)
         result = np.where((result == RESULTS.converged) & ~finite, RESULTS.nonfinite, result).astype(result.dtype)
+    # float32 too near a singular position for its tolerance (`jaxlink.analysis.precision`)
+    solved = result
+    near = _precision.imprecise(margin, order, p.dtype) & (result == RESULTS.converged)
+    result = np.where(near, RESULTS.imprecise, result).astype(result.dtype)
     conv = result == RESULTS.converged
-    assembled = conv | (result == RESULTS.singular)
+    assembled = _assembled(result)
     pts = np.where(assembled[:, None, None], np.asarray(points, dtype=float), np.nan)
     if order:
         assert mu is not None and v is not None
@@ -178,7 +184,7 @@ def kinematics_table(mech: Mechanism, phis, *, omega: float = 1.0, outputs=OUTPU
     # the candidates of the stored program hold for the solver's codes; where the re-check changed
     # which rows are assembled, `branch_points` computes them again
     same = np.array_equal(_assembled(np.asarray(raw)), _assembled(result))
-    located = located_branch_points(mech, phis_a, q, result, p, np.asarray(input_values, dtype=float),
+    located = located_branch_points(mech, phis_a, q, solved, p, np.asarray(input_values, dtype=float),
                                     (cand, sides) if same else None)
     cols, data = _branch_point_columns(mech, located, cols, data)
     return KinematicsTable(
@@ -208,7 +214,9 @@ class BranchPoint:
 
 
 def _assembled(result):
-    return (result == RESULTS.converged) | (result == RESULTS.singular)
+    """Whether a row's loops closed: `converged`, `singular`, or `imprecise` (float32 near a
+    singular position: its position given, its rates not)."""
+    return (result == RESULTS.converged) | (result == RESULTS.singular) | (result == RESULTS.imprecise)
 
 
 def located_branch_points(mech: Mechanism, phis, q, result, p, input_values, candidates=None) -> list:
@@ -340,7 +348,16 @@ def _arrays(mech: Mechanism, phis, p, order: int, change_points: str, wrap: bool
             nu, ddpts = tr.nu, tr.ddpoints
     phis_c, q_c, result_c = _closing(phis, sol.q, sol.result, wrap)
     cand, sides = _branch_points.candidates(mech, phis_c, q_c, p, result_c)
-    return sol.q, sol.points, sol.result, resid, mu, nu, dpts, ddpts, mech.length_scale(p), cand, sides
+    # the least reach margin of each row (S = sin² between a dyad's links; NaN without dyads)
+    dyads = _dyads.classify(mech)
+    n = phis.shape[0]
+    if dyads:
+        margin = jax.vmap(lambda sg, qq, ph: jnp.min(_dyads.reach_margins(mech, dyads, sg, qq, ph, p)))(
+            sides[:n], sol.q, phis)
+    else:
+        margin = jnp.full((n,), jnp.nan, p.dtype)
+    return (sol.q, sol.points, sol.result, resid, mu, nu, dpts, ddpts, mech.length_scale(p), cand, sides,
+            margin)
 
 
 def _traced_arrays(mech: Mechanism, phis, p, order: int, change_points: str = "keep"):
@@ -468,6 +485,10 @@ def print_summary(table: KinematicsTable, out: TextIO, every_row_hint: bool = Tr
     missing = int((~table.assembled).sum())
     if missing:
         out.write(f"{missing} positions not assembled (nan in the table, left out below)\n")
+    vague = int((table.result == RESULTS.imprecise).sum())
+    if vague:
+        out.write(f"{vague} positions imprecise (float32 too near a change point, toggle or dead centre for its "
+                  "tolerance: positions given, rates nan; --dtype float64)\n")
     width = max(len(c) for c in columns)
     out.write(f"{'column':<{width}}  {'min':>14} {'max':>14}\n")
     for j, c in enumerate(columns):
