@@ -46,6 +46,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..errors import MechanismError
+from . import resources as _resources
 from .design import to_values, unit_blocks
 from .inputs import Range, StudyInputs
 from .sobol import bootstrap_counts
@@ -249,6 +250,7 @@ def dgsm(mech, inputs: StudyInputs | None = None, *, samples: int | None = None,
     lu = unit_names(mech)[0]
     labels = tuple(r.labels) + (tuple((f"deviation({p})", lu, None) for p in inputs.points) if deviation else ())
     constants = poincare_constants(inputs)
+    _resources.check(study, "dgsm", n, checkpoint=checkpoint)
     counts = bootstrap_counts(n, inputs.bootstrap, [inputs.seed, 1])
     per = max(1, study.chunk // 4)  # the Jacobian holds T tangents per design
     nominal = None

@@ -47,6 +47,7 @@ from typing import NamedTuple
 import numpy as np
 
 from ..errors import MechanismError
+from . import resources as _resources
 from .design import to_values
 from .inputs import StudyInputs
 from .sobol import bootstrap_counts
@@ -243,6 +244,7 @@ def morris(mech, inputs: StudyInputs | None = None, *, samples: int | None = Non
         raise MechanismError(f"a Morris study needs at least 2 trajectories, got {r}", file=mech.file,
                              key="study.samples")
     p = inputs.morris_levels
+    _resources.check(study, "morris", r, checkpoint=checkpoint)
     u, order, sign = trajectories(groups, r, p, inputs.seed)
     counts = bootstrap_counts(r, inputs.bootstrap, [inputs.seed, 1])
     per = max(1, study.chunk // (D + 1))

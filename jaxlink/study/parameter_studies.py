@@ -27,6 +27,7 @@ import time
 
 import numpy as np
 
+from . import resources as _resources
 from .inputs import StudyInputs
 from .responses import outside_warning
 from .sampling import SampleReport, _Evaluator, _study, _units
@@ -49,6 +50,7 @@ def parameter_study(mech, inputs: StudyInputs | None = None, *, chunk=None, opti
         raise ValueError("parameter_study needs the inputs of a vector, list or centered study")
     ev = _Evaluator(study)
     values = np.asarray(inputs.designs, float)
+    _resources.check(study, inputs.method, len(values), checkpoint=checkpoint, option="designs")
     scalar = np.asarray([k is None for (_, _, k) in ev.labels], bool)
     done = 0
     saved = None if checkpoint is None else checkpoint.load()
