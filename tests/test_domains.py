@@ -96,6 +96,7 @@ def test_a_tolerance_wider_than_the_link_counts_the_negative_draws(slider):
     assert 250 < negative < 370  # 0.3 × 1024 ± 4σ
     assert mc.outside == negative and mc.infeasible == negative and mc.feasible == 1024 - negative
     assert any(f"{negative} of 1024 Monte Carlo samples have a value outside its domain" in w for w in rep.warnings)
+    assert not any("do not assemble" in w for w in rep.warnings)  # they are not called unassemblable
 
 
 def test_a_sample_study_reports_the_designs_outside_the_domain(slider):
@@ -106,6 +107,7 @@ def test_a_sample_study_reports_the_designs_outside_the_domain(slider):
     assert 4 < negative.sum() < 28
     assert not rep.feasible[negative].any() and rep.feasible[~negative].all()
     assert any(f"{int(negative.sum())} of 64 designs have a value outside its domain" in w for w in rep.warnings)
+    assert not any("do not assemble" in w for w in rep.warnings)
 
 
 def test_the_design_search_counts_a_negative_link_infeasible():

@@ -82,12 +82,12 @@ def parameter_study(mech, inputs: StudyInputs | None = None, *, chunk=None, opti
     feasible = np.concatenate(oks)
     responses = np.concatenate(vs)
     warnings = []
-    bad = int(np.count_nonzero(~feasible))
+    outside = study.responses.outside(values)
+    bad = int(np.count_nonzero(~feasible)) - outside  # the others are outside the domain: their own warning
     if bad:
         warnings.append(f"{bad} of {len(feasible)} designs do not assemble over the whole cycle on the nominal's "
                         f"branch ({study.responses.certificate}): kept and flagged (feasible = 0), their responses "
                         "left empty")
-    outside = study.responses.outside(values)
     if outside:
         warnings.append(outside_warning(outside, len(values)))
     labels = tuple((name, unit) for (name, unit, k) in ev.labels if k is None)

@@ -267,12 +267,12 @@ def sample(mech, inputs: StudyInputs | None = None, *, samples: int | None = Non
     feasible = np.concatenate(oks) if oks else np.zeros(0, bool)
     responses = np.concatenate(vs) if vs else np.zeros((0, int(scalar.sum())))
     warnings = []
-    bad = int(np.count_nonzero(~feasible))
+    outside = study.responses.outside(values)
+    bad = int(np.count_nonzero(~feasible)) - outside  # the others are outside the domain: their own warning
     if bad:
         warnings.append(f"{bad} of {len(feasible)} designs ({100 * bad / len(feasible):.3g} %) do not assemble over "
                         f"the whole cycle on the nominal's branch ({study.responses.certificate}): kept and flagged "
                         "(feasible = 0), their responses left empty")
-    outside = study.responses.outside(values)
     if outside:
         warnings.append(outside_warning(outside, len(values)))
     labels = tuple((name, unit) for (name, unit, k) in ev.labels if k is None)
