@@ -96,6 +96,7 @@ def test_a_tolerance_wider_than_the_link_counts_the_negative_draws(slider):
     assert 250 < negative < 370  # 0.3 × 1024 ± 4σ
     assert mc.outside == negative and mc.infeasible == negative and mc.feasible == 1024 - negative
     assert any(f"{negative} of 1024 Monte Carlo samples have a value outside its domain" in w for w in rep.warnings)
+    assert not any("do not assemble" in w for w in rep.warnings)  # they are not called unassemblable
 
 
 def test_a_sample_study_reports_the_designs_outside_the_domain(slider):
@@ -106,6 +107,7 @@ def test_a_sample_study_reports_the_designs_outside_the_domain(slider):
     assert 4 < negative.sum() < 28
     assert not rep.feasible[negative].any() and rep.feasible[~negative].all()
     assert any(f"{int(negative.sum())} of 64 designs have a value outside its domain" in w for w in rep.warnings)
+    assert not any("do not assemble" in w for w in rep.warnings)
 
 
 def test_the_design_search_counts_a_negative_link_infeasible():
@@ -181,3 +183,33 @@ def test_a_synthesized_design_outside_the_domain_does_not_pass():
             accepted.append(False)
     assert accepted == [True, True, False, False, False] and oks == accepted
     assert max(dists) - min(dists) < 1e-9 and max(dists) < 1e-3
+
+
+def test_every_study_method_counts_its_designs_outside_the_domain(slider):
+    """A range [−10, 30] mm on the crank: each method's warning counts exactly the designs it drew
+    with a negative crank (rebuilt independently from the sequence: Sobol' A, B and the AB_j of
+    `sensitivity`; the regression's own designs; Morris's trajectories; the DGSM's designs)."""
+    mech, study = slider
+    ranges = {"crank": [-10.0, 30.0], "rod": [79.0, 81.0]}
+    lo, hi = np.asarray([[-10.0, 79.0], [30.0, 81.0]])
+
+    def count(rep, n):
+        hits = [w for w in rep.warnings if "have a value outside its domain" in w]
+        assert len(hits) == 1 and hits[0].split(" of ")[1].split()[0] == str(n), rep.warnings
+        return int(hits[0].split()[0])
+
+    inputs = st.read_study(mech, method="sensitivity", samples=16, ranges=ranges)
+    rep = st.sensitivity(mech, study=study.moved(inputs=inputs))
+    u = np.concatenate(list(st.unit_blocks("sobol", 4, 16, inputs.seed)))
+    a, b = lo + u[:, :2] * (hi - lo), lo + u[:, 2:] * (hi - lo)
+    ab = [np.where(np.arange(2) == j, b, a) for j in range(2)]
+    assert count(rep, 16 * 4) == sum(int((x[:, 0] < 0).sum()) for x in [a, b, *ab]) > 0
+
+    inputs = st.read_study(mech, method="regression", samples=32, ranges=ranges)
+    rep = st.regression(mech, study=study.moved(inputs=inputs))
+    assert count(rep, 32) == int((rep.values[:, 0] < 0).sum()) > 0
+
+    inputs = st.read_study(mech, method="morris", samples=8, ranges=ranges)
+    rep = st.morris(mech, study=study.moved(inputs=inputs))
+    traj = st.trajectories([np.arange(0, 1), np.arange(1, 2)], 8, inputs.morris_levels, inputs.seed)[0].reshape(-1, 2)
+    assert count(rep, 8 * 3) == int((st.box_values(inputs, study.x0, traj)[:, 0] < 0).sum()) > 0

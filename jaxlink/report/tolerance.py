@@ -78,7 +78,12 @@ def write_tolerance_csv(path, mech, rep: ToleranceReport) -> None:
                 _g(mc.cp[q]) if math.isfinite(mc.cp[q]) else "", _g(mc.cpk[q])]
 
     def tail(name):
-        return [] if wc is None else (["", ""] if name not in worst else [_g(worst[name][0]), worst[name][1]])
+        if wc is None:
+            return []
+        if name not in worst:
+            return ["", ""]
+        value, status = worst[name]
+        return ["" if status == "none feasible" else _g(value), status]
 
     with open(path, "w", newline="", encoding="utf-8") as fh:
         w = csv.writer(fh)
@@ -190,7 +195,9 @@ def worst_case_json(rep: ToleranceReport):
     mcq = None if rep.monte_carlo is None else _mc_objectives(rep)
     return {"corners_enumerated": wc.corners, "candidates": wc.candidates, "infeasible": wc.infeasible,
             "ascent_evaluations": wc.evaluations,
-            "outputs": [{"name": n, "unit": wc.units[q], "worst": float(wc.value[q]), "status": wc.status[q],
+            "outputs": [{"name": n, "unit": wc.units[q],
+                         "worst": None if wc.status[q] == "none feasible" else float(wc.value[q]),
+                         "status": wc.status[q],
                          "linear": float(wc.linear[q]), "mc_max": None if mcq is None else float(mcq[q]),
                          "design": {p: float(d) for p, d in zip(rep.parameters, wc.design[q])}}
                         for q, n in enumerate(wc.names)]}
@@ -237,7 +244,8 @@ def summary(mech, rep: ToleranceReport) -> str:
         lines.append(f"{'output':<22} {'unit':<8} {'linear':>11} {'worst':>11}" + (f" {'MC max':>11}" if mc else "")
                      + "  status")
         for q, n in enumerate(wc.names):
-            lines.append(f"{n:<22} {wc.units[q]:<8} {wc.linear[q]:11.4g} {wc.value[q]:11.4g}"
+            value = f"{'—':>11}" if wc.status[q] == "none feasible" else f"{wc.value[q]:11.4g}"
+            lines.append(f"{n:<22} {wc.units[q]:<8} {wc.linear[q]:11.4g} {value}"
                          + (f" {mcq[q]:11.4g}" if mcq is not None else "") + f"  {wc.status[q]}")
     if mc is not None:
         lines.append(f"Monte Carlo: {mc.samples} samples, {mc.feasible} feasible, {mc.infeasible} infeasible "

@@ -85,6 +85,11 @@ class Rounds:
         self.samples = int(samples)
         self.history = history
 
+    @property
+    def dir(self):
+        """The folder of the study's checkpoint (`resources.check` estimates its free space)."""
+        return self.base.dir
+
     @staticmethod
     def saved_round(base):
         saved = None if base is None else base.load()

@@ -46,8 +46,10 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..errors import MechanismError
+from . import resources as _resources
 from .design import to_values, unit_blocks
 from .inputs import Range, StudyInputs
+from .responses import outside_warning
 from .sobol import bootstrap_counts
 from .streamed import Streamed
 
@@ -249,12 +251,13 @@ def dgsm(mech, inputs: StudyInputs | None = None, *, samples: int | None = None,
     lu = unit_names(mech)[0]
     labels = tuple(r.labels) + (tuple((f"deviation({p})", lu, None) for p in inputs.points) if deviation else ())
     constants = poincare_constants(inputs)
+    _resources.check(study, "dgsm", n, checkpoint=checkpoint)
     counts = bootstrap_counts(n, inputs.bootstrap, [inputs.seed, 1])
     per = max(1, study.chunk // 4)  # the Jacobian holds T tangents per design
     nominal = None
     acc: DGSMAccumulator | None = None
     seconds = 0.0
-    good = 0
+    good = outside = 0
     start = 0
     first = True
     done = 0
@@ -266,6 +269,7 @@ def dgsm(mech, inputs: StudyInputs | None = None, *, samples: int | None = None,
         acc = DGSMAccumulator(len(labels), groups, constants, counts)
         acc.restore(state["sums"])
         good, start = int(state["good"]), int(state["start"])
+        outside = int(state.get("outside", 0))
         if progress is not None:
             progress(start)
     for c, u in enumerate(unit_blocks(inputs.sampler, T, n, inputs.seed, per)):
@@ -300,8 +304,10 @@ def dgsm(mech, inputs: StudyInputs | None = None, *, samples: int | None = None,
         acc.update(start, J, v, ok)
         good += int(ok.sum())
         start += len(v)
+        outside += study.responses.outside(x[1:] if len(x) > len(v) else x)
         if checkpoint is not None:
-            checkpoint.save(c + 1, {"nominal": nominal, "sums": acc.state(), "good": good, "start": start})
+            checkpoint.save(c + 1, {"nominal": nominal, "sums": acc.state(), "good": good, "start": start,
+                                    "outside": outside})
         if progress is not None:
             progress(len(v))
     assert acc is not None and nominal is not None
@@ -312,6 +318,8 @@ def dgsm(mech, inputs: StudyInputs | None = None, *, samples: int | None = None,
     elif good < n:
         warnings.append(f"{n - good} of {n} designs do not assemble over the whole cycle: the DGSM are over the "
                         f"{good} others (conditional on feasibility)")
+    if outside:
+        warnings.append(outside_warning(outside, n))
     nominal_all = np.concatenate([nominal, np.zeros(K if deviation else 0)])
     timings = {"evaluate": seconds, "total": time.perf_counter() - t0}
     return DGSMReport(inputs, tuple(f.name for f in inputs.factors), labels, r.input_values, nominal_all, indices,

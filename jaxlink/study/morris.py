@@ -47,8 +47,10 @@ from typing import NamedTuple
 import numpy as np
 
 from ..errors import MechanismError
+from . import resources as _resources
 from .design import to_values
 from .inputs import StudyInputs
+from .responses import outside_warning
 from .sobol import bootstrap_counts
 from .streamed import Streamed
 
@@ -243,6 +245,7 @@ def morris(mech, inputs: StudyInputs | None = None, *, samples: int | None = Non
         raise MechanismError(f"a Morris study needs at least 2 trajectories, got {r}", file=mech.file,
                              key="study.samples")
     p = inputs.morris_levels
+    _resources.check(study, "morris", r, checkpoint=checkpoint)
     u, order, sign = trajectories(groups, r, p, inputs.seed)
     counts = bootstrap_counts(r, inputs.bootstrap, [inputs.seed, 1])
     per = max(1, study.chunk // (D + 1))
@@ -291,8 +294,11 @@ def morris(mech, inputs: StudyInputs | None = None, *, samples: int | None = Non
                         "which factors drive it")
     if len(ind.effects) and int(ind.effects[0].min()) < 2:
         warnings.append("a factor has fewer than two feasible elementary effects: its indices are 0 (not computed)")
-    timings = {"evaluate": ev.seconds, "total": time.perf_counter() - t0}
     rr = study.responses
+    outside = rr.outside(box_values(inputs, study.x0, u.reshape(-1, T)))
+    if outside:
+        warnings.append(outside_warning(outside, r * (D + 1)))
+    timings = {"evaluate": ev.seconds, "total": time.perf_counter() - t0}
     return MorrisReport(inputs, tuple(f.name for f in inputs.factors), ev.labels, rr.input_values, ev.nominal, ind,
                         feas.result(inputs.confidence), r, r * (D + 1), p, ok_total / (r * (D + 1)),
                         rr.certificate, warnings, timings)

@@ -27,6 +27,7 @@ import time
 
 import numpy as np
 
+from . import resources as _resources
 from .inputs import StudyInputs
 from .responses import outside_warning
 from .sampling import SampleReport, _Evaluator, _study, _units
@@ -49,6 +50,7 @@ def parameter_study(mech, inputs: StudyInputs | None = None, *, chunk=None, opti
         raise ValueError("parameter_study needs the inputs of a vector, list or centered study")
     ev = _Evaluator(study)
     values = np.asarray(inputs.designs, float)
+    _resources.check(study, inputs.method, len(values), checkpoint=checkpoint, option="designs")
     scalar = np.asarray([k is None for (_, _, k) in ev.labels], bool)
     done = 0
     saved = None if checkpoint is None else checkpoint.load()
@@ -80,12 +82,12 @@ def parameter_study(mech, inputs: StudyInputs | None = None, *, chunk=None, opti
     feasible = np.concatenate(oks)
     responses = np.concatenate(vs)
     warnings = []
-    bad = int(np.count_nonzero(~feasible))
+    outside = study.responses.outside(values)
+    bad = int(np.count_nonzero(~feasible)) - outside  # the others are outside the domain: their own warning
     if bad:
         warnings.append(f"{bad} of {len(feasible)} designs do not assemble over the whole cycle on the nominal's "
                         f"branch ({study.responses.certificate}): kept and flagged (feasible = 0), their responses "
                         "left empty")
-    outside = study.responses.outside(values)
     if outside:
         warnings.append(outside_warning(outside, len(values)))
     labels = tuple((name, unit) for (name, unit, k) in ev.labels if k is None)

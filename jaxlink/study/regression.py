@@ -39,6 +39,7 @@ from typing import NamedTuple
 import numpy as np
 
 from ..errors import MechanismError
+from . import resources as _resources
 from .correlation import correlate
 from .design import to_values, unit_blocks
 from .inputs import StudyInputs
@@ -174,6 +175,7 @@ def regression(mech, inputs: StudyInputs | None = None, *, samples: int | None =
     if n < T + 3:
         raise MechanismError(f"a regression study of {T} inputs needs at least {T + 3} designs, got {n}",
                              file=mech.file, key="study.samples")
+    _resources.check(study, "regression", n, checkpoint=checkpoint)
     xs, ys, oks = [], [], []
     done = 0
     saved = None if checkpoint is None else checkpoint.load()

@@ -31,6 +31,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..errors import MechanismError
+from . import resources as _resources
 from .correlation import correlate
 from .design import grid_shape, grid_values, to_values, unit_blocks
 from .inputs import StudyInputs
@@ -222,10 +223,12 @@ def sample(mech, inputs: StudyInputs | None = None, *, samples: int | None = Non
             raise MechanismError("the grid method needs [study.ranges]", file=mech.file, key="study.ranges")
         shape = grid_shape(inputs)
         n = int(np.prod(shape))
+        _resources.check(study, "grid", n, checkpoint=checkpoint, option="levels")
         blocks = ((grid_values(inputs, a, min(n, a + study.chunk))) for a in range(0, n, study.chunk))
     else:
         shape = None
         n = inputs.samples if samples is None else int(samples)
+        _resources.check(study, "sample", n, checkpoint=checkpoint)
         blocks = (to_values(inputs, study.x0, correlate(inputs, u, [inputs.seed, 2, i]))
                   for i, u in enumerate(unit_blocks(inputs.sampler, T, n, inputs.seed, study.chunk)))
     done = 0
@@ -264,12 +267,12 @@ def sample(mech, inputs: StudyInputs | None = None, *, samples: int | None = Non
     feasible = np.concatenate(oks) if oks else np.zeros(0, bool)
     responses = np.concatenate(vs) if vs else np.zeros((0, int(scalar.sum())))
     warnings = []
-    bad = int(np.count_nonzero(~feasible))
+    outside = study.responses.outside(values)
+    bad = int(np.count_nonzero(~feasible)) - outside  # the others are outside the domain: their own warning
     if bad:
         warnings.append(f"{bad} of {len(feasible)} designs ({100 * bad / len(feasible):.3g} %) do not assemble over "
                         f"the whole cycle on the nominal's branch ({study.responses.certificate}): kept and flagged "
                         "(feasible = 0), their responses left empty")
-    outside = study.responses.outside(values)
     if outside:
         warnings.append(outside_warning(outside, len(values)))
     labels = tuple((name, unit) for (name, unit, k) in ev.labels if k is None)
@@ -313,6 +316,7 @@ def sensitivity(mech, inputs: StudyInputs | None = None, *, samples: int | None 
     if N < 2:
         raise MechanismError(f"a sensitivity study needs at least 2 base samples, got {N}", file=mech.file,
                              key="study.samples")
+    _resources.check(study, "sensitivity", N, checkpoint=checkpoint)
     counts = bootstrap_counts(N, inputs.bootstrap, [inputs.seed, 1])
     second = bool(inputs.second_order)
     E = 2 * D + 2 if second else D + 2  # designs per base sample: A, B, AB_j (and BA_j)

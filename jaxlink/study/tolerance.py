@@ -602,9 +602,10 @@ def tolerance(mech, inputs: StudyInputs | None = None, *, samples: int | None = 
         t2 = time.perf_counter()
         mc = study.monte_carlo(n_mc, first, progress=progress, checkpoint=checkpoint, second=second)
         timings["monte_carlo"] = time.perf_counter() - t2
-        if mc.infeasible:
+        unassembled = mc.infeasible - mc.outside  # the others are outside the domain: their own warning
+        if unassembled:
             warnings.append(
-                f"{mc.infeasible} of {mc.samples} Monte Carlo samples ({100 * mc.infeasible / mc.samples:.3g} %) do "
+                f"{unassembled} of {mc.samples} Monte Carlo samples ({100 * unassembled / mc.samples:.3g} %) do "
                 f"not assemble over the whole cycle on the nominal's branch ({r.certificate}); the statistics are "
                 f"those of the {mc.feasible} feasible samples")
         if mc.outside:

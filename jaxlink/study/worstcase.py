@@ -52,7 +52,8 @@ class WorstCase(NamedTuple):
 
     `names` (Q,) objective names, `units` (Q,), `value` (Q,) the largest deviation found,
     `linear` (Q,) its linear counterpart (the linear worst case), `design` (Q, T) the deviations δ
-    of the toleranced parameters that give it, `status` (Q,) "enumerated" | "found";
+    of the toleranced parameters that give it, `status` (Q,) "enumerated" | "found" | "none
+    feasible" (no candidate assembles: `value` NaN, `design` 0);
     `candidates` (designs evaluated in the batch), `infeasible` (of them, not assembling),
     `corners` (True: every corner of the box was evaluated), `evaluations` (ascent steps)."""
 
@@ -263,6 +264,10 @@ def worst_case(study, first, bound) -> WorstCase:
                     alpha *= 0.5
             if f > found:
                 found, at = f, s
+        if not order:  # no candidate assembles: no worst case was found, not a worst deviation of 0
+            best[q] = np.nan
+            status.append("none feasible")
+            continue
         best[q] = found
         design[q] = at * scale
         status.append("enumerated" if exhaustive and found <= corner_best * (1 + 1e-9) + 1e-300 else "found")
