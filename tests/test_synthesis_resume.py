@@ -24,10 +24,13 @@ pytestmark = pytest.mark.xdist_group("synthesis_resume")
 
 # a limaçon (a classic closed curve, no symmetry a wrong turn could match), three rounds (full,
 # polishing, full), each round's best and one more polished in float64 (the four-bar's programs of
-# tests/test_synthesis_size.py: compiled once)
+# tests/test_synthesis_size.py: compiled once). The seed is one whose third round polishes its best
+# and one more (the phase-free distance, issue 46: with seed 5 the third round's candidates are all
+# past twice the best, nothing is polished after it and a wrong state after two rounds changes
+# nothing; seeds 0-4, 6, 7: two polishes after round 3 with 3 and 7, one with 0, 1, 4, 6, none with 2)
 K = np.linspace(0, 2 * np.pi, 120, endpoint=False)
 TARGET = np.stack([(1 + 0.6 * np.cos(K)) * np.cos(K), (1 + 0.6 * np.cos(K)) * np.sin(K)], axis=1)
-OPTS = dict(topologies=["four-bar"], rounds=3, quick=True, samples=4096, count=300, finish=1, seed=5)
+OPTS = dict(topologies=["four-bar"], rounds=3, quick=True, samples=4096, count=300, finish=1, seed=3)
 
 
 class Stop(Exception):
