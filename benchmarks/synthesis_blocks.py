@@ -33,7 +33,8 @@ def run(target, caps: tuple[int, int, int] | None, rounds: int, max_links: int, 
     """One search with these block caps (None: this device's own)."""
     lines: list[str] = []
     t0 = time.perf_counter()
-    r = jl.synthesize(target, time_limit=time_limit, rounds=rounds, max_links=max_links, blocks=caps,
+    # the time limit only chooses the programs (a cap would stop the rounds: `quick` instead)
+    r = jl.synthesize(target, quick=time_limit <= 15.0, rounds=rounds, max_links=max_links, blocks=caps,
                       log=lambda s: (lines.append(s), print("  " + s, flush=True)))
     wall = time.perf_counter() - t0
     phases = []

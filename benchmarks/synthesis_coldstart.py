@@ -95,12 +95,15 @@ def sse_nearest(points: np.ndarray, curve: np.ndarray) -> float:
     return float(np.sum(cKDTree(curve).query(points)[0] ** 2))
 
 
-def run_once(target: Path, out: Path, cache: Path, time_limit: float, seed: int) -> dict:
+def run_once(target: Path, out: Path, cache: Path, time_limit: float | None, seed: int) -> dict:
     beside = Path(sys.executable).with_name("jaxlink")  # the command installed with this Python
     exe = str(beside) if beside.exists() else shutil.which("jaxlink")
     if exe is None:
         raise SystemExit("the jaxlink command is not installed (pip install -e .)")
-    cmd = [exe, "synthesize", str(target), "--topologies", "four-bar", "--time-limit", str(time_limit),
+    # the default: one round of the quick programs (a time limit is a cap: one shorter than the compiling
+    # gives no design)
+    limit = ["--rounds", "1", "--quick"] if time_limit is None else ["--time-limit", str(time_limit)]
+    cmd = [exe, "synthesize", str(target), "--topologies", "four-bar", *limit,
             "--seed", str(seed), "--out", str(out), "--no-plot"]
     env = dict(os.environ, JAXLINK_CACHE_DIR=str(cache))
     before = resource.getrusage(resource.RUSAGE_CHILDREN)
@@ -122,8 +125,9 @@ def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--case", default="mkh1", help="a case of benchmarks/fourbar-path (default mkh1), or 'all'")
     ap.add_argument("--target", help="a CSV of target points (columns x, y) to run instead of the cases")
-    ap.add_argument("--time-limit", type=float, default=1.0,
-                    help="the search's --time-limit (s, default 1: one round, the time to a first answer)")
+    ap.add_argument("--time-limit", type=float, default=None,
+                    help="the search's --time-limit (s, a cap; default none: --rounds 1 --quick, one round of the "
+                         "quick programs, the time to a first answer)")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--out", default=str(HERE / "results" / "synthesis_coldstart.json"))
     args = ap.parse_args()

@@ -167,10 +167,10 @@ def main() -> int:
                        np.linspace(0, 2 * np.pi, 100, endpoint=False))[0][:, 5]
     quick = args.time_limit <= 15.0  # the search's default, which selects the programs
     for closed in (True, False):
-        jl.synthesize(warm if closed else warm[:60], closed=closed, time_limit=0.1, max_links=args.max_links,
+        jl.synthesize(warm if closed else warm[:60], closed=closed, rounds=1, max_links=args.max_links,
                       samples=args.samples, quick=quick)
         if args.eight_given and "8" in classes:
-            jl.synthesize(warm if closed else warm[:60], closed=closed, time_limit=0.1, samples=args.samples,
+            jl.synthesize(warm if closed else warm[:60], closed=closed, rounds=1, samples=args.samples,
                           topologies=[eight_bar(np.random.default_rng(0))], quick=quick)
     compile_s = time.perf_counter() - t0
     given = ", eight-bar given" if args.eight_given else ""

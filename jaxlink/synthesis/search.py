@@ -42,7 +42,8 @@ from __future__ import annotations
 import functools
 import os
 import time
-from concurrent.futures import ThreadPoolExecutor
+from concurrent.futures import Future, ThreadPoolExecutor
+from concurrent.futures import TimeoutError as FutureTimeout
 from pathlib import Path
 from typing import Any, NamedTuple
 
@@ -185,7 +186,8 @@ class Programs(NamedTuple):
 def programs(n_topos: int, n_dyads: int, closed: bool, *, samples: int, screen_keep: int, refine: int,
              steps: int, quick: bool = False, where: _spread.Layout | None = None,
              polish_points: int = 0, sliders: bool = False, timed: bool = False,
-             bounded: bool = False, blocks: tuple[int, int, int] | None = None) -> Programs:
+             bounded: bool = False, blocks: tuple[int, int, int] | None = None,
+             deadline: float | None = None) -> Programs:
     """Compile the screen, the rank and the refinement for these shapes, all three at once (XLA
     compiles in parallel threads; on a cold start compiling is most of a short search's time).
     The rank compiles at XLA's lowest optimisation level (about half the compile time, its run
@@ -205,7 +207,10 @@ def programs(n_topos: int, n_dyads: int, closed: bool, *, samples: int, screen_k
     `timed`: a timed target's two programs (`_screen_timed`, `_refine_timed`; no rank: `rank` None)
     and its polish (`polish.program_timed` for `polish_points` points). `bounded`: the programs
     that keep a design within a size (`size`; their last argument the bound, unused without it).
-    `blocks`: other caps (screen, rank, refinement) than the platform's (`block_caps`)."""
+    `blocks`: other caps (screen, rank, refinement) than the platform's (`block_caps`).
+    `deadline` (a `time.perf_counter()` time; one process): a wait for a program still compiling
+    past it raises `spread.OutOfTime` (the search stops there; XLA's compiling threads cannot be
+    stopped, and the process waits for them at its exit)."""
     keep = min(screen_keep, samples * len(_subarcs(closed)))
     sizes: tuple[int, ...] = (samples, keep * n_topos, min(refine, keep) * n_topos)
     given = checked_blocks(blocks)
@@ -231,11 +236,19 @@ def programs(n_topos: int, n_dyads: int, closed: bool, *, samples: int, screen_k
     futures = [ex.submit(_compiled, t[0][0], t[1], *t[0][1:], x64, t[2]) for t in tasks]
     ex.shutdown(wait=False)  # the threads end with their compiling
 
+    def wait(f: Future):
+        if deadline is None:
+            return f.result()
+        try:
+            return f.result(timeout=max(0.0, deadline - time.perf_counter()))
+        except FutureTimeout:
+            raise _spread.OutOfTime("the programs were still compiling at the time limit") from None
+
     def ready(fs: list, also=None) -> list:
         """The programs of `fs` once compiled (and `also`, the polish's)."""
-        out = [f.result() for f in fs]
+        out = [wait(f) for f in fs]
         if also is not None:
-            also.result()
+            wait(also)
         return out
 
     # the screen and the rank are waited for here; the refinement (and the polish) go on compiling
@@ -840,9 +853,19 @@ def search(target: Target, topos: list[Topology], *, time_limit: float | None = 
     finish = (0 if quick else 4) if finish is None else finish
     sliders = any(t.sliders or t.levers for t in topos)  # the programs that trace both kinds
     polish_points = (len(target.points) if timed else n_points) if finish > 0 else 0
-    prog = programs(len(topos), arr.parents.shape[1], closed, samples=samples, screen_keep=screen_keep,
-                    refine=refine, steps=steps, quick=quick, polish_points=polish_points,
-                    sliders=sliders, timed=timed, bounded=bounded, blocks=blocks)
+    # a time limit in one process: a compile still running at `ABANDON_AT` times it ends the search
+    start = began if saved is None else time.perf_counter() - saved["elapsed"]
+    compile_by = start + ABANDON_AT * limit if capped and jax.process_count() == 1 else None
+    try:
+        prog = programs(len(topos), arr.parents.shape[1], closed, samples=samples, screen_keep=screen_keep,
+                        refine=refine, steps=steps, quick=quick, polish_points=polish_points,
+                        sliders=sliders, timed=timed, bounded=bounded, blocks=blocks, deadline=compile_by)
+    except _spread.OutOfTime:
+        status.update(stopped_by="time_limit", rounds=int(saved["rnd"]) if saved is not None else 0)
+        if log is not None:
+            log(f"the programs were still compiling at {time.perf_counter() - start:.1f} s (the time limit: "
+                f"{limit:g} s)")
+        return sorted(saved["found"], key=lambda c: c.match.distance) if saved is not None else []
     if timed:  # the screen's and the refinement's samples of the target; `jitter` leaves the span alone
         ts = timed_samples(target, TIMED_SCREEN_T)
         screen_target = (*(np.asarray(x, np.float32) for x in ts[:3]), ts[3])
