@@ -114,4 +114,4 @@ def constrained(M, g, m, a, target: float = TARGET):
     aMa = np.sum(a * Ma, axis=1)
     binds = np.isfinite(m) & (lin < target) & (aMa > 0)
     mu = np.where(binds, (target - lin) / np.where(binds, aMa, 1.0), 0.0)
-    return dv0 + mu[:, None] * Ma, binds
+    return np.where(binds[:, None], dv0 + mu[:, None] * Ma, dv0), binds
