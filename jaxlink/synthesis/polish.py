@@ -6,7 +6,7 @@ dyad's reach margin above 0.02: cheap enough for hundreds of candidates a round,
 converged nor sharp (at distances of 0.01–0.1, τ = 0.01 is no small smoothing). `polish` takes
 one candidate further: scipy's L-BFGS-B (`ITERS` iterations at each τ of `TAUS`, the first
 a continuation step for the second) on the same surrogate in float64 over `POLISH_T` samples
-against the target at `distance.N_POINTS` (the distance's own resolution), with the margin
+against the target at `distance.N_POINTS` (`--points`; the reported distance takes `distance.N_FINE`), with the margin
 penalty `WEIGHT` · Σ max(0, `FLOOR` − S)² summed over the samples: a dyad may come closer to its
 dead centre (a letter's corner is often one) yet is pushed back hard from it. The value and
 gradient are one compiled program (`program`, stored like the search's, `cache.compiled`); the
