@@ -91,6 +91,9 @@ _STOPPED = {"budget": "at the budget (the evaluations allowed)", "iterations": "
 
 
 def cmd_optimize(args) -> int:
+    import time
+
+    started = time.perf_counter()  # a --time limit counts loading the file and building the evaluator too
     from .mechanism import enable_dtype, load_from_args
 
     printer = _distributed(args)
@@ -136,7 +139,7 @@ def cmd_optimize(args) -> int:
     check_size(problem, ev.chunk, "--chunk" if args.chunk is not None else "chunk")
     with writing("--out", args.out) if args.out and printer else contextlib.nullcontext():
         result = run(ev, args.method, budget=budget, seed=seed, out=args.out, resume=args.resume,
-                     progress=progress and printer, time=time_s, **knobs)
+                     progress=progress and printer, time=time_s, started=started, **knobs)
     if not printer:
         return 0 if result.parameters else 1
     print(f"method      {result.method}" + (f" ({knobs['uniform']})" if "uniform" in knobs else ""))

@@ -43,7 +43,7 @@ def evaluator_for(problem: Problem, chunk: int | None = None) -> Evaluator:
 def run(problem_or_evaluator: Problem | Evaluator, method: str, *, budget: int | None = None, seed: int = 0,
         out: str | os.PathLike | None = None, resume: bool = False, progress: bool = False,
         chunk: int | None = None, stop_after_chunks: int | None = None, checkpoint_s: float = 2.0,
-        time: float | None = None,
+        time: float | None = None, started: float | None = None,
         **knobs) -> SearchResult:
     """Search the design space of a problem for the lowest objective.
 
@@ -62,7 +62,9 @@ def run(problem_or_evaluator: Problem | Evaluator, method: str, *, budget: int |
       last one fits in the time left (the final report's programs compile beside the search), so
       the call ends within about a chunk's time of the cap; the gradient search also ends its
       presample after 30 % of it. With a cap, `extra` holds `"time_limit_s"`. A search stopped
-      by it depends on the machine's speed.
+      by it depends on the machine's speed. `started`: when the time limit's clock started (a
+      `time.perf_counter()` time; default: this call), e.g. the command's start, so that loading
+      the file and building the evaluator count too.
     - `extra["stopped_by"]` says what ended the search: "time_limit", "budget", "iterations" or
       "converged" (the gradient search: no start improves), "interrupted" (`stop_after_chunks`).
     - `out`: the JSON document's path; the state is checkpointed beside it (`checkpoint_s`)
@@ -117,7 +119,7 @@ def run(problem_or_evaluator: Problem | Evaluator, method: str, *, budget: int |
     # a time limit is a cap on this call's whole time, the final report included: the report's
     # programs compile in a thread beside the search, and a chunk starts only if one as long as the
     # last one (without its compilation) fits in the time left
-    t_call = _time.perf_counter()
+    t_call = _time.perf_counter() if started is None else float(started)
     warm = _report_ahead(ev) if time is not None else None
     stepped = 0.0  # seconds of this call in `search.step`
     last = 0.0  # the last chunk's seconds without compilation (the next one's estimate)
