@@ -198,3 +198,12 @@ def test_fast_paths_give_the_plain_distances():
     other = D.match(curve, tgt.points[::-1].copy(), closed=True)  # the same shape, another order: the same curve
     shifted = D.match(curve, tgt.points * 1.5, closed=True)
     assert abs(other.distance - kept.distance) < 1e-5 and shifted.scale == pytest.approx(1.5 * kept.scale, rel=1e-12)
+    # every input of the kept target is in its key: the same points at another resolution or as an
+    # open curve, asked for while the closed 2000-point one is kept, give what a cold call gives
+    for kw in (dict(closed=True, n=500), dict(closed=False, n=D.N_FINE)):
+        warm = D.match(curve, tgt.points, **kw)
+        D._target_curve.cache_clear()
+        cold = D.match(curve, tgt.points, **kw)
+        assert (warm.distance, warm.rotation, warm.scale) == (cold.distance, cold.rotation, cold.scale)
+        assert warm.distance != kept.distance
+        D.match(curve, tgt.points, closed=True)  # the closed 2000-point target kept again
