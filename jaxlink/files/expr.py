@@ -27,13 +27,14 @@ at trace time.
 from __future__ import annotations
 
 import dataclasses
-import difflib
 import math
 from fractions import Fraction
 from typing import Callable, Mapping, Union
 
 import jax.numpy as jnp
 import numpy as np
+
+from .keys import suggest  # noqa: F401  (the did-you-mean of every file error: `_expr.suggest`)
 
 # ----------------------------------------------------------------------------- limits
 
@@ -706,6 +707,3 @@ def _eval(node: Node, env, kinds, units):
     raise TypeError(node)
 
 
-def suggest(name: str, candidates) -> str:
-    close = difflib.get_close_matches(name, list(candidates), n=1)
-    return f" (did you mean '{close[0]}'?)" if close else ""

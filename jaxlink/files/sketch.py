@@ -50,6 +50,7 @@ from typing import Any, Callable
 
 from ..errors import MechanismError
 from .keys import check_keys
+from .keys import suggest as _suggest
 from .sketch_bodies import body_tables
 from .sketch_loops import ORIGIN as _ORIGIN
 from .sketch_loops import Edge as _Edge
@@ -404,8 +405,3 @@ def _identifier(name: str, err, table: str) -> None:
         raise err(f"'{name}' is not a valid name (letters, digits and _, not starting with a digit)", table, name)
 
 
-def _suggest(name: str, candidates) -> str:
-    import difflib
-
-    close = difflib.get_close_matches(name, list(candidates), n=1)
-    return f" (did you mean '{close[0]}'?)" if close else ""

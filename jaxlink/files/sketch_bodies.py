@@ -8,6 +8,7 @@ import math
 
 from ..model.bodies import GROUND
 from .keys import check_keys
+from .keys import suggest as _suggest
 
 FRAME = "frame"
 _MASS_KEYS = {"mass", "inertia", "centroid"}
@@ -108,8 +109,3 @@ def body_tables(masses, loads, err, *, bodies, frame, sliders, theta, crank, act
     return out_b, out_j, loads_out
 
 
-def _suggest(name: str, candidates) -> str:
-    import difflib
-
-    close = difflib.get_close_matches(name, list(candidates), n=1)
-    return f" (did you mean '{close[0]}'?)" if close else ""
