@@ -271,6 +271,24 @@ def cancel_prepared() -> None:
 
 _GENERATION = [0]
 
+# compilations started in threads of their own that a command may stop waiting for (`background`)
+_BACKGROUND: list = []
+
+
+def background(future) -> None:
+    """Note a compilation running in a thread of its own (a `concurrent.futures.Future`) that its
+    caller may stop waiting for (`jaxlink.synthesis.search.programs` at a time limit): the command
+    line then ends its process without waiting for it (`unfinished`, `jaxlink.cli.run`)."""
+    _BACKGROUND[:] = [f for f in _BACKGROUND if not f.done()]
+    _BACKGROUND.append(future)
+
+
+def unfinished() -> bool:
+    """Whether a compilation noted by `background` is still running (XLA's compiling cannot be
+    stopped: a process that exits normally waits for it). Those of `prepare` are not counted: the
+    command waits for them (they are the next command's cached programs)."""
+    return any(not f.done() for f in _BACKGROUND)
+
 
 def _prepare_one(name: str, fun, treedef, static: tuple, leaves, fast, generation: int = 0) -> None:
     """`prepare`'s work in its thread: what `traced` does before its first call, then the

@@ -18,7 +18,9 @@ import argparse
 import contextlib
 import difflib
 import importlib
+import os
 import sys
+import time
 
 from ..errors import MechanismError
 from .pipe import quiet_closed_pipes
@@ -75,14 +77,31 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None) -> int:
     """Run the command of `argv` (default: the command line's); its exit status. Standard output
-    and error closing early (`| head -1`) stop nothing (`pipe.py`)."""
+    and error closing early (`| head -1`) stop nothing (`pipe.py`). A command's handler finds in
+    `args.started` the `time.perf_counter()` time a time limit counts from: the process's start for
+    the command line's own arguments (`process_started`: importing JAX counts), else this call's."""
+    started = process_started() if argv is None else time.perf_counter()
     with quiet_closed_pipes():
-        return _main(argv)
+        return _main(argv, started)
 
 
-def _main(argv: list[str] | None) -> int:
+def process_started() -> float:
+    """The `time.perf_counter()` time this process started at (Linux: its start time in
+    /proc/self/stat against the boot clock, to the kernel's tick); where that cannot be read, now."""
+    now = time.perf_counter()
+    try:
+        with open("/proc/self/stat", encoding="ascii") as fh:
+            ticks = int(fh.read().rsplit(")", 1)[1].split()[19])  # field 22, starttime
+        age = time.clock_gettime(time.CLOCK_BOOTTIME) - ticks / os.sysconf("SC_CLK_TCK")
+    except (OSError, ValueError, AttributeError, IndexError):
+        return now
+    return now - age if 0.0 <= age < 3600.0 else now
+
+
+def _main(argv: list[str] | None, started: float) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
+    args.started = started
     name = f"jaxlink {args.command}"
     from ..cache import cancel_prepared, enable_compilation_cache, one_command
 
@@ -123,9 +142,20 @@ def run() -> int:
     exit does not walk them all in its last garbage collections (`check four-bar`: 0.2–0.3 s of a
     2 s command went to the exit). Nothing is lost: the output is flushed and the files closed by
     the commands and at exit as before; only cyclic garbage is left to the end of the process.
-    Not in `main`, which tests and programs call in a process that goes on."""
+    Not in `main`, which tests and programs call in a process that goes on. A compilation still
+    running in a thread (a time-limited `synthesize` that stopped waiting for it at its limit:
+    `cache.unfinished`) is not waited for: the output flushed, the process ends at once
+    (`os._exit`; its files are written and closed by then), where a normal exit would join XLA's
+    compiling threads, or tear the interpreter down under them."""
     import gc
 
+    from ..cache import unfinished
+
     rc = main()
+    if unfinished():
+        for stream in (sys.stdout, sys.stderr):
+            with contextlib.suppress(OSError, ValueError):
+                stream.flush()
+        os._exit(rc)
     gc.freeze()
     return rc

@@ -33,9 +33,11 @@ def register(sub) -> None:
     g.add_argument("--open", dest="closed", action="store_const", const=False,
                    help="an open path, matched by a sub-interval of the crank turn")
     p.add_argument("--time-limit", type=float, default=None, metavar="S",
-                   help="a cap on the search's seconds, compiling included (default: none). A round starts only if "
-                        "1.25 times the last one's time fits, a round still running at 1.05 times the limit is "
-                        "abandoned (the rounds done are the answer), the float64 polishes stop at the limit; alone, "
+                   help="a cap on the command's seconds, from its start, compiling included (default: none). A "
+                        "round starts only if 1.25 times the last one's time fits, a round is abandoned before a "
+                        "block whose batch would not end by the limit (the rounds done are the answer), programs "
+                        "whose compile would not fit (as measured here before) are not compiled, and the float64 "
+                        "polishes stop at the limit: the command overruns it by at most 10 %% + 2 s; alone, "
                         "rounds go on while one fits. When it stops the search the summary and the JSON "
                         "(stopped_by) say so: the designs then depend on the machine's speed")
     p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
@@ -133,7 +135,7 @@ def cmd_synthesize(args) -> int:
                          samples=args.samples, sliders=args.sliders, levers=args.levers,
                          max_size=args.max_size,
                          min_transmission=args.min_transmission, checkpoint=state, resume=args.resume,
-                         **quick,
+                         started=getattr(args, "started", None), **quick,
                          log=(lambda s: print(s, file=sys.stderr)) if printer else None)
     except KeyboardInterrupt:
         if state is not None and state.exists():
@@ -150,8 +152,9 @@ def cmd_synthesize(args) -> int:
         bounds = ([f"--max-size {args.max_size:g}"] if args.max_size is not None else []) + (
             [f"--min-transmission {args.min_transmission:g}"] if args.min_transmission is not None else [])
         if res.stopped_by == "time_limit" and res.rounds == 0:
-            print(f"no design: the time limit ({args.time_limit:g} s) ended the search in its first round "
-                  f"({res.wall_s:.1f} s, compiling included); give a longer --time-limit, or none", file=sys.stderr)
+            print(f"no design: the time limit ({args.time_limit:g} s) ended the search before its first round "
+                  f"ended ({res.wall_s:.1f} s since the command started, compiling included); give a longer "
+                  "--time-limit, or none", file=sys.stderr)
             return 130 if res.interrupted else 1
         print("no design assembled over its interval" + (f" within {' and '.join(bounds)}" if bounds else "")
               + ": give more --rounds, --time-limit or --samples" + (", or looser bounds" if bounds else ""),

@@ -165,7 +165,7 @@ def synthesize(target: Any, *, closed: bool | None = None, time_limit: float | N
                n_points: int = _dist.N_POINTS, count: int = 1000, samples: int = 8192, name: str = "synthesized",
                max_size: float | None = None, min_transmission: float | None = None,
                log: Callable[[str], None] | None = None, checkpoint: str | Path | None = None,
-               resume: bool = False, **search_options) -> Synthesis:
+               resume: bool = False, started: float | None = None, **search_options) -> Synthesis:
     """Find linkages whose traced point follows `target` (a path to a .csv/.npy/.svg file, an
     (N, 2) array or a `Target`), up to `max_links` links, in `rounds` search rounds or within
     `time_limit` seconds.
@@ -183,8 +183,12 @@ def synthesize(target: Any, *, closed: bool | None = None, time_limit: float | N
     given), so that the result is the same on any machine, any number of devices, any number of
     processes. `time_limit` (seconds, compiling included; default none) is a cap: with `rounds`,
     a round starts only if 1.25 times the last one of its kind fits in the time left; alone, the
-    rounds go on while one fits; in one process a round still running at 1.05 times the limit is
-    abandoned (the rounds done are the answer: none done, none). When it stops the search,
+    rounds go on while one fits; in one process a round is abandoned before a turn of its blocks
+    when the turns left would not end by the limit (the rounds done are the answer: none done,
+    none), and programs whose compile would not fit (as measured on this machine before:
+    `compiling`) are not compiled — the log says so. `started` (a `time.perf_counter()` time,
+    default this call's): when the limit's clock started (the command line's: its start, so that
+    loading and importing count). When it stops the search,
     `Synthesis.stopped_by` is "time_limit" and the designs depend on the machine's speed. A limit
     of at most 15 s also chooses the quick programs (`search.quick_of`). Spread over this
     process's devices, and over the processes of a `jax.distributed` group
@@ -238,7 +242,7 @@ def synthesize(target: Any, *, closed: bool | None = None, time_limit: float | N
         checked_blocks(search_options.get("blocks"))
     except ValueError as e:
         raise MechanismError(str(e)) from None
-    t0 = time.perf_counter()
+    t0 = time.perf_counter() if started is None else float(started)
     if isinstance(target, Target):
         tgt = target if closed is None else target._replace(closed=bool(closed))
     elif isinstance(target, (str, Path)):

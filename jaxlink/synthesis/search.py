@@ -19,8 +19,9 @@ One **round** (repeated with fresh candidates until the time limit):
    (`tracer.trace_exact`, float64) at `n_trace` inputs, checked over their whole interval
    (`assembly.certify`) and matched (`distance.match`), until `per_topology` pass (at most
    `SCORE_TRIES` × `per_topology` tried); the topologies side by side in `SCORE_THREADS` threads,
-   the most promising first; in a time-limited search in one process, once a design is found, no
-   score starts past the time limit (less `SCORE_RESERVE_S`).
+   the most promising first; in a time-limited search in one process, once a design is kept (in
+   a round before, or in this one by any topology), no score starts past the time limit (less
+   `SCORE_RESERVE_S`).
 
 After each full round, and while a full round would not fit in the time left, a **polishing
 round**: refine and score only, every slot on the best three topologies' best refined so far
@@ -41,6 +42,7 @@ from __future__ import annotations
 
 import functools
 import os
+import threading
 import time
 from concurrent.futures import Future, ThreadPoolExecutor
 from concurrent.futures import TimeoutError as FutureTimeout
@@ -51,9 +53,11 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from ..cache import background as _background
 from ..cache import compiled
 from ..model.domains import joints_inside
 from . import checkpoint as _ckpt
+from . import compiling as _compiling
 from . import distance as _dist
 from . import size as _size
 from . import spread as _spread
@@ -124,10 +128,13 @@ QUICK_S = 15.0
 #: 2-core CPU with the 16 topologies up to eight links; a count, the same designs on any machine
 DEFAULT_ROUNDS = 2
 
-#: a time-limited search in one process abandons a round still running at this many times its
-#: limit (`spread.Blocked`'s deadline, between blocks), keeping the rounds done: a run overruns its
-#: limit by at most 10 %, the last block's time and the designs' writing included
-ABANDON_AT = 1.05
+#: a time-limited search in one process abandons a round before a turn of blocks (`spread.Blocked`'s
+#: deadline) whose batch would not end by this many times its limit, at the time its turns took,
+#: keeping the rounds done; and stops waiting for programs still compiling there, and starts none
+#: whose compile (as measured here before, `compiling.estimate`) would not end by then: what
+#: follows (the round's scoring until a design passes, the designs, the files) takes the rest of
+#: the 10 % + 2 s a run may overrun its limit by
+ABANDON_AT = 1.0
 
 
 def quick_of(time_limit: float | None, quick: bool | None) -> bool:
@@ -210,7 +217,9 @@ def programs(n_topos: int, n_dyads: int, closed: bool, *, samples: int, screen_k
     `blocks`: other caps (screen, rank, refinement) than the platform's (`block_caps`).
     `deadline` (a `time.perf_counter()` time; one process): a wait for a program still compiling
     past it raises `spread.OutOfTime` (the search stops there; XLA's compiling threads cannot be
-    stopped, and the process waits for them at its exit)."""
+    stopped: they are noted as such, `cache.background`, and the command line's process ends
+    without waiting for them). The compile's seconds, from the start to the last program, are
+    recorded (`compiling.record`, under `compile_key` of the same arguments)."""
     keep = min(screen_keep, samples * len(_subarcs(closed)))
     sizes: tuple[int, ...] = (samples, keep * n_topos, min(refine, keep) * n_topos)
     given = checked_blocks(blocks)
@@ -235,6 +244,13 @@ def programs(n_topos: int, n_dyads: int, closed: bool, *, samples: int, screen_k
            else ex.submit(_polish_program, n_dyads, polish_points, sliders, bounded))
     futures = [ex.submit(_compiled, t[0][0], t[1], *t[0][1:], x64, t[2]) for t in tasks]
     ex.shutdown(wait=False)  # the threads end with their compiling
+    every = futures + ([pol] if pol is not None else [])
+    for f in every:
+        _background(f)
+    _timed_compile(every, compile_key(n_topos, n_dyads, closed, samples=samples, screen_keep=screen_keep,
+                                      refine=refine, steps=steps, quick=quick, where=where,
+                                      polish_points=polish_points, sliders=sliders, timed=timed,
+                                      bounded=bounded, blocks=blocks))
 
     def wait(f: Future):
         if deadline is None:
@@ -264,6 +280,40 @@ def programs(n_topos: int, n_dyads: int, closed: bool, *, samples: int, screen_k
         rows, keyed = ((1, 2, 3), (0, 1, 2, 3, 4)), (0, None)
     out = [_spread.Blocked(c, r, k, where, n, b) for c, r, k, n, b in zip(per, rows, keyed, sizes, block)]
     return Programs(out[0], None, out[1]) if timed else Programs(*out)
+
+
+def compile_key(n_topos: int, n_dyads: int, closed: bool, *, samples: int, screen_keep: int, refine: int,
+                steps: int, quick: bool = False, where: _spread.Layout | None = None, polish_points: int = 0,
+                sliders: bool = False, timed: bool = False, bounded: bool = False,
+                blocks: tuple[int, int, int] | None = None) -> str:
+    """The key (`compiling.key`) under which the compile of `programs` with these arguments is
+    recorded and estimated: its programs' blocks, options and devices."""
+    keep = min(screen_keep, samples * len(_subarcs(closed)))
+    given = checked_blocks(blocks)
+    caps = default_blocks(quick) if given is None else given
+    where = _spread.layout() if where is None else where
+    sizes = (samples, keep * n_topos, min(refine, keep) * n_topos)
+    return _compiling.key(blocks=[_spread.blocks(n, c)[1] for n, c in zip(sizes, caps)], n_dyads=n_dyads,
+                          closed=closed, steps=steps, quick=quick, devices=where.devices,
+                          polish_points=polish_points, sliders=sliders, timed=timed, bounded=bounded)
+
+
+def _timed_compile(futures: list, key: str) -> None:
+    """Record (`compiling.record`) the seconds from now until every one of `futures` is done, if
+    all succeed."""
+    t0 = time.perf_counter()
+    left = [len(futures)]
+    lock = threading.Lock()
+
+    def one_done(f: Future) -> None:
+        with lock:  # the futures end in their own threads
+            left[0] -= 1
+            last = left[0] == 0
+        if last and all(g.exception() is None for g in futures):
+            _compiling.record(key, time.perf_counter() - t0)
+
+    for f in futures:
+        f.add_done_callback(one_done)
 
 
 @functools.lru_cache(maxsize=32)
@@ -783,9 +833,11 @@ def search(target: Target, topos: list[Topology], *, time_limit: float | None = 
     cap. With `rounds` too, a round starts only if `ROUND_MARGIN` times the last one of its kind
     fits in the time left; alone, the rounds go on while one fits (after each full round, and
     whenever the time left is too short for another full round but not for a refinement, a
-    polishing round refines the best found again, `_polish_slots`). In one process a round still
-    running at `ABANDON_AT` times the limit is abandoned between two blocks (the rounds done are
-    the answer; none done: no answer). A search stopped by its limit depends on the machine's
+    polishing round refines the best found again, `_polish_slots`). In one process a round is
+    abandoned before a turn of blocks when its batch's turns left would not end by the limit
+    (`spread.Blocked`, at the time its turns took; the rounds done are the answer; none done: no
+    answer), and programs whose compile would not end by it (`compiling.estimate`: measured here
+    before) are not compiled: the search says so and ends. A search stopped by its limit depends on the machine's
     speed. `status` (a dict, if given) receives `rounds` (the rounds done) and `stopped_by`:
     "rounds" (they were done) or "time_limit" (the limit stopped a round, its scoring or a polish).
     `quick` (`programs`; default: when a `time_limit` ≤ 15 s is given) trades run time for compile
@@ -853,9 +905,24 @@ def search(target: Target, topos: list[Topology], *, time_limit: float | None = 
     finish = (0 if quick else 4) if finish is None else finish
     sliders = any(t.sliders or t.levers for t in topos)  # the programs that trace both kinds
     polish_points = (len(target.points) if timed else n_points) if finish > 0 else 0
-    # a time limit in one process: a compile still running at `ABANDON_AT` times it ends the search
+    # a time limit in one process: a compile that would not end by `ABANDON_AT` times it is not
+    # started, and one still running then ends the search
     start = began if saved is None else time.perf_counter() - saved["elapsed"]
     compile_by = start + ABANDON_AT * limit if capped and jax.process_count() == 1 else None
+    if compile_by is not None:
+        need = _compiling.estimate(compile_key(len(topos), arr.parents.shape[1], closed, samples=samples,
+                                               screen_keep=screen_keep, refine=refine, steps=steps, quick=quick,
+                                               polish_points=polish_points, sliders=sliders, timed=timed,
+                                               bounded=bounded, blocks=blocks))
+        left = compile_by - time.perf_counter()
+        if left <= 0 or (need is not None and need > left):
+            status.update(stopped_by="time_limit", rounds=int(saved["rnd"]) if saved is not None else 0)
+            if log is not None:
+                log(f"the programs were not compiled: {'no time was left' if left <= 0 else ''}"
+                    + (f"their compile would take about {need:.1f} s (as measured here before), more than "
+                       f"the {left:.1f} s left" if left > 0 else "")
+                    + f" of the time limit ({limit:g} s, counted from {time.perf_counter() - start:.1f} s ago)")
+            return sorted(saved["found"], key=lambda c: c.match.distance) if saved is not None else []
     try:
         prog = programs(len(topos), arr.parents.shape[1], closed, samples=samples, screen_keep=screen_keep,
                         refine=refine, steps=steps, quick=quick, polish_points=polish_points,
@@ -891,8 +958,8 @@ def search(target: Target, topos: list[Topology], *, time_limit: float | None = 
     t_polish = None  # the seconds one float64 polish took (the time kept free for the last ones)
 
     origins: set[int] = set()  # the candidates polished (by id)
-    # a time-limited search in one process: its polishes stop at the limit, a round still running at
-    # `ABANDON_AT` times it is abandoned, and without `rounds` the time left after the final polishes
+    # a time-limited search in one process: its polishes stop at the limit, a round whose batch would
+    # not end by `ABANDON_AT` times it is abandoned, and without `rounds` the time left after the final polishes
     # polishes further candidates (several processes must polish alike: `_polish_starts`)
     cut = capped and jax.process_count() == 1
 
@@ -958,7 +1025,7 @@ def search(target: Target, topos: list[Topology], *, time_limit: float | None = 
         return nxt < 0
 
     done = saved is not None and (saved["stage"] != "rounds" or last_round(time.perf_counter()))
-    if cut:  # a round still running at `ABANDON_AT` times the limit is abandoned (`spread.Blocked`)
+    if cut:  # a round whose batch would not end by `ABANDON_AT` times the limit is abandoned (`spread.Blocked`)
         for blocked in prog:
             if blocked is not None:
                 blocked.deadline = began + ABANDON_AT * limit
@@ -1000,21 +1067,23 @@ def search(target: Target, topos: list[Topology], *, time_limit: float | None = 
                 if pool:
                     elite_vals[ti] = pool[:2]
                     elites[ti] = [(e[1], e[2]) for e in pool[:2]]
-            # the exact scoring after the search's first design stops at the time limit (one process)
-            stop = began + limit - SCORE_RESERVE_S if cut and found else None
+            # the exact scoring after the search's first design (found in a round before, or in this
+            # one by any topology's thread) stops at the time limit (one process)
+            stop = began + limit - SCORE_RESERVE_S if cut else None
+            any_kept = [bool(found)]
 
             def scored(ti: int, stop=stop) -> list[Candidate]:
                 """Topology `ti`'s refined candidates scored in the surrogate's order until `per_topology`
                 pass, trying at most SCORE_TRIES times as many: the best by the surrogate can all fail
                 the exact check (a four-bar pushed to a dead centre on letter R's corners), the next
-                ones not; none after `stop` (a `time.perf_counter()` time)."""
+                ones not; none after `stop` (a `time.perf_counter()` time) once a design is kept."""
                 idx = np.flatnonzero(stix == ti)
                 idx = idx[np.isfinite(v[idx]) & rank_ok[idx]]
                 kept: list[Candidate] = []
                 for i in idx[np.argsort(v[idx])][:SCORE_TRIES * per_topology]:
                     if len(kept) >= per_topology:
                         break
-                    if stop is not None and time.perf_counter() >= stop:
+                    if stop is not None and any_kept[0] and time.perf_counter() >= stop:
                         status["stopped_by"] = "time_limit"  # the scoring stopped by the limit
                         break
                     start = float(a[i, 0])
@@ -1026,6 +1095,7 @@ def search(target: Target, topos: list[Topology], *, time_limit: float | None = 
                             floor == 0 or keeps_transmission(topos[ti], p[i], start, span, target, floor)):
                         kept.append(Candidate(topos[ti], p[i], start, span, m, asm, time.perf_counter() - began,
                                               size=sz))
+                        any_kept[0] = True
                 return kept
 
             # the topologies side by side (NumPy and SciPy's k-d trees release the interpreter), the most
@@ -1057,12 +1127,13 @@ def search(target: Target, topos: list[Topology], *, time_limit: float | None = 
             save("rounds")
             now = round_start = time.perf_counter()
             done = last_round(now)
-        except _spread.OutOfTime:
-            # abandoned at `ABANDON_AT` times the limit, in its screen, rank or refinement (before it
+        except _spread.OutOfTime as why:
+            # abandoned before `ABANDON_AT` times the limit, in its screen, rank or refinement (before it
             # changed the candidates or the elites): the rounds done are the answer
             status["stopped_by"] = "time_limit"
             if log is not None:
-                log(f"round {rnd} abandoned at {time.perf_counter() - began:.1f} s (the time limit: {limit:g} s)")
+                log(f"round {rnd} abandoned at {time.perf_counter() - began:.1f} s (the time limit: {limit:g} s): "
+                    f"{why}")
             rnd -= 1
             break
     if saved is not None and saved["stage"] != "rounds":  # resumed in the final polish (or after it)

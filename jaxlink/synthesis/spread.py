@@ -64,7 +64,7 @@ def pad(x: np.ndarray, rows: int) -> np.ndarray:
 
 
 class OutOfTime(Exception):
-    """A batch abandoned between two blocks: the clock passed its `Blocked.deadline`."""
+    """A batch abandoned between two blocks: the blocks left would not end by its `Blocked.deadline`."""
 
 
 class Blocked:
@@ -76,9 +76,14 @@ class Blocked:
     every process (NumPy arrays). `programs` may also be a function that returns them (waiting for
     programs still compiling): called at their first use. `deadline` (a `time.perf_counter()`
     time, or None; one process only): the blocks are then computed a device's turn at a time, and
-    past it the batch is abandoned (`OutOfTime`) — the same bits for the blocks computed."""
+    the batch is abandoned (`OutOfTime`) before a turn when the turns left would not end by it at
+    the time a turn takes (`turn_s`: measured on this batch's turns so far, before its first one
+    on the call before; unknown before any, when only a deadline already passed stops it) — a run
+    stops before its limit, not a block after it; the same bits for the blocks computed."""
 
     deadline: float | None = None
+    #: the seconds one turn of blocks (one block per device) took, last measured (None: never)
+    turn_s: float | None = None
 
     def __init__(self, programs: Sequence[Callable] | Callable[[], Sequence[Callable]], rows: tuple[int, ...],
                  keyed: int | None, where: Layout, n: int, size: int):
@@ -94,6 +99,7 @@ class Blocked:
 
     def __call__(self, *args: Any) -> tuple[np.ndarray, ...]:
         devices = jax.local_devices()[:self.where.devices]
+        programs = self.programs  # waited for (a program still compiling) before the clock of the turns
         k, size = self.count, self.size
         for i in self.rows:
             if len(args[i]) != self.n:
@@ -102,12 +108,20 @@ class Blocked:
         whole: dict[tuple[int, int], jax.Array] = {}
         mine = self.where.mine(k)
         pending: list = []
+        turns = -(-len(mine) // len(devices))
+        began = time.perf_counter() if self.deadline is not None else 0.0
         for j, blk in enumerate(mine):
             if self.deadline is not None and j % len(devices) == 0:  # a turn of every device done
                 if pending:
                     jax.block_until_ready(pending[-1])
-                if time.perf_counter() > self.deadline:
-                    raise OutOfTime(f"past the deadline after {j} of {len(mine)} blocks")
+                now = time.perf_counter()
+                done = j // len(devices)
+                if done:
+                    self.turn_s = (now - began) / done
+                left = (turns - done) * (self.turn_s or 0.0)
+                if now + left > self.deadline:
+                    raise OutOfTime(f"a batch's {len(mine) - j} blocks left of {len(mine)}, {self.turn_s or 0.0:.2g} s "
+                                    f"each, would not end in the {self.deadline - now:.1f} s left")
             d = j % len(devices)
             put = []
             for i, a in enumerate(args):
@@ -119,9 +133,11 @@ class Blocked:
                     if (i, d) not in whole:
                         whole[i, d] = jax.device_put(np.asarray(a), devices[d])
                     put.append(whole[i, d])
-            pending.append(self.programs[d](*put))  # dispatched: every device starts before any is read
+            pending.append(programs[d](*put))  # dispatched: every device starts before any is read
         local = [np.concatenate([np.asarray(out[o]) for out in pending]) for o in range(len(pending[0]))] \
             if pending else []
+        if self.deadline is not None and turns:
+            self.turn_s = (time.perf_counter() - began) / turns
         if self.where.processes == 1:
             return tuple(x[:self.n] for x in local)
         return tuple(x[:self.n] for x in _gathered(local, self.where, k, size, self._shapes()))
