@@ -277,7 +277,7 @@ _BACKGROUND: list = []
 
 def background(future) -> None:
     """Note a compilation running in a thread of its own (a `concurrent.futures.Future`) that its
-    caller may stop waiting for (`jaxlink.synthesis.search.programs` at a time limit): the command
+    caller may stop waiting for (`jaxlink.synthesis.programs.programs` at a time limit): the command
     line then ends its process without waiting for it (`unfinished`, `jaxlink.cli.run`)."""
     _BACKGROUND[:] = [f for f in _BACKGROUND if not f.done()]
     _BACKGROUND.append(future)

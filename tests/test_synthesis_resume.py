@@ -181,9 +181,9 @@ def test_a_wrong_state_changes_the_search_and_another_search_is_refused(whole, a
     # other blocks (their bits differ): given, or a GPU's (`search.block_caps`) resuming a CPU's state
     with pytest.raises(MechanismError, match="another search"):
         api.synthesize(tgt, checkpoint=state, resume=True, blocks=(1024, 64, 4), **OPTS)
-    import jaxlink.synthesis.search as search
+    import jaxlink.synthesis.programs as programs
 
-    monkeypatch.setattr(search, "_platform", lambda: "gpu")
+    monkeypatch.setattr(programs, "_platform", lambda: "gpu")
     with pytest.raises(MechanismError, match="another search"):
         api.synthesize(tgt, checkpoint=state, resume=True, **OPTS)
     monkeypatch.undo()

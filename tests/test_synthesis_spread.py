@@ -183,13 +183,14 @@ def test_the_blocks_of_a_round_on_each_platform(monkeypatch, platform, counts, s
     ranked, 8 refined): on a CPU small blocks (1024, 64, 8 rows); on a GPU, whose small blocks run at
     their kernels' latency one after another, a batch in as few blocks as `ACCEL_BLOCKS` allows (the
     programs not compiled: only their blocks)."""
+    from jaxlink.synthesis import programs as P
     from jaxlink.synthesis import search as S
 
     assert S.block_caps("cpu", False) == (S.SCREEN_BLOCK, S.RANK_BLOCK, S.REFINE_BLOCK) == (1024, 64, 8)
     assert S.block_caps("cpu", True)[2] == S.REFINE_BLOCK_QUICK
     assert S.block_caps("gpu", False) == S.block_caps("gpu", True) == S.block_caps("cuda", False) == S.ACCEL_BLOCKS
-    monkeypatch.setattr(S, "_platform", lambda: platform)
-    monkeypatch.setattr(S, "_compiled", lambda *a: a)
+    monkeypatch.setattr(P, "_platform", lambda: platform)
+    monkeypatch.setattr(P, "_compiled", lambda *a: a)
     prog = S.programs(43, 9, False, samples=8192, screen_keep=128, refine=8, steps=300)
     assert (prog.screen.count, prog.rank.count, prog.refine.count) == counts
     assert (prog.screen.n, prog.rank.n, prog.refine.n) == (8192, 43 * 128, 43 * 8)

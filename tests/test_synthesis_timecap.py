@@ -72,13 +72,13 @@ def test_a_compile_that_would_not_fit_is_not_started(monkeypatch):
     estimate measured here before: `compiling.estimate`) compiles nothing and says so; one whose
     limit's clock started long enough ago (`started`: the command's start) neither."""
     from jaxlink.synthesis import compiling
-    from jaxlink.synthesis import search as S
+    from jaxlink.synthesis import programs as P
     from jaxlink.synthesis.api import synthesize
 
     def never(*args, **kw):
         raise AssertionError("a program was compiled")
 
-    monkeypatch.setattr(S, "_compiled", never)
+    monkeypatch.setattr(P, "_compiled", never)
     monkeypatch.setattr(compiling, "estimate", lambda key: 100.0)
     k = np.arange(60) * 2 * np.pi / 60
     target = np.stack([np.cos(k), 0.5 * np.sin(k)], axis=1)

@@ -1,5 +1,5 @@
 """How long a search's programs take to compile on this machine, known before they are compiled:
-each compile of `search.programs` is measured and recorded in the compilation cache's directory
+each compile of `programs.programs` is measured and recorded in the compilation cache's directory
 (`jaxlink.cache.cache_dir`, file `synthesis-compile.json`), and read back before the next one, so
 that a time-limited search whose compiling would not fit in its limit says so and does not start it.
 

@@ -12,7 +12,7 @@ dead centre (a letter's corner is often one) yet is pushed back hard from it. Th
 gradient are one compiled program (`program`, stored like the search's, `cache.compiled`); the
 optimizer runs on the host, so the result is the same in every process of a group.
 
-The polished candidate is checked like any other (`search.score`: traced exactly, certified over
+The polished candidate is checked like any other (`scoring.score`: traced exactly, certified over
 its whole interval, matched). If it does not assemble over its interval — L-BFGS may end a hair
 across a dead centre — the points back along the segment from the start, at `BACK` of the way,
 are tried in turn and the first that assembles is the result (`search` keeps whichever of the

@@ -3,7 +3,7 @@ layer: the same values in the same order as `jnp.sort` (a minimum and a maximum 
 layer pairs every position i with i XOR j — a reshape and a reversal, no gather — so the network is
 log₂n (log₂n + 1) / 2 elementwise steps over the whole batch (15 for 32 values).
 
-The screen sorts millions of 32-value descriptors (`search._screen`). Measured 2026-11-25 on 8192 ×
+The screen sorts millions of 32-value descriptors (`screening._screen`). Measured 2026-11-25 on 8192 ×
 64 rows of 32 float32 values, 2 cores: XLA's CPU sort 1.3 s, this network along the leading axis
 0.47 s (compiled in 0.2 s); an unrolled odd–even merge network over 32 separate columns ran in
 0.18 s but took 2.6 s to compile, which a cold search pays."""
