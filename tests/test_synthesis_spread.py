@@ -280,6 +280,34 @@ def test_the_default_search_gives_the_same_designs_under_load(monkeypatch):
     assert (loaded.rounds, loaded.stopped_by) == (quiet.rounds, quiet.stopped_by) == (S.DEFAULT_ROUNDS, "rounds")
 
 
+def test_the_progress_of_a_search_and_its_best_design_so_far(tmp_path):
+    """`synthesize(progress=...)`: a `Progress` from the start (compiling, before any round), each
+    round's start and each topology scored, the end; the best so far never worse, and at the end the
+    answer's (its distance, topology, joints, transmission angle); `best_file` holds the best
+    design so far after every round, at the end the answer's sketch; `report.progress_line` says it."""
+    from jaxlink.report.synthesis import progress_line
+    from jaxlink.synthesis.api import synthesize
+
+    events: list = []
+    best = tmp_path / "best.toml"
+    r = synthesize(_arc(), progress=events.append, best_file=best, **dict(_SEARCH, refine=8, finish=0))
+    assert events[0].stage == "compiling" and events[0].round == 0 and not events[0].topology
+    assert events[-1].stage == "done" and events[-1].round == 2
+    assert [(e.round, e.polish) for e in events if e.stage == "round"] == [(1, False), (2, True)]
+    assert [(e.scored, e.topologies) for e in events if e.stage == "scored"] == [(1, 1), (1, 1)]
+    dist = [e.distance for e in events if e.topology]
+    assert dist and dist == sorted(dist, reverse=True)
+    last, d = events[-1], r.best
+    assert (last.topology, last.joints, last.distance) == (d.topology, d.joints, d.distance)
+    assert last.transmission_deg == pytest.approx(d.transmission_deg, abs=1e-9)
+    assert all(e.left_s is None for e in events) and all(b.elapsed_s >= a.elapsed_s for a, b in zip(events, events[1:]))
+    assert best.read_text() == d.sketch.toml()
+    line = progress_line(events[-2], str(best))
+    assert line.startswith("round 2 (polish): 1/1 topologies scored | best ") and "four-bar, 5 joints, mu " in line
+    assert str(best) in line and progress_line(events[0]).startswith("compiling the programs | no design yet | ")
+    assert progress_line(events[0]._replace(left_s=12.4)).endswith(" s, 12 s left")
+
+
 def test_a_time_limit_caps_the_rounds_and_says_so(monkeypatch, tmp_path):
     """With `rounds` and a time limit, the limit is a cap: the next round starts only if 1.25 times
     the last of its kind fits (here the clock passes the limit in round 1: one round of three), and

@@ -86,6 +86,14 @@ def register(sub) -> None:
     p.add_argument("--out", metavar="DIR", default="synthesis",
                    help="write the files into this folder (default synthesis)")
     p.add_argument("--no-plot", action="store_true", help="do not draw the plot")
+    p.add_argument("--progress", choices=("auto", "on", "off"), default="auto",
+                   help="a progress line on standard error from the start: the round, the topologies scored, the "
+                        "best design so far (distance, topology, joints, least transmission angle; written to "
+                        "OUT/synthesized.toml after every round where it changed), the time spent and left "
+                        "(auto: when standard error is a terminal, updated in place; on: also a line per step "
+                        "elsewhere)")
+    p.add_argument("--quiet", action="store_true",
+                   help="nothing on standard error but errors: no progress line, no line per round")
     p.add_argument("--resume", action="store_true",
                    help="continue the interrupted search of --out: the search writes its whole state to "
                         "DIR/synthesis.state after every round (one process), so Ctrl-C or a kill loses at most "
@@ -129,20 +137,32 @@ def cmd_synthesize(args) -> int:
     elif args.resume:
         raise MechanismError("--resume is for a search in one process")
     quick: dict[str, Any] = {"quick": True} if args.quick else {}
+    tty = sys.stderr.isatty()
+    shown = printer and not args.quiet and (tty if args.progress == "auto" else args.progress == "on")
+    best_file = Path(args.out) / "synthesized.toml" if printer else None
+    status = _Status(sys.stderr, tty, None if best_file is None else str(best_file)) if shown else None
+    log = None if not printer or args.quiet else (status.log if status is not None else
+                                                  (lambda s: print(s, file=sys.stderr)))
+    if best_file is not None:
+        best_file.parent.mkdir(parents=True, exist_ok=True)
     try:
         res = synthesize(tgt, time_limit=args.time_limit, seed=args.seed, rounds=args.rounds,
                          max_links=args.max_links, topologies=names, n_points=args.points, count=args.count,
                          samples=args.samples, sliders=args.sliders, levers=args.levers,
                          max_size=args.max_size,
                          min_transmission=args.min_transmission, checkpoint=state, resume=args.resume,
-                         started=getattr(args, "started", None), **quick,
-                         log=(lambda s: print(s, file=sys.stderr)) if printer else None)
+                         started=getattr(args, "started", None), **quick, log=log,
+                         progress=None if status is None else status.show, best_file=best_file)
     except KeyboardInterrupt:
+        if status is not None:
+            status.close()
         if state is not None and state.exists():
             print(f"synthesize: interrupted; the search's state after its last round is in {state}: the same "
                   "command with --resume continues it", file=sys.stderr)
             return 130
         raise
+    if status is not None:
+        status.close()
     if res.interrupted:  # Ctrl-C after a round: the designs until then are written, and the state kept
         print(f"synthesize: interrupted; writing the designs found until then. The search's state is in {state}: "
               "the same command with --resume continues it", file=sys.stderr)
@@ -172,3 +192,29 @@ def cmd_synthesize(args) -> int:
               "synthesis.json")
     print(f"replay      jaxlink kinematics {args.out}/synthesized.toml {span} --outputs position")
     return 130 if res.interrupted else 0
+
+
+class _Status:
+    """The progress line on `stream` (`report.synthesis.progress_line`): on a terminal one line
+    rewritten in place, the search's log lines printed above it; elsewhere a line per step."""
+
+    def __init__(self, stream, tty: bool, best_file: str | None):
+        self.stream, self.tty, self.best_file, self.line = stream, tty, best_file, ""
+
+    def _write(self, text: str) -> None:
+        self.stream.write(text)
+        self.stream.flush()
+
+    def show(self, p) -> None:
+        from ..report.synthesis import progress_line
+
+        self.line = progress_line(p, self.best_file)
+        self._write(f"\r{self.line}\x1b[K" if self.tty else self.line + "\n")
+
+    def log(self, text: str) -> None:
+        self._write(f"\r{text}\x1b[K\n{self.line}" if self.tty else text + "\n")
+
+    def close(self) -> None:
+        if self.tty and self.line:
+            self._write("\n")
+        self.line = ""

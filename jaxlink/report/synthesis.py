@@ -36,6 +36,27 @@ def table(res) -> str:
     return "\n".join(lines)
 
 
+def progress_line(p, best_file: str | None = None) -> str:
+    """One line of a running synthesis (`jaxlink.synthesis.progress.Progress`): the stage and round,
+    the topologies scored, the best design so far (its distance, topology, joints and least
+    transmission angle, and `best_file`, where the best design so far is written, if given), the
+    time spent and, with a limit, the time left."""
+    if p.stage == "compiling":
+        where = "compiling the programs"
+    elif p.stage == "done":
+        where = f"done after {p.round} round{'s' if p.round != 1 else ''}"
+    else:
+        where = f"round {p.round}{' (polish)' if p.polish else ''}: {p.scored}/{p.topologies} topologies scored"
+        if p.stage == "polished":
+            where = f"round {p.round}: float64 polish"
+    best = "no design yet" if not p.topology else (
+        f"best {p.distance:.4g} ({p.topology}, {p.joints} joints, mu {p.transmission_deg:.0f} deg)")
+    if p.topology and best_file:
+        best += f" in {best_file}"
+    clock = f"{p.elapsed_s:.0f} s" + (f", {max(0.0, p.left_s):.0f} s left" if p.left_s is not None else "")
+    return f"{where} | {best} | {clock}"
+
+
 def to_json(res) -> dict:
     """The JSON of the ranked designs (docs/reference/cli.md, `jaxlink synthesize`)."""
     t = res.target

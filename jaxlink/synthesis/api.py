@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import functools
 import math
 import time
 from concurrent.futures import ThreadPoolExecutor
@@ -15,6 +16,7 @@ from ..errors import MechanismError
 from ..model.sketch import Sketch
 from . import checkpoint as _checkpoint
 from . import distance as _dist
+from . import progress as _progress
 from . import size as _size
 from . import transmission as _tm
 from .mechanism import crank_angle, placed_pose, to_sketch
@@ -153,6 +155,13 @@ def _timed_points(c: Candidate, target: Target, m: _dist.Match, start_deg: float
     return start_deg + np.degrees(dt), at
 
 
+def _write_best(path: Path, target: Target, n_trace: int, name: str, c: Candidate) -> None:
+    """The design of candidate `c` written to `path` as a sketch file, atomically."""
+    tmp = path.with_name(path.name + ".tmp")
+    tmp.write_text(_design(c, target, n_trace, name).sketch.toml())
+    tmp.replace(path)
+
+
 def _blocks_of(options: dict, time_limit: float | None) -> tuple[int, ...]:
     """The blocks' caps a search with these `search.search` options and time limit takes."""
     given = checked_blocks(options.get("blocks"))
@@ -165,7 +174,9 @@ def synthesize(target: Any, *, closed: bool | None = None, time_limit: float | N
                n_points: int = _dist.N_POINTS, count: int = 1000, samples: int = 8192, name: str = "synthesized",
                max_size: float | None = None, min_transmission: float | None = None,
                log: Callable[[str], None] | None = None, checkpoint: str | Path | None = None,
-               resume: bool = False, started: float | None = None, **search_options) -> Synthesis:
+               resume: bool = False, started: float | None = None,
+               progress: Callable[[_progress.Progress], None] | None = None, best_file: str | Path | None = None,
+               **search_options) -> Synthesis:
     """Find linkages whose traced point follows `target` (a path to a .csv/.npy/.svg file, an
     (N, 2) array or a `Target`), up to `max_links` links, in `rounds` search rounds or within
     `time_limit` seconds.
@@ -188,7 +199,11 @@ def synthesize(target: Any, *, closed: bool | None = None, time_limit: float | N
     none), and programs whose compile would not fit (as measured on this machine before:
     `compiling`) are not compiled — the log says so. `started` (a `time.perf_counter()` time,
     default this call's): when the limit's clock started (the command line's: its start, so that
-    loading and importing count). When it stops the search,
+    loading and importing count). `progress` (a function, if given): called with a
+    `jaxlink.synthesis.progress.Progress` at every stage of the search (compiling, each round's start,
+    each topology scored, each float64 polish, the end), with the best design so far. `best_file`
+    (a path, if given): the best design so far written there as a sketch file after every round and
+    every polish where it changed (replaced whole: a reader never sees half a file). When it stops the search,
     `Synthesis.stopped_by` is "time_limit" and the designs depend on the machine's speed. A limit
     of at most 15 s also chooses the quick programs (`search.quick_of`). Spread over this
     process's devices, and over the processes of a `jax.distributed` group
@@ -286,7 +301,10 @@ def synthesize(target: Any, *, closed: bool | None = None, time_limit: float | N
                        n_trace=count, n_points=n_points, t0=t0, log=log, status=status,
                        max_size=None if max_size is None else float(max_size),
                        min_transmission=None if min_transmission is None else float(min_transmission),
-                       checkpoint=checkpoint, resume=bool(resume), fingerprint=fp, **search_options)
+                       checkpoint=checkpoint, resume=bool(resume), fingerprint=fp,
+                       progress=None if progress is None and best_file is None else _progress.relay(
+                           progress, tgt, None if best_file is None else functools.partial(
+                               _write_best, Path(best_file), tgt, count, name)), **search_options)
     except KeyboardInterrupt:
         # stopped: the candidates of the rounds done, as saved after the last one (none saved: stop)
         saved = _checkpoint.load(Path(checkpoint), fp) if checkpoint is not None else None

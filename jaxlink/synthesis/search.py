@@ -104,7 +104,8 @@ def search(target: Target, topos: list[Topology], *, time_limit: float | None = 
            lr: float = 0.01, jitter: float = 0.02, quick: bool | None = None, t0: float | None = None,
            finish: int | None = None, max_size: float | None = None, min_transmission: float | None = None,
            log=None, checkpoint=None, resume: bool = False, fingerprint: str = "",
-           blocks: tuple[int, int, int] | None = None, status: dict | None = None) -> list[Candidate]:
+           blocks: tuple[int, int, int] | None = None, status: dict | None = None,
+           progress=None) -> list[Candidate]:
     """Rounds of screen → rank → refine → score: `rounds` of them, or until `time_limit` seconds.
     `rounds` (default `DEFAULT_ROUNDS` when no `time_limit` is given): that many rounds (the
     polishing ones counted), full and polishing alternating: the same result on any machine, any
@@ -141,7 +142,12 @@ def search(target: Target, topos: list[Topology], *, time_limit: float | None = 
     (`checkpoint.load`; none: from the start). With `rounds` a resumed search ends with exactly the
     uninterrupted one's candidates; with a time limit the time spent before counts against it.
     `blocks`: the caps (screen, rank, refinement) of the batches' blocks (`programs`; default the
-    platform's, `block_caps`: the answer's bits depend on them).
+    platform's, `block_caps`: the answer's bits depend on them). `progress` (a function, if given)
+    is called with a dict as the search goes: `stage` ("compiling" before the programs are
+    compiled, "round" when a round starts, "scored" after each topology's scoring — `scored` of
+    `topologies` done —, "polished" after each float64 polish, "done"), `round`, `polish` (a
+    polishing round), `best` (the best `Candidate` so far, or None), `elapsed` and `left` (seconds
+    since the search's clock started, and of the time limit left; None without one).
     Returns every scored candidate that assembles (and is within `max_size`, and keeps
     `min_transmission`), best first."""
     if rounds is not None and (isinstance(rounds, bool) or not isinstance(rounds, (int, np.integer)) or rounds < 1):
@@ -184,6 +190,10 @@ def search(target: Target, topos: list[Topology], *, time_limit: float | None = 
     finish = (0 if quick else 4) if finish is None else finish
     sliders = any(t.sliders or t.levers for t in topos)  # the programs that trace both kinds
     polish_points = (len(target.points) if timed else n_points) if finish > 0 else 0
+    if progress is not None:
+        progress(dict(stage="compiling", round=0, polish=False, scored=0, topologies=len(topos), best=None,
+                      elapsed=time.perf_counter() - began,
+                      left=limit - (time.perf_counter() - began) if capped else None))
     # a time limit in one process: a compile that would not end by `ABANDON_AT` times it is not
     # started, and one still running then ends the search
     start = began if saved is None else time.perf_counter() - saved["elapsed"]
@@ -279,6 +289,7 @@ def search(target: Target, topos: list[Topology], *, time_limit: float | None = 
         if new is not None:
             found.append(new)
         t_polish = time.perf_counter() - t1  # the estimate of the next one
+        tell("polished")
         if log is not None:
             log(f"polished {c.topology.name}: {c.match.distance:.4f} -> "
                 f"{new.match.distance if new is not None else float('nan'):.4f}, {time.perf_counter() - began:.1f} s")
@@ -308,10 +319,19 @@ def search(target: Target, topos: list[Topology], *, time_limit: float | None = 
         for blocked in prog:
             if blocked is not None:
                 blocked.deadline = began + ABANDON_AT * limit
+    def tell(stage: str, scored: int = 0) -> None:
+        """`progress` told where the search is (`stage`, `scored` topologies of this round's scoring)."""
+        if progress is not None:
+            now = time.perf_counter()
+            progress(dict(stage=stage, round=rnd, polish=polish, scored=scored, topologies=len(topos),
+                          best=min(found, key=lambda c: c.match.distance, default=None), elapsed=now - began,
+                          left=limit - (now - began) if capped else None))
+
     round_start = time.perf_counter()
     while not done:
         try:
             rnd += 1
+            tell("round")
             n_before = len(found)
             clock: dict[str, float] = {}  # the round's phases (s), for the log
             if polish:
@@ -386,6 +406,7 @@ def search(target: Target, topos: list[Topology], *, time_limit: float | None = 
                 futures = {ti: ex.submit(scored, ti) for ti in first}
                 for ti in range(len(topos)):
                     found.extend(futures[ti].result())
+                    tell("scored", ti + 1)
             if log is not None:
                 best = min((c.match.distance for c in found), default=float("inf"))
                 clock["score"] = time.perf_counter() - t_score
@@ -437,6 +458,7 @@ def search(target: Target, topos: list[Topology], *, time_limit: float | None = 
         save("finish", last=last, n_done=len(last))
     found.sort(key=lambda c: c.match.distance)
     status["rounds"] = rnd
+    tell("done")
     return found
 
 
