@@ -36,6 +36,61 @@ def pyplot():
     return plt
 
 
+def wrapped(fig, text: str, fontsize: float, width: float = 0.96) -> str:
+    """`text` broken at spaces into lines that each fit in `width` of the figure's width when drawn
+    at `fontsize` (measured with the figure's renderer, not guessed from a character count)."""
+    r = fig.canvas.get_renderer()
+    limit = width * fig.bbox.width
+    probe = fig.text(0, 0, "", fontsize=fontsize)
+    lines: list[str] = []
+    for para in text.split("\n"):
+        line = ""
+        for word in para.split(" "):
+            trial = f"{line} {word}" if line else word
+            probe.set_text(trial)
+            if line and probe.get_window_extent(r).width > limit:
+                lines.append(line)
+                line = word
+            else:
+                line = trial
+        lines.append(line)
+    probe.remove()
+    return "\n".join(lines)
+
+
+def legend_below(fig, handles, labels, ncol: int, fontsize: float = 8):
+    """A figure legend centred below the panels, in at most `ncol` columns and as few fewer as it
+    takes to fit in the figure's width; the legend (None without handles)."""
+    if not handles:
+        return None
+    r = fig.canvas.get_renderer()
+    for n in range(max(1, min(ncol, len(labels))), 0, -1):
+        leg = fig.legend(handles, labels, loc="lower center", ncol=n, fontsize=fontsize, frameon=False)
+        if n == 1 or leg.get_window_extent(r).width <= 0.98 * fig.bbox.width:
+            return leg
+        leg.remove()
+    return None
+
+
+def finish(fig, path, *, title: str | None = None, legend=None, title_size: float = 10, dpi: int = 120) -> None:
+    """Lay out and write a figure of panels: the title wrapped to the figure's width above the
+    panels, `legend` = (handles, labels, columns) centred below them (`legend_below`), the panels
+    fitted between the two (`tight_layout` with the measured heights of title and legend), then
+    the figure written to `path` at `dpi` and closed. Every text stays inside the figure."""
+    r = fig.canvas.get_renderer()
+    H = fig.bbox.height
+    if title:  # tight_layout leaves room for it
+        fig.suptitle(wrapped(fig, title, title_size), fontsize=title_size)
+    bottom = 0.0
+    if legend is not None:
+        leg = legend_below(fig, *legend)
+        if leg is not None:
+            bottom = (leg.get_window_extent(r).height + 4) / H
+    fig.tight_layout(rect=(0, bottom, 1, 1))
+    fig.savefig(path, dpi=dpi)
+    pyplot().close(fig)
+
+
 def length_unit(mech) -> tuple:
     """(factor from metres to the file's length unit, its name)."""
     u = float(mech.units.length)
