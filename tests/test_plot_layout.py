@@ -160,3 +160,42 @@ def test_a_one_response_study_draws_its_plots_inside_the_figure(tmp_path):
         files = draw_plots(tmp_path, mech, rep)
     assert [f.name for f in files] == ["tolerance.png", "tornado.png", "histograms.png"]
     assert w.found == []
+
+
+@pytest.mark.parametrize("rpm", [None, 300.0])
+def test_kinematics_plot_rates_in_the_file_unit(tmp_path, rpm):
+    """The issue: 'plots show positions in mm and velocities in m/s'. The velocity panel of a
+    file in mm is in mm/s at a given speed and in mm/rad (the transfer function) without one, its
+    |v| line that of an independent numpy four-bar's central differences in φ (× ω with a speed)."""
+    from matplotlib.figure import Figure
+
+    from jaxlink.report.kinematics import kinematics_table
+    from jaxlink.report.plot import plot_kinematics
+
+    mech = jl.loads(FILE)
+    deg = np.arange(30.0, 390.0, 10.0)
+    omega = 1.0 if rpm is None else rpm * 2 * math.pi / 60
+    table = kinematics_table(mech, np.deg2rad(deg), omega=omega, rpm=rpm, input_values=deg)
+    grabbed = []
+    orig = Figure.savefig
+
+    def grab(fig, *a, **k):
+        grabbed.append(fig)
+        return orig(fig, *a, **k)
+
+    Figure.savefig = grab
+    try:
+        plot_kinematics(str(tmp_path / "k.png"), mech, table)
+    finally:
+        Figure.savefig = orig
+    ax = next(a for a in grabbed[0].axes if a.get_ylabel().startswith("velocity"))
+    assert ax.get_ylabel() == ("velocity (mm/rad)" if rpm is None else "velocity (mm/s)")
+    line = next(ln for ln in ax.get_lines() if ln.get_label() == "|v| P")
+    phi = np.deg2rad(deg)
+    x0 = np.array([20.0, 60.0, 45.0, 55.0, 30.0, 15.0])
+    nominal = table.points[:, 0, 0] * 1e3
+    pick = min((1, -1), key=lambda s: np.abs(_coupler_point(x0, phi, s)[:, 0] - nominal).max())
+    h = 1e-6
+    dP = (_coupler_point(x0, phi + h, pick) - _coupler_point(x0, phi - h, pick)) / (2 * h)
+    want = np.hypot(dP[:, 0], dP[:, 1]) * omega
+    np.testing.assert_allclose(line.get_ydata()[: len(deg)], want, rtol=1e-6)

@@ -23,6 +23,7 @@ import numpy as np
 from ..results import RESULTS
 from . import grid as _grid
 from .drawing import LinkageDrawing, drawing
+from .units import file_units
 
 UNITS = {1.0: "m", 1e-2: "cm", 1e-3: "mm"}
 
@@ -365,7 +366,9 @@ def limit_axis(ax, arrays, unit_text):
 
 
 def plot_kinematics(path: str, mech, table) -> None:
-    """The linkage and the point paths (left); positions, |v|, |a| over the input (right)."""
+    """The linkage and the point paths (left); positions, |v|, |a| over the input (right), in the
+    file's length unit: per second at the speed given (`--rpm`, `--omega`, named under the axis),
+    else per radian of the crank (per metre of a length input) — the transfer functions."""
     plt = pyplot()
     s, lu = length_unit(mech)
     x_in = table.input_values
@@ -378,6 +381,10 @@ def plot_kinematics(path: str, mech, table) -> None:
     if table.accelerations is not None:
         panels.append(("acceleration", table.accelerations))
     rows = len(panels)
+    # rates per second at a speed that was given; at the default unit speed they are the transfer
+    # functions d/dφ, d²/dφ² (per radian of the crank; per metre of a length input) and say so
+    given = table.rpm is not None or table.omega != 1.0
+    per = "s" if given else ("rad" if angle else "m")
     fig = plt.figure(figsize=(13, 3.4 * max(rows, 2)), layout="constrained")
     gs = fig.add_gridspec(rows, 2, width_ratios=[1.0, 1.15])
     ax_path = fig.add_subplot(gs[:, 0])
@@ -420,14 +427,15 @@ def plot_kinematics(path: str, mech, table) -> None:
             else:
                 assert arr is not None
                 letter = what[0]
-                mag = np.hypot(arr[:, i, 0], arr[:, i, 1])
+                shown = arr[:, i] * s  # the file's length unit
+                mag = np.hypot(shown[:, 0], shown[:, 1])
                 xx, yy = closed_curve(x_in, mag, table.periodic)
                 ax.plot(xx, yy, "-", color=col, lw=2.4, label=f"|{letter}| {pn}")
                 for comp, style in ((0, "-"), (1, "--")):
-                    xx, yy = closed_curve(x_in, arr[:, i, comp], table.periodic)
+                    xx, yy = closed_curve(x_in, shown[:, comp], table.periodic)
                     ax.plot(xx, yy, style, color=col, lw=0.9, alpha=0.7, label=f"{pn} {letter}{'xy'[comp]}")
-                series += [mag, arr[:, i, 0], arr[:, i, 1]]
-        unit = {"position": lu, "velocity": "m/s", "acceleration": "m/s²"}[what]
+                series += [mag, shown[:, 0], shown[:, 1]]
+        unit = {"position": lu, "velocity": f"{lu}/{per}", "acceleration": f"{lu}/{per}²"}[what]
         ax.set_ylabel(f"{what} ({unit})")
         _shade_failures(ax, x_in, table)
         if what != "position":
@@ -438,7 +446,7 @@ def plot_kinematics(path: str, mech, table) -> None:
         if ax.get_legend_handles_labels()[0]:
             ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8, frameon=False)
         if r == rows - 1:
-            speed = f", at {table.speed_text()}" if rows > 1 else ""
+            speed = f", at {table.speed_text(file_units(mech))}" if rows > 1 and given else ""
             ax.set_xlabel(xlabel + speed)
     fig.savefig(path, dpi=110)
     plt.close(fig)
