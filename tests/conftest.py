@@ -35,3 +35,16 @@ jax.config.update("jax_enable_x64", True)
 from jaxlink.cache import enable_compilation_cache  # noqa: E402
 
 enable_compilation_cache()
+
+import pytest  # noqa: E402
+
+
+@pytest.fixture(autouse=True)
+def _figures_read_cleanly():
+    """Every figure a test saves in its own process is checked as it is written (tests/layout.py:
+    no text outside the figure, no overlapping tick labels); the test fails if one is not."""
+    from layout import Watch
+
+    with Watch() as w:
+        yield
+    assert not w.found, "figures with cut-off or overlapping text:\n" + "\n".join(w.found)

@@ -23,6 +23,7 @@ import numpy as np
 from ..results import RESULTS
 from . import grid as _grid
 from .drawing import LinkageDrawing, drawing
+from .units import file_units
 
 UNITS = {1.0: "m", 1e-2: "cm", 1e-3: "mm"}
 
@@ -34,6 +35,61 @@ def pyplot():
     import matplotlib.pyplot as plt
 
     return plt
+
+
+def wrapped(fig, text: str, fontsize: float, width: float = 0.96) -> str:
+    """`text` broken at spaces into lines that each fit in `width` of the figure's width when drawn
+    at `fontsize` (measured with the figure's renderer, not guessed from a character count)."""
+    r = fig.canvas.get_renderer()
+    limit = width * fig.bbox.width
+    probe = fig.text(0, 0, "", fontsize=fontsize)
+    lines: list[str] = []
+    for para in text.split("\n"):
+        line = ""
+        for word in para.split(" "):
+            trial = f"{line} {word}" if line else word
+            probe.set_text(trial)
+            if line and probe.get_window_extent(r).width > limit:
+                lines.append(line)
+                line = word
+            else:
+                line = trial
+        lines.append(line)
+    probe.remove()
+    return "\n".join(lines)
+
+
+def legend_below(fig, handles, labels, ncol: int, fontsize: float = 8):
+    """A figure legend centred below the panels, in at most `ncol` columns and as few fewer as it
+    takes to fit in the figure's width; the legend (None without handles)."""
+    if not handles:
+        return None
+    r = fig.canvas.get_renderer()
+    for n in range(max(1, min(ncol, len(labels))), 0, -1):
+        leg = fig.legend(handles, labels, loc="lower center", ncol=n, fontsize=fontsize, frameon=False)
+        if n == 1 or leg.get_window_extent(r).width <= 0.98 * fig.bbox.width:
+            return leg
+        leg.remove()
+    return None
+
+
+def finish(fig, path, *, title: str | None = None, legend=None, title_size: float = 10, dpi: int = 120) -> None:
+    """Lay out and write a figure of panels: the title wrapped to the figure's width above the
+    panels, `legend` = (handles, labels, columns) centred below them (`legend_below`), the panels
+    fitted between the two (`tight_layout` with the measured heights of title and legend), then
+    the figure written to `path` at `dpi` and closed. Every text stays inside the figure."""
+    r = fig.canvas.get_renderer()
+    H = fig.bbox.height
+    if title:  # tight_layout leaves room for it
+        fig.suptitle(wrapped(fig, title, title_size), fontsize=title_size)
+    bottom = 0.0
+    if legend is not None:
+        leg = legend_below(fig, *legend)
+        if leg is not None:
+            bottom = (leg.get_window_extent(r).height + 4) / H
+    fig.tight_layout(rect=(0, bottom, 1, 1))
+    fig.savefig(path, dpi=dpi)
+    pyplot().close(fig)
 
 
 def length_unit(mech) -> tuple:
@@ -310,7 +366,9 @@ def limit_axis(ax, arrays, unit_text):
 
 
 def plot_kinematics(path: str, mech, table) -> None:
-    """The linkage and the point paths (left); positions, |v|, |a| over the input (right)."""
+    """The linkage and the point paths (left); positions, |v|, |a| over the input (right), in the
+    file's length unit: per second at the speed given (`--rpm`, `--omega`, named under the axis),
+    else per radian of the crank (per metre of a length input) — the transfer functions."""
     plt = pyplot()
     s, lu = length_unit(mech)
     x_in = table.input_values
@@ -323,6 +381,10 @@ def plot_kinematics(path: str, mech, table) -> None:
     if table.accelerations is not None:
         panels.append(("acceleration", table.accelerations))
     rows = len(panels)
+    # rates per second at a speed that was given; at the default unit speed they are the transfer
+    # functions d/dφ, d²/dφ² (per radian of the crank; per metre of a length input) and say so
+    given = table.rpm is not None or table.omega != 1.0
+    per = "s" if given else ("rad" if angle else "m")
     fig = plt.figure(figsize=(13, 3.4 * max(rows, 2)), layout="constrained")
     gs = fig.add_gridspec(rows, 2, width_ratios=[1.0, 1.15])
     ax_path = fig.add_subplot(gs[:, 0])
@@ -365,14 +427,15 @@ def plot_kinematics(path: str, mech, table) -> None:
             else:
                 assert arr is not None
                 letter = what[0]
-                mag = np.hypot(arr[:, i, 0], arr[:, i, 1])
+                shown = arr[:, i] * s  # the file's length unit
+                mag = np.hypot(shown[:, 0], shown[:, 1])
                 xx, yy = closed_curve(x_in, mag, table.periodic)
                 ax.plot(xx, yy, "-", color=col, lw=2.4, label=f"|{letter}| {pn}")
                 for comp, style in ((0, "-"), (1, "--")):
-                    xx, yy = closed_curve(x_in, arr[:, i, comp], table.periodic)
+                    xx, yy = closed_curve(x_in, shown[:, comp], table.periodic)
                     ax.plot(xx, yy, style, color=col, lw=0.9, alpha=0.7, label=f"{pn} {letter}{'xy'[comp]}")
-                series += [mag, arr[:, i, 0], arr[:, i, 1]]
-        unit = {"position": lu, "velocity": "m/s", "acceleration": "m/s²"}[what]
+                series += [mag, shown[:, 0], shown[:, 1]]
+        unit = {"position": lu, "velocity": f"{lu}/{per}", "acceleration": f"{lu}/{per}²"}[what]
         ax.set_ylabel(f"{what} ({unit})")
         _shade_failures(ax, x_in, table)
         if what != "position":
@@ -383,7 +446,7 @@ def plot_kinematics(path: str, mech, table) -> None:
         if ax.get_legend_handles_labels()[0]:
             ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8, frameon=False)
         if r == rows - 1:
-            speed = f", at {table.speed_text()}" if rows > 1 else ""
+            speed = f", at {table.speed_text(file_units(mech))}" if rows > 1 and given else ""
             ax.set_xlabel(xlabel + speed)
     fig.savefig(path, dpi=110)
     plt.close(fig)

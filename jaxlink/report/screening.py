@@ -195,12 +195,12 @@ def plot_indices(path, mech, rep) -> bool:
     """Morris: μ* against σ per factor, one panel per scalar output (the feasibility first);
     regression: SRC and PRCC bars with their intervals; DGSM: the ST bound's bars. False (nothing
     drawn) where there is no panel."""
+    from .plot import finish
     from .sampling import _plt
 
     panels: list[Any] = []
-    if isinstance(rep, MorrisReport):
-        panels.append(("feasible (indicator)", rep.feasibility, 0))
-    elif isinstance(rep, RegressionReport):
+    every = rep.feasible_fraction >= 1.0  # the indicator is constant: its panel would be one point
+    if isinstance(rep, (MorrisReport, RegressionReport)) and not every:
         panels.append(("feasible (indicator)", rep.feasibility, 0))
     if rep.indices is not None:
         panels += [(f"{name} ({unit})", rep.indices, i) for i, (name, unit, k) in enumerate(rep.labels) if k is None]
@@ -238,8 +238,11 @@ def plot_indices(path, mech, rep) -> bool:
         ax.grid(True, lw=0.3)
     for ax in axes.ravel()[len(panels):]:
         ax.axis("off")
-    fig.suptitle(f"{mech.name}: {_method(rep)}", fontsize=10)
-    fig.tight_layout()
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
+    what = {MorrisReport: "Morris elementary effects (μ* against σ)", RegressionReport:
+            "standardised regression (SRC) and partial rank correlation (PRCC) coefficients",
+            DGSMReport: "derivative-based upper bounds of ST"}[type(rep)]
+    n = f"{rep.evaluations if isinstance(rep, MorrisReport) else rep.samples} designs"
+    feas = ("every design assembles" if every else
+            f"{100 * (1 - rep.feasible_fraction):.3g} % of the designs do not assemble")
+    finish(fig, path, title=f"{mech.name}: {what}; {n}, {feas}")
     return True

@@ -326,19 +326,26 @@ def plot_band(path, mech, rep: ToleranceReport, *, k: float = 3.0, ellipses: int
 
 
 def _finish(fig, axes, used: int, path, title: str, legend_cols: int | None) -> None:
-    """The unused panels off, the first panel's legend below the figure (`legend_cols` columns;
-    None: no legend), the title, and the figure written to `path` and closed."""
-    from .plot import pyplot
+    """The unused panels off, the first panel's legend below the figure (at most `legend_cols`
+    columns; None: no legend), the title, and the figure written to `path` and closed
+    (`plot.finish`: every text inside the figure)."""
+    from .plot import finish
 
     for ax in axes.ravel()[used:]:
         ax.axis("off")
-    if legend_cols:
-        h, lab = axes.ravel()[0].get_legend_handles_labels()
-        fig.legend(h, lab, loc="lower center", ncol=legend_cols, fontsize=8)
-    fig.suptitle(title, fontsize=10)
-    fig.tight_layout(rect=(0, 0.05 if legend_cols else 0, 1, 0.95))
-    fig.savefig(path, dpi=120)
-    pyplot().close(fig)
+    legend = (*axes.ravel()[0].get_legend_handles_labels(), legend_cols) if legend_cols else None
+    finish(fig, path, title=title, legend=legend)
+
+
+def _input_text(mech, x: float) -> str:
+    """An input value of the study (file units) as a designer names it: a crank angle reduced to
+    one turn (a cycle from 19° has its last position at 19° + 359°, named 18°), a length as is."""
+    lu, au = unit_names(mech)
+    if mech.input_kind != "angle":
+        return f"{x:.4g} {lu}"
+    turn = 360.0 if au == "deg" else 2 * math.pi
+    r = float(np.mod(x, turn))
+    return f"{0.0 if math.isclose(r, turn, rel_tol=0, abs_tol=1e-9) else r:.4g} {au}"
 
 
 def tornado_rows(mech, rep: ToleranceReport) -> list:
@@ -360,8 +367,8 @@ def tornado_rows(mech, rep: ToleranceReport) -> list:
             continue
         c = t[None, :] * np.hypot(f.jacobian[rx], f.jacobian[ry])  # (N, T)
         k = int(np.argmax(c.sum(axis=1)))
-        where = rep.input_values[rep.labels[rx[k]][2]]
-        out.append((f"deviation({p}) at {where:.4g} {unit_names(mech)[1]}", lu, np.zeros(len(t)), c[k]))
+        out.append((f"deviation({p}) at {_input_text(mech, rep.input_values[rep.labels[rx[k]][2]])}", lu,
+                    np.zeros(len(t)), c[k]))
     return out
 
 
