@@ -12,7 +12,11 @@ LInK" is counted under both metrics. (The stored (2000, 2) curve beside them is 
 The letters have no licence: they are read from a path (`--letters`, default `$JAXLINK_LINKABC`,
 e.g. /work/data/linkabc/alphabet.npy, a (26, 200, 2) array, A..Z) and never copied into the
 repository; LInK's mechanisms from `alpha_res.npy` beside it when present. The four-bar is
-always searched, so the answer is never worse than the best four-bar found.
+always searched, so the answer is never worse than the best four-bar found. The search keeps the
+designer's default bounds (30°, links and frame pivots within 3 extents: synthesis/bounds.py;
+`--bounds off`: none); each row records the best design's least transmission angle, size, whether
+it meets the default bounds, and the simplest topology within 10 %; the summary counts the letters
+whose best meets them.
 
     python benchmarks/synthesis_letters.py --letters /work/data/linkabc/alphabet.npy \
         --only CDILOSUV --time-limit 100 [--cores 2]
@@ -42,6 +46,10 @@ jax.config.update("jax_enable_x64", True)
 
 import jaxlink as jl  # noqa: E402
 from jaxlink.synthesis import link_chamfer, match  # noqa: E402
+from jaxlink.synthesis.bounds import MAX_PIVOT, MAX_SIZE, MIN_TRANSMISSION  # noqa: E402
+
+#: every designer's bound off (`--bounds off`): the search of before the defaults
+BOUNDS_OFF = dict(min_transmission=None, max_size=None, max_pivot=None)
 
 
 def link_curve(entry, n: int = 2000):
@@ -94,12 +102,14 @@ def summarise(rows: list[dict]) -> dict:
                                               if r["distance"] is not None and r["four_bar"] is not None)),
                "better_than_link": int(sum(r["distance"] < r["link_distance"] for r in rows
                                            if r["distance"] is not None and r["link_distance"] is not None)),
+               "meets_default_bounds": int(sum(bool(r.get("meets_default")) for r in rows)),
                "max_time_s": max(r["time_s"] for r in rows)}
     print(f"mean {summary['mean']:.4f}  median {summary['median']:.4f}  (LInK's mechanisms, same metric: mean "
           f"{summary['link_mean']}, median {summary['link_median']}); better than LInK on "
           f"{summary['better_than_link']}/{len(rows)}; LInK's metric at 2000 points: mean "
           f"{summary['mean_link_chamfer_2000']} against {summary['link_mean_link_chamfer_2000']}, better on "
-          f"{summary['better_than_link_2000']}/{len(rows)}; slowest {summary['max_time_s']:.1f} s")
+          f"{summary['better_than_link_2000']}/{len(rows)}; meeting the default bounds (30°, 3 extents) "
+          f"{summary['meets_default_bounds']}/{len(rows)}; slowest {summary['max_time_s']:.1f} s")
     return summary
 
 
@@ -126,6 +136,8 @@ def main() -> int:
     ap.add_argument("--max-links", type=int, default=8)
     ap.add_argument("--samples", type=int, default=8192)
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--bounds", choices=("default", "off"), default="default",
+                    help="the designer's bounds (synthesis/bounds.py: 30°, 3 extents, 3 extents) or none (off)")
     ap.add_argument("--cores", type=int, default=None, help="pin to this many cores")
     ap.add_argument("--cache", action="store_true",
                     help="jaxlink's persistent compilation cache on (as `jaxlink synthesize` has it): a warm start")
@@ -159,7 +171,7 @@ def main() -> int:
         i = ord(ch) - 65
         t0 = time.perf_counter()
         r = jl.synthesize(letters[i], time_limit=args.time_limit, seed=args.seed, max_links=args.max_links,
-                          samples=args.samples,
+                          samples=args.samples, **({} if args.bounds == "default" else BOUNDS_OFF),
                           log=(lambda m, ch=ch: print(f"  {ch} {m}", flush=True)) if args.log else None)
         wall = time.perf_counter() - t0
         tgt = r.target
@@ -178,6 +190,11 @@ def main() -> int:
                "time_s": wall, "found_s": b.found_s if b else None, "link_distance": theirs,
                "link_link_chamfer_2000": theirs2,
                "link_stored_chamfer": stored,
+               "transmission_deg": b.transmission_deg if b else None, "size": b.size if b else None,
+               # with the default bounds the design's own exact check; off, its angle and sizes against them
+               "meets_default": bool(b and (b.meets if args.bounds == "default" else (
+                   b.transmission_deg >= MIN_TRANSMISSION and b.link_size <= MAX_SIZE and b.pivot_size <= MAX_PIVOT))),
+               "simplest": r.designs[r.simplest].topology if r.simplest is not None else None,
                "link_joints": int((np.asarray(link[i][0][0]).sum(-1) > 0).sum()) if link is not None else None}
         rows.append(row)
         save(rows)

@@ -126,7 +126,7 @@ def case(cls: str, k: int, rng: np.random.Generator, args) -> dict:
     fl = floor(trace_exact(topo, pose, dense)[0][:, topo.traced], closed)
     t0 = time.perf_counter()
     r = jl.synthesize(curve, closed=closed, time_limit=args.time_limit, seed=args.seed + k,
-                      max_links=args.max_links, samples=args.samples)
+                      max_links=args.max_links, samples=args.samples, **_bounds(args))
     wall = time.perf_counter() - t0
     b = r.best
     row = {"class": cls, "case": k, "closed": closed, "planted": topo.name, "planted_joints": topo.n_joints,
@@ -134,15 +134,24 @@ def case(cls: str, k: int, rng: np.random.Generator, args) -> dict:
            "found": b.topology, "found_joints": b.joints, "distance": b.distance,
            "link_chamfer_2000": b.link_chamfer_2000, "floor": fl,
            "ratio": b.distance / fl, "recovered": bool(b.distance <= args.factor * fl), "time_s": wall,
-           "found_s": b.found_s}
+           "found_s": b.found_s, "meets": b.meets, "transmission_deg": b.transmission_deg, "size": b.size,
+           "simplest": r.designs[r.simplest].topology if r.simplest is not None else None,
+           # issue 47: the planted topology or a smaller one on the Pareto front within 10 % of the best
+           "planted_or_smaller_on_front": any(d.pareto and d.joints <= topo.n_joints and d.distance <= 1.1 * b.distance
+                                              for d in r.designs)}
     if cls == "8" and args.eight_given:
         t1 = time.perf_counter()
         g = jl.synthesize(curve, closed=closed, time_limit=args.time_limit, seed=args.seed + k,
-                          topologies=[topo], samples=args.samples)
+                          topologies=[topo], samples=args.samples, **_bounds(args))
         row |= {"given_distance": g.best.distance, "given_ratio": g.best.distance / fl,
                 "given_recovered": bool(g.best.distance <= args.factor * fl),
                 "given_time_s": time.perf_counter() - t1}
     return row
+
+
+def _bounds(args) -> dict:
+    """The synthesis's bounds: its defaults (synthesis/bounds.py), or none (`--bounds off`)."""
+    return {} if args.bounds == "default" else dict(min_transmission=None, max_size=None, max_pivot=None)
 
 
 def main() -> int:
@@ -157,6 +166,8 @@ def main() -> int:
     ap.add_argument("--samples", type=int, default=8192)
     ap.add_argument("--eight-given", action="store_true", help="search each eight-bar again with its own topology")
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--bounds", choices=("default", "off"), default="default",
+                    help="the designer's bounds of synthesize (30°, 3 extents, 3 extents) or none (off)")
     ap.add_argument("--cores", type=int, default=None, help="pin to this many cores")
     ap.add_argument("--out", default=str(Path(__file__).parent / "results" / "synthesis_planted.json"))
     args = ap.parse_args()
@@ -168,10 +179,10 @@ def main() -> int:
     quick = args.time_limit <= 15.0  # the search's default, which selects the programs
     for closed in (True, False):
         jl.synthesize(warm if closed else warm[:60], closed=closed, rounds=1, max_links=args.max_links,
-                      samples=args.samples, quick=quick)
+                      samples=args.samples, quick=quick, **_bounds(args))
         if args.eight_given and "8" in classes:
             jl.synthesize(warm if closed else warm[:60], closed=closed, rounds=1, samples=args.samples,
-                          topologies=[eight_bar(np.random.default_rng(0))], quick=quick)
+                          topologies=[eight_bar(np.random.default_rng(0))], quick=quick, **_bounds(args))
     compile_s = time.perf_counter() - t0
     given = ", eight-bar given" if args.eight_given else ""
     print(f"compiled (closed and open{given}) in {compile_s:.1f} s", flush=True)

@@ -55,7 +55,8 @@ def main() -> int:
         tgt = make_target(pts, inputs=phis if timed else None, closed=True, unit="mm", source="sewing-feed Z")
         t0 = time.perf_counter()
         res = jl.synthesize(tgt, time_limit=args.time_limit, topologies=names, max_links=args.max_links,
-                            max_size=args.max_size, min_transmission=args.min_transmission)
+                            max_size=args.max_size, max_pivot=args.max_size,  # links and pivots, as before
+                            min_transmission=args.min_transmission)
         wall = time.perf_counter() - t0
         print(f"\n{'timed (ordered distance)' if timed else 'untimed (chamfer distance)'}: {wall:.1f} s")
         for d in res.designs[:5]:

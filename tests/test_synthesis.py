@@ -21,6 +21,10 @@ from jaxlink.synthesis.search import score
 from jaxlink.synthesis.target import arclength_resample, load_target, make_target
 from jaxlink.synthesis.tracer import trace_exact
 
+#: the designer's bounds off (`jaxlink.synthesis.bounds`): the unbounded search these tests were made for
+OFF = dict(min_transmission=None, max_size=None, max_pivot=None)
+OFF_CLI = ["--min-transmission", "0", "--max-size", "none", "--max-pivot", "none"]
+
 FOUR_BAR = T.topologies()[0]
 # a crank-rocker: F0 = 0, F1 = (1, 0), crank 0.3, coupler point P off the coupler C–B
 POSE = np.array([[0, 0], [1.0, 0], [0, 0], [0.3, 0.0], [1.1, 0.8], [0.5, 0.9]])
@@ -130,7 +134,7 @@ def test_planted_four_bar_closed_and_replay(tmp_path):
     assert tgt.closed and tgt.unit == "mm"
     out_dir = tmp_path / "syn"
     assert cli_main(["synthesize", str(f), "--topologies", "four-bar", "--rounds", "1", "--quick", "--count", "400",
-                     "--out", str(out_dir)]) == 0
+                     *OFF_CLI, "--out", str(out_dir)]) == 0
     res = json.loads((out_dir / "synthesis.json").read_text())
     best = res["designs"][0]
     assert (out_dir / "synthesis.png").stat().st_size > 0 and best["topology"] == "four-bar"
@@ -233,7 +237,7 @@ def test_planted_open_arc_by_subinterval():
     tgt = make_target(arc * 2.0, closed=False)
     assert not tgt.closed
     # rank and refine: the shapes of the closed run above (one program for both); a smaller screen
-    r = synthesize(tgt, topologies=["four-bar"], rounds=1, quick=True, count=400, samples=1024)
+    r = synthesize(tgt, topologies=["four-bar"], rounds=1, quick=True, count=400, samples=1024, **OFF)
     best = r.best
     assert best.stop_deg - best.start_deg < 300
     assert best.distance <= 1.5 * _floor(tgt.points, False)
@@ -403,7 +407,7 @@ def test_topology_objects_are_searched():
     pose = POSE.copy()
     pose[4] = [1.1, -0.8]     # the rocker dyad's branch sign flips with its parents' order: the other assembly
     target = trace_exact(mine, pose, np.linspace(0, 2 * np.pi, 400, endpoint=False))[0][:, mine.traced]
-    r = synthesize(target, topologies=[mine], rounds=1, quick=True, count=400)
+    r = synthesize(target, topologies=[mine], rounds=1, quick=True, count=400, **OFF)
     assert [d.topology for d in r.designs] == ["my-four-bar"] and r.best.joints == 5
     assert r.best.distance <= 1.5 * _floor(target, True)
     for bad in (3, 0, -1, 4.5, True):

@@ -19,6 +19,9 @@ from jaxlink.synthesis.assembly import certify
 from jaxlink.synthesis.target import load_target
 from jaxlink.synthesis.tracer import trace, trace_exact
 
+#: the designer's bounds off (`jaxlink.synthesis.bounds`): the unbounded search these tests were made for
+OFF_CLI = ["--min-transmission", "0", "--max-size", "none", "--max-pivot", "none"]
+
 #: the four-bar whose rocker dyad is a slotted lever about F1 (the Whitworth quick return's lever),
 #: its point P hung on the crank pin and the lever's point J4 by two links
 LEVER = T.lever(T.topologies()[0], 0)
@@ -135,7 +138,7 @@ def test_planted_lever_design_is_recovered_and_replayed(tmp_path):
     f.write_text("x_mm,y_mm\n" + "\n".join(f"{float(x)!r},{float(y)!r}" for x, y in target))
     out_dir = tmp_path / "syn"
     assert cli_main(["synthesize", str(f), "--closed", "--topologies", "four-bar,four-bar+lever-J4", "--rounds", "2",
-                     "--samples", "2048", "--quick", "--count", "400", "--no-plot",
+                     "--samples", "2048", "--quick", "--count", "400", "--no-plot", *OFF_CLI,
                      "--out", str(out_dir)]) == 0
     res = json.loads((out_dir / "synthesis.json").read_text())
     best = res["designs"][0]

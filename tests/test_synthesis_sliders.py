@@ -21,6 +21,9 @@ from jaxlink.synthesis.search import score
 from jaxlink.synthesis.target import load_target, make_target
 from jaxlink.synthesis.tracer import trace, trace_exact
 
+#: the designer's bounds off (`jaxlink.synthesis.bounds`): the unbounded search these tests were made for
+OFF_CLI = ["--min-transmission", "0", "--max-size", "none", "--max-pivot", "none"]
+
 SLIDER_CRANK = next(t for t in T.topologies(4, sliders=True) if t.name == "slider-crank")
 
 
@@ -157,7 +160,7 @@ def test_planted_slider_crank_is_recovered_and_replayed(tmp_path):
     f.write_text("x_mm,y_mm\n" + "\n".join(f"{float(x)!r},{float(y)!r}" for x, y in target))
     out_dir = tmp_path / "syn"
     assert cli_main(["synthesize", str(f), "--topologies", "slider-crank", "--rounds", "3", "--samples", "2048",
-                     "--quick", "--count", "400", "--out", str(out_dir)]) == 0
+                     "--quick", "--count", "400", *OFF_CLI, "--out", str(out_dir)]) == 0
     res = json.loads((out_dir / "synthesis.json").read_text())
     best = res["designs"][0]
     assert best["topology"] == "slider-crank" and best["joints"] == 4 and best["links"] == 4

@@ -84,7 +84,9 @@ def test_programs_given_later_compute_the_same_bits_and_are_asked_for_once():
 
 # a quick search: its refinement's blocks are of at most REFINE_BLOCK_QUICK = 64 slots, so
 # 80 slots make two blocks of 40 (each device gets screen, rank and refinement blocks)
-_SEARCH = dict(closed=True, topologies=["four-bar"], quick=True, rounds=2, count=400, samples=2048, refine=80)
+# the designer's bounds off (`synthesis.bounds`): the unbounded programs
+_SEARCH = dict(closed=True, topologies=["four-bar"], quick=True, rounds=2, count=400, samples=2048, refine=80,
+               min_transmission=None, max_size=None, max_pivot=None)
 
 _TWO_DEVICES = r"""
 import sys, jax, numpy as np

@@ -22,6 +22,10 @@ from jaxlink.synthesis.search import score, timed_samples
 from jaxlink.synthesis.target import load_target, make_target
 from jaxlink.synthesis.tracer import trace_exact
 
+#: the designer's bounds off (`jaxlink.synthesis.bounds`): the unbounded search these tests were made for
+OFF = dict(min_transmission=None, max_size=None, max_pivot=None)
+OFF_CLI = ["--min-transmission", "0", "--max-size", "none", "--max-pivot", "none"]
+
 FOUR_BAR = T.topologies()[0]
 POSE = np.array([[0, 0], [1.0, 0], [0, 0], [0.3, 0.0], [1.1, 0.8], [0.5, 0.9]])
 
@@ -122,7 +126,7 @@ def test_planted_timed_four_bar_recovered_and_replayed(tmp_path):
     _write(f, ["theta_deg", "x_mm", "y_mm"], [[123.0 + 5 * i, x, y] for i, (x, y) in enumerate(pts)])
     out_dir = tmp_path / "syn"
     assert cli_main(["synthesize", str(f), "--topologies", "four-bar", "--rounds", "2", "--samples", "2048",
-                     "--quick", "--out", str(out_dir)]) == 0
+                     "--quick", *OFF_CLI, "--out", str(out_dir)]) == 0
     res = json.loads((out_dir / "synthesis.json").read_text())
     best = res["designs"][0]
     assert res["target"]["timed"] and best["distance"] <= 0.01
@@ -144,7 +148,7 @@ def test_timed_search_keeps_the_timing():
     t = np.sort(rng.uniform(0, 1.5 * np.pi, 24))
     pts = trace_exact(FOUR_BAR, POSE, 0.7 + t - t[0])[0][:, FOUR_BAR.traced] * 30 + [5, 7]
     tgt = make_target(pts, inputs=t + 2.0)
-    r = synthesize(tgt, topologies=["four-bar"], quick=True, rounds=2, samples=2048)
+    r = synthesize(tgt, topologies=["four-bar"], quick=True, rounds=2, samples=2048, **OFF)
     b = r.best
     assert b.distance <= 0.01 and len(b.inputs_deg) == 24
     assert np.allclose(np.diff(b.inputs_deg), np.degrees(np.diff(t)), rtol=0, atol=1e-9)

@@ -7,7 +7,24 @@ from pathlib import Path
 from typing import Any
 
 
+def _extents(text: str) -> float | None:
+    """A bound in target extents: a positive number, or "none" (no bound)."""
+    import argparse
+    import math
+
+    if text.strip().lower() in ("none", "off"):
+        return None
+    try:
+        v = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r}: a positive number of target extents, or none") from None
+    if not (math.isfinite(v) and v > 0):
+        raise argparse.ArgumentTypeError(f"{text!r}: a positive number of target extents, or none")
+    return v
+
+
 def register(sub) -> None:
+    from ..synthesis.bounds import MAX_PIVOT, MAX_SIZE, MIN_TRANSMISSION
     from .optimize import add_distributed_arguments
 
     p = sub.add_parser(
@@ -19,7 +36,10 @@ def register(sub) -> None:
             "follows TARGET (a .csv of x, y, a .npy (N, 2) "
             "array or an .svg path) up to translation, rotation and scale, ranked by the symmetric chamfer "
             "distance of the normalised curves' points to each other's polyline (independent of where the crank's "
-            "turn starts), LInK's 2000-point metric beside it (docs/methods/synthesis.md). Writes the best "
+            "turn starts), LInK's 2000-point metric beside it (docs/methods/synthesis.md). By default only "
+            "designs a designer can build: a transmission angle of at least 30 degrees, links at most 3 times the "
+            "target's extent, frame pivots within 3 times it of its centre (--min-transmission 0 --max-size none "
+            "--max-pivot none: no bound). Writes the best "
             "mechanism as a sketch file that "
             "`jaxlink kinematics` replays, every topology's best, a JSON of the ranked designs and a plot."
         ),
@@ -65,16 +85,19 @@ def register(sub) -> None:
     p.add_argument("--topologies", default=None, metavar="NAMES",
                    help="comma-separated topology names to search (default: all up to --max-links; the "
                         "slider and lever topologies by name without --sliders or --levers too)")
-    p.add_argument("--max-size", type=float, default=None, metavar="K",
-                   help="keep the designs within a size: every link at most K times the target's extent (the "
-                        "largest distance between two of its points), every frame pivot within K times it of the "
-                        "target's centre (e.g. 2; default: no bound). Each design's size, in extents, is in the "
-                        "table and the JSON either way")
-    p.add_argument("--min-transmission", type=float, default=None, metavar="DEG",
+    p.add_argument("--max-size", type=_extents, default=MAX_SIZE, metavar="K",
+                   help=f"keep every link at most K times the target's extent (the largest distance between two of "
+                        f"its points; default {MAX_SIZE:g}; none: no bound). Each design's size, in extents, is in "
+                        "the table and the JSON either way")
+    p.add_argument("--max-pivot", type=_extents, default=MAX_PIVOT, metavar="P",
+                   help=f"keep every frame pivot within P times the target's extent of the target's centre "
+                        f"(default {MAX_PIVOT:g}; none: no bound)")
+    p.add_argument("--min-transmission", type=float, default=MIN_TRANSMISSION, metavar="DEG",
                    help="keep every design's transmission angle (between the two links of each revolute dyad, "
                         "between a slider's link and its guide's normal) at least DEG degrees over its whole "
-                        "interval, checked between samples (e.g. 40; default: none). Each design's least angle "
-                        "is in the table (mu_deg) and the JSON either way")
+                        f"interval, checked between samples (default {MIN_TRANSMISSION:g}; 0: no bound). Each "
+                        "design's least angle is in the table (mu_deg) and the JSON either way; the table's "
+                        "column `bounds` says which designs meet the bounds")
     p.add_argument("--samples", type=int, default=8192, metavar="N",
                    help="random candidates per topology and round (default 8192)")
     p.add_argument("--points", type=int, default=200, metavar="N",
@@ -149,7 +172,7 @@ def cmd_synthesize(args) -> int:
         res = synthesize(tgt, time_limit=args.time_limit, seed=args.seed, rounds=args.rounds,
                          max_links=args.max_links, topologies=names, n_points=args.points, count=args.count,
                          samples=args.samples, sliders=args.sliders, levers=args.levers,
-                         max_size=args.max_size,
+                         max_size=args.max_size, max_pivot=args.max_pivot,
                          min_transmission=args.min_transmission, checkpoint=state, resume=args.resume,
                          started=getattr(args, "started", None), **quick, log=log,
                          progress=None if status is None else status.show, best_file=best_file)
@@ -170,7 +193,8 @@ def cmd_synthesize(args) -> int:
         return 0 if res.designs else 1
     if not res.designs:
         bounds = ([f"--max-size {args.max_size:g}"] if args.max_size is not None else []) + (
-            [f"--min-transmission {args.min_transmission:g}"] if args.min_transmission is not None else [])
+            [f"--max-pivot {args.max_pivot:g}"] if args.max_pivot is not None else []) + (
+            [f"--min-transmission {args.min_transmission:g}"] if args.min_transmission else [])
         if res.stopped_by == "time_limit" and res.rounds == 0:
             print(f"no design: the time limit ({args.time_limit:g} s) ended the search before its first round "
                   f"ended ({res.wall_s:.1f} s since the command started, compiling included); give a longer "
@@ -181,6 +205,10 @@ def cmd_synthesize(args) -> int:
               file=sys.stderr)
         return 130 if res.interrupted else 1
     print(table(res))
+    if not res.meets:
+        print(f"synthesize: no design meets the bounds; the best found, {res.best.topology}, breaks them "
+              f"({'; '.join(res.best.violates)}). It is written all the same: give more --rounds or --samples, "
+              "or looser bounds", file=sys.stderr)
     for f in write_all(args.out, res, plot_it=not args.no_plot):
         print(f"wrote {f}")
     b = res.best

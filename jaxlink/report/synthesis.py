@@ -9,26 +9,43 @@ from pathlib import Path
 import numpy as np
 
 
+def _short(violates) -> str:
+    """The bounds a design breaks, in a word each (`bounds.violations`' first words): "mu", "link", "pivot"."""
+    words = {"transmission": "mu", "link": "link", "frame": "pivot"}
+    return ",".join(words.get(v.split()[0], v.split()[0]) for v in violates)
+
+
 def table(res) -> str:
-    """One line per design: topology, joints, links, distance (phase-free, the ranking), LInK's metric
-    (`link2000`; "-" for a timed target), size, least transmission angle, crank interval, time found."""
+    """The bounds in force (`bounds.describe`), then one line per design: topology, joints, links,
+    distance (phase-free, the ranking), LInK's metric (`link2000`; "-" for a timed target), size, least
+    transmission angle, whether it meets the bounds (`bounds`: "yes", or the ones it breaks), crank
+    interval, time found, on the Pareto front; then the simplest design within 10 % of the best."""
     t = res.target
     kind = (f"timed over {abs(np.degrees(t.inputs[-1] - t.inputs[0])):.6g}° (distance: the ordered one)" if t.timed
             else "closed" if t.closed else "open")
     unit = f" {t.unit}" if t.unit else ""
-    bound = "" if res.max_size is None else f"; designs at most {res.max_size:g} extents (--max-size)"
-    if res.min_transmission is not None:
-        bound += f"; transmission angles at least {res.min_transmission:g}° (--min-transmission)"
+    from ..synthesis.bounds import describe
+
     lines = [f"target      {t.source}: {len(t.points)} points, {kind}" + (f", in {t.unit}" if t.unit else ""),
              f"extent      {res.extent:.6g}{unit} (the largest distance between two target points: the unit of "
-             f"`size`, the longest link or the frame pivot furthest from the target's centre){bound}",
-             f"{'rank':>4}  {'topology':<26}{'joints':>7}{'links':>6}{'distance':>11}{'link2000':>10}{'size':>7}"
-             f"{'mu_deg':>8}{'start_deg':>11}{'stop_deg':>11}{'found_s':>9}  pareto"]
+             "`size`, the longest link or the frame pivot furthest from the target's centre)",
+             f"bounds      {describe(res.bounds)}"]
+    if not res.meets:
+        b = res.best
+        lines.append(f"NO DESIGN   meets the bounds: the best found, {b.topology}, breaks them "
+                     f"({'; '.join(b.violates)}); give more --rounds or --samples, or looser bounds")
+    lines.append(f"{'rank':>4}  {'topology':<26}{'joints':>7}{'links':>6}{'distance':>11}{'link2000':>10}{'size':>7}"
+                 f"{'mu_deg':>8}{'bounds':>11}{'start_deg':>11}{'stop_deg':>11}{'found_s':>9}  pareto")
     for i, d in enumerate(res.designs, 1):
         link = "-" if np.isnan(d.link_chamfer_2000) else f"{d.link_chamfer_2000:.5f}"
         lines.append(f"{i:>4}  {d.topology:<26}{d.joints:>7}{d.links:>6}{d.distance:>11.5f}{link:>10}{d.size:>7.2f}"
-                     f"{d.transmission_deg:>8.1f}"
+                     f"{d.transmission_deg:>8.1f}{'yes' if d.meets else _short(d.violates):>11}"
                      f"{d.start_deg:>11.3f}{d.stop_deg:>11.3f}{d.found_s:>9.1f}  {'*' if d.pareto else ''}")
+    if res.simplest is not None:
+        s = res.designs[res.simplest]
+        top = min(d.distance for d in res.designs if d.meets or not res.meets)
+        lines.append(f"simplest    rank {res.simplest + 1}, {s.topology} ({s.joints} joints): distance "
+                     f"{s.distance:.5f}, within 10 % of the best {top:.5f}")
     lines.append(f"wall time   {res.wall_s:.1f} s, {res.rounds} round{'s' if res.rounds != 1 else ''}")
     if res.stopped_by == "time_limit":
         lines.append(f"stopped     at the time limit ({res.time_limit:g} s): the designs depend on the machine's "
@@ -65,6 +82,10 @@ def to_json(res) -> dict:
                    "timed": t.timed, "extent": res.extent},
         "max_size": res.max_size,
         "min_transmission_deg": res.min_transmission,
+        "max_pivot": res.max_pivot,
+        "bounds_met": res.meets,
+        "simplest": None if res.simplest is None else {"rank": res.simplest + 1,
+                                                       "topology": res.designs[res.simplest].topology},
         "wall_s": res.wall_s,
         "interrupted": res.interrupted,
         "rounds": res.rounds,
@@ -76,7 +97,9 @@ def to_json(res) -> dict:
             "link_chamfer_2000": None if np.isnan(d.link_chamfer_2000) else d.link_chamfer_2000,
             "start_deg": d.start_deg, "stop_deg": d.stop_deg, "count": d.n_inputs,
             "scale": d.scale, "rotation_deg": d.rotation_deg, "translation": list(d.translation),
-            "margin": d.margin, "size": d.size, "transmission_deg": d.transmission_deg, "lengths": d.lengths,
+            "margin": d.margin, "size": d.size, "link_size": d.link_size, "pivot_size": d.pivot_size,
+            "transmission_deg": d.transmission_deg, "meets": d.meets, "violates": list(d.violates),
+            "lengths": d.lengths,
             "found_s": d.found_s, "pareto": d.pareto,
             "joint_positions": d.sketch.tables()["sketch"]["joints"],
             "links_joints": d.sketch.tables()["sketch"]["links"],
@@ -139,7 +162,8 @@ def plot(path, res) -> None:
     ax.set_ylabel(f"y [{unit}]")
     ax.set_aspect("equal")
     ax.set_title(f"{d.topology}: distance {d.distance:.4f}, crank {d.start_deg:.1f}° to {d.stop_deg:.1f}°, "
-                 f"size {d.size:.2f}, least transmission angle {d.transmission_deg:.1f}°", fontsize=8)
+                 f"size {d.size:.2f}, least transmission angle {d.transmission_deg:.1f}°"
+                 + ("" if d.meets else f"\nbreaks the bounds: {'; '.join(d.violates)}"), fontsize=8)
     ax.legend(fontsize=8)
     fig.tight_layout()
     fig.savefig(path)

@@ -9,6 +9,8 @@
 - `assembly`: the check that a candidate assembles over its whole interval on its branch;
 - `size`: a design's size in extents of the target, and the bound a search keeps to (`max_size`);
 - `transmission`: a design's least transmission angle, and the floor a search keeps to (`min_transmission`);
+- `bounds`: the designer's bounds, on by default (30°, 3 extents, 3 extents), and what a design breaks;
+- `pareto`: the Pareto front of distance, joints, transmission angle and size; the simplest design that fits;
 - `search`: screen → rank → refine → score rounds (`block_caps`, `default_blocks`: the blocks a
   platform's batches are cut into);
 - `mechanism`: a candidate as a sketch file; `api`: `synthesize`.

@@ -14,8 +14,10 @@ import numpy as np
 
 from ..errors import MechanismError
 from ..model.sketch import Sketch
+from . import bounds as _bounds
 from . import checkpoint as _checkpoint
 from . import distance as _dist
+from . import pareto as _pareto
 from . import progress as _progress
 from . import size as _size
 from . import transmission as _tm
@@ -54,14 +56,18 @@ class Design(NamedTuple):
       onto the target (x ↦ k R(φ) x + t);
     - `margin`: the smallest reach margin of its dyads over the interval (`assembly`);
     - `size`: its longest link, or its frame pivot furthest from the target's centre, over the
-      target's extent (its largest distance between two points): `size.design_size`;
+      target's extent (its largest distance between two points): `size.design_size`, the larger of
+      `link_size` (its longest link) and `pivot_size` (its frame pivot furthest from the centre);
     - `transmission_deg`: its least transmission angle over the interval (degrees, 0–90: the angle
       between the two links of a revolute dyad, between a slider's link and its guide's normal;
       located between samples, `transmission.least`);
     - `lengths`: the crank's and every dyad link's length (target unit);
     - `sketch`: the mechanism (`jaxlink.Sketch`), `curve`: the traced path (n_inputs, 2);
-    - `found_s`: seconds from the start of the search to this answer; `pareto`: no other answer
-      has both fewer or as many joints and a smaller distance;
+    - `found_s`: seconds from the start of the search to this answer; `pareto`: it is on the Pareto
+      front of the answers' distance, joints, least transmission angle and size (`pareto.front`: no
+      other answer is as good on each and better on one);
+    - `violates`: the bounds in force it breaks, in words (`bounds.violations`; empty: it meets them
+      all, `meets`);
     - `inputs_deg`: a timed target's crank angles (the file's input, degrees) at which its points are
       matched, (N,); `distance` is then the ordered distance (`distance.match_ordered`) of the
       traced point there to the target's points, and `curve` the path over the interval; else None;
@@ -89,13 +95,26 @@ class Design(NamedTuple):
     size: float = float("nan")
     transmission_deg: float = float("nan")
     link_chamfer_2000: float = float("nan")
+    link_size: float = float("nan")
+    pivot_size: float = float("nan")
+    violates: tuple[str, ...] = ()
+
+    @property
+    def meets(self) -> bool:
+        """Whether it meets every bound in force (`Synthesis.bounds`)."""
+        return not self.violates
 
 
 class Synthesis(NamedTuple):
-    """`target`; `designs`: the best answer of each topology, best first; `wall_s`: the search's time;
-    `max_size`: the bound on the designs' size (None: none); `extent`: the target's extent (its
-    largest distance between two points, in its unit: the size's unit); `min_transmission`: the
-    least transmission angle asked for (degrees; None: none); `interrupted`: the search was stopped
+    """`target`; `designs`: the best answer of each topology, those that meet the bounds first, each
+    part best first (a topology with no answer within the bounds: its best outside them, with what it
+    `violates`); `wall_s`: the search's time;
+    `max_size`: the bound on the designs' longest link (extents; None: none); `extent`: the target's
+    extent (its largest distance between two points, in its unit: the size's unit); `min_transmission`:
+    the least transmission angle asked for (degrees; None: none); `max_pivot`: the bound on the frame
+    pivots' distance from the target's centre (extents; None: none); `simplest`: the index in
+    `designs` of the simplest answer (`pareto.simplest`: the fewest joints within 10 % of the best
+    distance, of those meeting the bounds; None: no design); `interrupted`: the search was stopped
     (Ctrl-C) and these are the designs of its rounds until then (`synthesize(checkpoint=...)`);
     `rounds`: the rounds done; `stopped_by`: "rounds" (the rounds asked for, or the default
     `search.DEFAULT_ROUNDS`, were done: the designs do not depend on the machine) or "time_limit"
@@ -111,13 +130,29 @@ class Synthesis(NamedTuple):
     rounds: int = 0
     stopped_by: str = "rounds"
     time_limit: float | None = None
+    max_pivot: float | None = None
+    simplest: int | None = None
 
     @property
     def best(self) -> Design:
         return self.designs[0]
 
+    @property
+    def bounds(self) -> _bounds.Bounds:
+        """The bounds in force (`bounds.Bounds`)."""
+        return _bounds.Bounds(self.min_transmission, self.max_size, self.max_pivot)
 
-def _design(c: Candidate, target: Target, n_trace: int, name: str) -> Design:
+    @property
+    def meets(self) -> bool:
+        """Whether some design meets every bound in force (then the best does)."""
+        return any(d.meets for d in self.designs)
+
+
+def _design(c: Candidate, target: Target, n_trace: int, name: str, frame: tuple | None = None,
+            bnds: _bounds.Bounds = _bounds.OFF) -> Design:
+    """The answer of a candidate; `frame`: the target's `size.target_frame` (the search's; default
+    at `distance.N_POINTS`), `bnds`: the bounds it is checked against (`Design.violates`)."""
+    frame = _size.target_frame(target, _dist.N_POINTS) if frame is None else frame
     m = c.match
     placed = placed_pose(c.topology, c.pose, c.start, m)
     a0 = crank_angle(placed)
@@ -135,12 +170,14 @@ def _design(c: Candidate, target: Target, n_trace: int, name: str) -> Design:
     mu = (_tm.least(c.topology, c.pose, *certified_interval(c.start, c.span, target)) if c.topology.levers
           else c.assembly)
     mu_deg = _tm.angle_deg(mu.margin) if np.isfinite(mu.margin) else float("nan")
+    link_size, pivot_size = _size.design_sizes(c.topology, c.pose, m, frame[0], frame[2])
     return Design(c.topology.name, c.topology.n_joints, c.topology.n_links, float(m.distance), start,
                   start + math.degrees(span), n_trace, float(m.scale), math.degrees(m.rotation),
                   (float(m.translation[0]), float(m.translation[1])), float(c.assembly.margin),
                   {k: v * m.scale for k, v in lengths(c.topology, c.pose).items()}, sk, curve, c.found_s, False,
                   inputs_deg, at_inputs, float(c.size), mu_deg,
-                  float("nan") if target.timed else _dist.link_chamfer(curve, target.points, closed=target.closed))
+                  float("nan") if target.timed else _dist.link_chamfer(curve, target.points, closed=target.closed),
+                  link_size, pivot_size, _bounds.violations(bnds, float(mu.margin), link_size, pivot_size))
 
 
 def _timed_points(c: Candidate, target: Target, m: _dist.Match, start_deg: float):
@@ -172,9 +209,9 @@ def synthesize(target: Any, *, closed: bool | None = None, time_limit: float | N
                rounds: int | None = None, max_links: int = 8, sliders: bool = False, levers: bool = False,
                topologies: list[str | Topology] | None = None,
                n_points: int = _dist.N_POINTS, count: int = 1000, samples: int = 8192, name: str = "synthesized",
-               max_size: float | None = None, min_transmission: float | None = None,
-               log: Callable[[str], None] | None = None, checkpoint: str | Path | None = None,
-               resume: bool = False, started: float | None = None,
+               max_size: float | None = _bounds.MAX_SIZE, min_transmission: float | None = _bounds.MIN_TRANSMISSION,
+               max_pivot: float | None = _bounds.MAX_PIVOT, log: Callable[[str], None] | None = None,
+               checkpoint: str | Path | None = None, resume: bool = False, started: float | None = None,
                progress: Callable[[_progress.Progress], None] | None = None, best_file: str | Path | None = None,
                **search_options) -> Synthesis:
     """Find linkages whose traced point follows `target` (a path to a .csv/.npy/.svg file, an
@@ -209,12 +246,19 @@ def synthesize(target: Any, *, closed: bool | None = None, time_limit: float | N
     process's devices, and over the processes of a `jax.distributed` group
     (`jaxlink.optimize.initialize_distributed`, called first in every process): every process
     returns the same designs (`search`).
-    `max_size` K: only designs whose links are at most K times the target's extent (its largest
-    distance between two points) and whose frame pivots are within K times it of the target's
-    centre (`jaxlink.synthesis.size`; each design's `size` is reported either way).
-    `min_transmission` μ (degrees): only designs whose transmission angle stays at least μ over
-    their interval (`jaxlink.synthesis.transmission`; each design's `transmission_deg` is reported
-    either way).
+    The bounds a designer builds to, on by default (`jaxlink.synthesis.bounds`), each off with None:
+    `min_transmission` μ (degrees, default 30; 0 too: none): designs whose transmission angle stays
+    at least μ over their interval (`jaxlink.synthesis.transmission`, located between samples);
+    `max_size` K (default 3): designs whose links are at most K times the target's extent (its
+    largest distance between two points); `max_pivot` P (default 3): designs whose frame pivots are
+    within P times it of the target's centre (`jaxlink.synthesis.size`). The search keeps to them
+    (to the larger of K and P for both when they differ, the exact check then marking the others);
+    each design's `transmission_deg`, `link_size`, `pivot_size` are reported either way, and what it
+    `violates`. The designs meeting them come first; a topology with none within them is shown by its
+    best outside them (so when none meets them, `Synthesis.meets` is False and the best shown breaks
+    them: its `violates` says how). Every design is marked on the Pareto front or not
+    (`Design.pareto`), and `Synthesis.simplest` names the simplest within 10 % of the best distance
+    (`jaxlink.synthesis.pareto`).
     `checkpoint` (a file path): the search's whole state written there after every round, so that
     an interrupted search loses at most a round (an earlier state there is removed first, unless
     `resume`); stopped by Ctrl-C (KeyboardInterrupt) after a round, it returns the designs of the
@@ -236,15 +280,10 @@ def synthesize(target: Any, *, closed: bool | None = None, time_limit: float | N
         raise MechanismError(f"sliders = {sliders!r}: True (also the slider variants) or False")
     if not isinstance(levers, (bool, np.bool_)):
         raise MechanismError(f"levers = {levers!r}: True (also the slotted-lever variants) or False")
-    if max_size is not None and (isinstance(max_size, bool) or not isinstance(max_size, (int, float, np.integer,
-                                                                                        np.floating))
-                                 or not math.isfinite(max_size) or max_size <= 0):
-        raise MechanismError(f"max_size = {max_size!r}: a positive number of target extents (the largest "
-                             "distance between two target points), or None for no bound")
-    if min_transmission is not None and (isinstance(min_transmission, bool) or not isinstance(
-            min_transmission, (int, float, np.integer, np.floating)) or not 0 < min_transmission < 90):
-        raise MechanismError(f"min_transmission = {min_transmission!r}: an angle in degrees between 0 and 90 "
-                             "(e.g. 40), or None for none")
+    try:
+        bnds = _bounds.checked(min_transmission, max_size, max_pivot)
+    except ValueError as e:
+        raise MechanismError(str(e)) from None
     fin = search_options.get("finish")
     if fin is not None and (isinstance(fin, bool) or not isinstance(fin, (int, np.integer)) or fin < 0):
         raise MechanismError(f"finish = {fin!r}: the number of candidates polished at the end must be a whole "
@@ -286,7 +325,8 @@ def synthesize(target: Any, *, closed: bool | None = None, time_limit: float | N
         raise MechanismError("a checkpoint (and --resume) is for a search in one process; with several "
                              "processes run without it")
     fp = _checkpoint.fingerprint(tgt, topos, seed=seed, rounds=rounds, samples=samples, count=count,
-                                 n_points=n_points, max_size=max_size, min_transmission=min_transmission,
+                                 n_points=n_points, max_size=bnds.search_size,
+                                 min_transmission=bnds.min_transmission,
                                  time_limit=time_limit if rounds is None else quick_of(time_limit, None),
                                  cap=time_limit is not None and rounds is not None,
                                  options=sorted(search_options.items()),
@@ -299,8 +339,7 @@ def synthesize(target: Any, *, closed: bool | None = None, time_limit: float | N
     try:
         found = search(tgt, topos, time_limit=time_limit, seed=seed, rounds=rounds, samples=samples,
                        n_trace=count, n_points=n_points, t0=t0, log=log, status=status,
-                       max_size=None if max_size is None else float(max_size),
-                       min_transmission=None if min_transmission is None else float(min_transmission),
+                       max_size=bnds.search_size, min_transmission=bnds.min_transmission,
                        checkpoint=checkpoint, resume=bool(resume), fingerprint=fp,
                        progress=None if progress is None and best_file is None else _progress.relay(
                            progress, tgt, None if best_file is None else functools.partial(
@@ -315,16 +354,37 @@ def synthesize(target: Any, *, closed: bool | None = None, time_limit: float | N
         status = {"rounds": int(saved["rnd"]), "stopped_by": "interrupted"}
         if log is not None:
             log(f"interrupted: the designs of the {saved['rnd']} rounds done")
+    frame = _size.target_frame(tgt, n_points)
+    chosen = _each_topology(found, sorted(status.get("outside", []), key=lambda c: c.match.distance), bnds, frame)
+    with ThreadPoolExecutor(SCORE_THREADS) as ex:  # the designs side by side (NumPy), in order
+        designs = list(ex.map(lambda c: _design(c, tgt, count, name, frame, bnds), chosen))
+    designs.sort(key=lambda d: (not d.meets, d.distance))
+    on = _pareto.front([d.distance for d in designs], [d.joints for d in designs],
+                       [d.transmission_deg for d in designs], [d.size for d in designs])
+    designs = [d._replace(pareto=bool(p)) for d, p in zip(designs, on)]
+    simplest = _pareto.simplest([d.distance for d in designs], [d.joints for d in designs],
+                                [d.links for d in designs], [d.meets for d in designs])
+    return Synthesis(tgt, designs, time.perf_counter() - t0, bnds.max_size, _size.extent(tgt.points),
+                     bnds.min_transmission, interrupted, int(status.get("rounds", 0)),
+                     str(status.get("stopped_by", "rounds")), None if time_limit is None else float(time_limit),
+                     bnds.max_pivot, simplest)
+
+
+def _each_topology(found: list[Candidate], outside: list[Candidate], bnds: _bounds.Bounds,
+                   frame: tuple) -> list[Candidate]:
+    """Each topology's answer: its best candidate of `found` (the search's, within its bounds) that
+    is within the link and pivot bounds one by one (they differ from the search's one bound only when
+    the two differ), else its best of `found`, else its best of `outside` (both best first)."""
+    def within(c: Candidate) -> bool:
+        if bnds.max_size is None and bnds.max_pivot is None:
+            return True
+        link, pivot = _size.design_sizes(c.topology, c.pose, c.match, frame[0], frame[2])
+        return not _bounds.violations(bnds._replace(min_transmission=None), 0.0, link, pivot)
+
     best: dict[str, Candidate] = {}
     for c in found:
-        if c.topology.name not in best:
+        if c.topology.name not in best and within(c):
             best[c.topology.name] = c
-    with ThreadPoolExecutor(SCORE_THREADS) as ex:  # the designs side by side (NumPy), in order
-        designs = list(ex.map(lambda c: _design(c, tgt, count, name), best.values()))
-    designs.sort(key=lambda d: d.distance)
-    designs = [d._replace(pareto=not any(o.joints <= d.joints and o.distance < d.distance for o in designs))
-               for d in designs]
-    return Synthesis(tgt, designs, time.perf_counter() - t0, None if max_size is None else float(max_size),
-                     _size.extent(tgt.points), None if min_transmission is None else float(min_transmission),
-                     interrupted, int(status.get("rounds", 0)), str(status.get("stopped_by", "rounds")),
-                     None if time_limit is None else float(time_limit))
+    for c in [*found, *outside]:
+        best.setdefault(c.topology.name, c)
+    return list(best.values())

@@ -119,7 +119,9 @@ def search(target: Target, topos: list[Topology], *, time_limit: float | None = 
     answer), and programs whose compile would not end by it (`compiling.estimate`: measured here
     before) are not compiled: the search says so and ends. A search stopped by its limit depends on the machine's
     speed. `status` (a dict, if given) receives `rounds` (the rounds done) and `stopped_by`:
-    "rounds" (they were done) or "time_limit" (the limit stopped a round, its scoring or a polish).
+    "rounds" (they were done) or "time_limit" (the limit stopped a round, its scoring or a polish),
+    and `outside`: the scored candidates that assemble but break `max_size` or `min_transmission`
+    (not in the checkpoint: a resumed search's are its own rounds').
     `quick` (`programs`; default: when a `time_limit` ≤ 15 s is given) trades run time for compile
     time. Several processes (`jax.distributed`): each computes its share of every batch, all hold
     the same results, process 0's clock decides the rounds (`spread`).
@@ -160,7 +162,8 @@ def search(target: Target, topos: list[Topology], *, time_limit: float | None = 
     capped = time_limit is not None
     limit = float(time_limit) if time_limit is not None else np.inf  # the cap (s)
     status = {} if status is None else status
-    status.update(rounds=0, stopped_by="rounds")
+    status.update(rounds=0, stopped_by="rounds", outside=[])
+    outside: list[Candidate] = status["outside"]  # the scored candidates that assemble outside the bounds
     if finish is not None and (isinstance(finish, bool) or not isinstance(finish, (int, np.integer)) or finish < 0):
         raise ValueError(f"finish = {finish!r}: a whole number of candidates to polish, at least 0")
     if isinstance(per_topology, bool) or not isinstance(per_topology, (int, np.integer)) or per_topology < 1:
@@ -395,6 +398,9 @@ def search(target: Target, topos: list[Topology], *, time_limit: float | None = 
                         kept.append(Candidate(topos[ti], p[i], start, span, m, asm, time.perf_counter() - began,
                                               size=sz))
                         any_kept[0] = True
+                    elif np.isfinite(m.distance) and asm.ok:  # assembles, outside the bounds: set aside
+                        outside.append(Candidate(topos[ti], p[i], start, span, m, asm, time.perf_counter() - began,
+                                                 size=sz))
                 return kept
 
             # the topologies side by side (NumPy and SciPy's k-d trees release the interpreter), the most

@@ -83,9 +83,18 @@ def terms(topo: Topology, pose) -> tuple[np.ndarray, np.ndarray]:
     return np.asarray(lengths), pose[sorted(used)]
 
 
+def design_sizes(topo: Topology, pose, m: _dist.Match, centre: np.ndarray,
+                 target_extent: float) -> tuple[float, float]:
+    """(its longest link, its frame pivot furthest from the target's `centre`) over the target's
+    extent: the two terms of S (module doc), its pose's links times the placement's scale, its frame
+    pivots placed onto the target by the match `m` (`distance.place`)."""
+    lengths, pivots = terms(topo, pose)
+    reach = np.hypot(*(_dist.place(pivots, m) - np.asarray(centre, float)).T)
+    return float(m.scale * np.max(lengths) / target_extent), float(np.max(reach) / target_extent)
+
+
 def design_size(topo: Topology, pose, m: _dist.Match, centre: np.ndarray, target_extent: float) -> float:
-    """S of a design (module doc): its pose's links times the placement's scale, its frame pivots
-    placed onto the target by the match `m` (`distance.place`), the target's `centre` and extent."""
+    """S of a design (module doc): the larger of `design_sizes`."""
     lengths, pivots = terms(topo, pose)
     reach = np.hypot(*(_dist.place(pivots, m) - np.asarray(centre, float)).T)
     return float(max(m.scale * np.max(lengths), np.max(reach)) / target_extent)
