@@ -455,3 +455,75 @@ def test_optimize_without_method_runs_the_documented_default(monkeypatch):
                      "method      montecarlo"]
     text = (pathlib.Path(__file__).resolve().parent.parent / "docs" / "reference" / "cli.md").read_text()
     assert "| `--method` | `uniform`, `montecarlo`, `gradient` | `gradient` |" in text
+
+
+def test_ctrl_c_in_optimize_says_what_was_saved_and_how_to_resume(tmp_path):
+    """SIGINT to `jaxlink optimize --out r.json` after its first checkpoint: exit 130, the best so
+    far printed and saved (r.json `"complete": false`, `"stopped_by": "interrupted"`, r.best.toml),
+    the state in r.state.npz, and standard error says so and how --resume continues. Before: one
+    line, "interrupted", and r.json as of the last checkpoint (up to 2 s older)."""
+    import json
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    out = tmp_path / "r.json"
+    cmd = [sys.executable, "-m", "jaxlink.cli", "optimize", "sewing-feed-opt", "--method", "montecarlo",
+           "--budget", "100000000", "--chunk", "4", "--seed", "1", "--progress", "off", "--out", str(out)]
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        deadline = time.monotonic() + 300
+        while not out.exists() and proc.poll() is None and time.monotonic() < deadline:
+            time.sleep(0.1)
+        assert out.exists(), proc.stderr.read() if proc.poll() is not None else "no checkpoint in 300 s"
+        time.sleep(0.5)
+        proc.send_signal(signal.SIGINT)
+        stdout, stderr = proc.communicate(timeout=300)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    assert proc.returncode == 130, stderr
+    doc = json.loads(out.read_text(encoding="utf-8"))
+    assert doc["complete"] is False and doc["stopped_by"] == "interrupted"
+    assert 0 < doc["evaluations"] < 100000000 and (tmp_path / "r.state.npz").is_file()
+    assert doc["best_file"] == str(tmp_path / "r.best.toml") and (tmp_path / "r.best.toml").is_file()
+    log = [json.loads(line) for line in (tmp_path / "r.log.jsonl").read_text().splitlines()]
+    assert log[-1]["evaluations"] == doc["evaluations"]  # the state saved is the last chunk's
+    best = ", ".join(f"{k} = {v:.6g}" for k, v in doc["best"]["parameters"].items())
+    assert f"best        {best}" in stdout and "stopped     interrupted (Ctrl-C)" in stdout
+    for words in (f"interrupted after {doc['evaluations']} evaluations", f"saved the best so far in {out}",
+                  "r.best.toml", "r.state.npz", "--resume"):
+        assert words in stderr, (words, stderr)
+
+
+def test_ctrl_c_in_optimize_without_out_prints_the_best_so_far(monkeypatch):
+    """Without --out a Ctrl-C (here raised by the search's third chunk) ends the search as its end
+    would: the best so far printed, the command says nothing was written and how --out and --resume
+    keep a search, exit 130."""
+    import jaxlink.optimize.searches.runner as runner
+
+    real = runner.searcher
+
+    def interrupted_after_two(*a, **kw):
+        search = real(*a, **kw)
+        step, calls = search.step, [0]
+
+        def stepping(st):
+            calls[0] += 1
+            if calls[0] == 3:
+                raise KeyboardInterrupt
+            return step(st)
+
+        search.step = stepping
+        return search
+
+    monkeypatch.setattr(runner, "searcher", interrupted_after_two)
+    err, out = io.StringIO(), io.StringIO()
+    with contextlib.redirect_stderr(err), contextlib.redirect_stdout(out):
+        rc = main(["optimize", "sewing-feed-opt", "--method", "montecarlo", "--budget", "64", "--chunk", "4",
+                   "--progress", "off"])
+    assert rc == 130, err.getvalue()
+    assert "evaluations 8 (8 designs" in out.getvalue() and "best        l2 = " in out.getvalue()
+    assert "interrupted after 8 evaluations: the best design so far is printed above; nothing was written" \
+        in err.getvalue() and "--resume" in err.getvalue()

@@ -92,7 +92,8 @@ def _distributed(args) -> bool:
 
 
 _STOPPED = {"budget": "at the budget (the evaluations allowed)", "iterations": "after its iterations",
-            "converged": "by itself: no start improves", "interrupted": "interrupted"}
+            "converged": "by itself: no start improves",
+            "interrupted": "interrupted (Ctrl-C): the best design found so far, not the search's end"}
 
 
 def cmd_optimize(args) -> int:
@@ -176,4 +177,24 @@ def cmd_optimize(args) -> int:
     if args.out:
         print(f"wrote {args.out}" + (f" and {result.best_file} (the best design: jaxlink kinematics "
                                      f"{result.best_file})" if result.best_file else ""))
+    if stopped_by == "interrupted":
+        print(_interrupted(args, result), file=sys.stderr)
+        return 130
     return 0 if result.parameters else 1
+
+
+def _interrupted(args, result) -> str:
+    """What a Ctrl-C saved and how to go on."""
+    head = f"jaxlink optimize: interrupted after {result.evaluations} evaluations"
+    if not args.out:
+        return (f"{head}: the best design so far is printed above; nothing was written (no --out). With --out "
+                "OUT.json the search writes its best so far and its state as it goes, and --resume continues an "
+                "interrupted one to the uninterrupted result")
+    from ..optimize.checkpoint import paths
+
+    state = paths(args.out)[1]
+    best = f" and the best design as a file in {result.best_file}" if result.best_file else ""
+    return (f"{head}: saved the best so far in {args.out} (\"complete\": false){best}, the search's state in "
+            f"{state}; the same command with --resume continues it to the result of an uninterrupted search: "
+            f"jaxlink optimize {args.file} --method {args.method} --out {args.out} --resume (and the same "
+            "--set, --budget, --seed and other options)")
