@@ -401,7 +401,8 @@ def register(sub) -> None:
                         "OUT.dxf writes the geometry, as --export does")
     p.add_argument("--export", metavar="OUT.dxf",
                    help="write the geometry in the file's length unit: the traced paths of the points and moving "
-                        "joints and the linkage at its first position, as layers of a DXF file (.dxf) or groups of "
+                        "joints and the linkage in one pose (a sketch's own, else the first position), as layers of a "
+                        "DXF file (.dxf) or groups of "
                         "an SVG file (.svg)")
     p.add_argument("--animate", metavar="OUT.gif", help="animated GIF of the moving linkage")
     p.add_argument("--json", metavar="OUT.json",
@@ -512,6 +513,39 @@ def _start_arrays(mech, phi, p):
     return q, sol.result[0], sol.residual[0], sol.steps[0], jax.jacfwd(mech.residual)(q, phi, p)
 
 
+def _at_start(mech, dtype) -> tuple:
+    """`(q, result code, residual, Newton steps, Jacobian)` at `[input] start` (numpy), solved in
+    `dtype`: a linkage of dyads driven by an angle takes it from the designer's numbers' turn (its
+    first input, in their dtype: the same numbers as the start solved alone); else the start alone
+    (`_start_arrays`, a stored trace)."""
+    import jax
+
+    from ..analysis import motion as _motion
+    from ..cache import traced
+
+    p = np.asarray(mech.parameters, dtype)  # the solve in the asked dtype
+    at_start = _motion.start(mech) if p.dtype == jax.dtypes.canonicalize_dtype(np.float64) else None
+    if at_start is None:
+        at_start = traced("check_start", _start_arrays, (
+            mech.replace(parameters=p, guess=np.asarray(mech.guess, dtype)), np.asarray(mech.input_start, dtype), p))
+    return tuple(np.asarray(x) for x in at_start)
+
+
+def sketched_pose(mech, dtype) -> tuple | None:
+    """`(q, input)` of a sketch file's own pose — the solve at its `[input] start`, where its
+    joints are drawn — for the exports (`--export`, `--plot OUT.dxf`); None for a loop file, or
+    when the start does not assemble (the exports then draw the table's first position)."""
+    from ..cache import traced
+    from ..results import RESULTS
+
+    if mech.sketch is None:
+        return None
+    p = np.asarray(mech.parameters, dtype)
+    q, result = (np.asarray(x) for x in traced("check_start", _start_arrays, (  # the start alone, as `check`'s
+        mech.replace(parameters=p, guess=np.asarray(mech.guess, dtype)), np.asarray(mech.input_start, dtype), p))[:2])
+    return (q, float(mech.input_start)) if int(result) == RESULTS.converged else None
+
+
 def cmd_check(args) -> int:
     dtype = enable_dtype(args.dtype)
     from ..model import structure as _structure
@@ -584,18 +618,7 @@ def cmd_check(args) -> int:
         g = info["grubler"]
         print(f"            {g['mobility']} by Grübler: u = {g['members']} members, s = {g['joint_count']} "
               f"joint count, n = 3(u−1) − 2s; independent loops k = s − u + 1 = {g['loops']}")
-    p = np.asarray(mech.parameters, dtype)  # the solve in the asked dtype
-    import jax
-
-    from ..cache import traced
-
-    # a linkage of dyads driven by an angle: the start is the first input of the designer's numbers'
-    # turn (in their dtype; the same numbers as the start solved alone); else the start alone
-    at_start = _motion.start(mech) if p.dtype == jax.dtypes.canonicalize_dtype(np.float64) else None
-    if at_start is None:
-        at_start = traced("check_start", _start_arrays, (
-            mech.replace(parameters=p, guess=np.asarray(mech.guess, dtype)), np.asarray(mech.input_start, dtype), p))
-    q, result, resid, steps, jac = (np.asarray(x) for x in at_start)
+    q, result, resid, steps, jac = _at_start(mech, dtype)
     code = int(result)
     cond = np.linalg.cond(jac)
     how = ("closed-form dyads" if method_for(mech, NewtonOptions()) == "closed_form"
@@ -665,12 +688,13 @@ def cmd_kinematics(args) -> int:
         if args.csv != "-":
             print(f"wrote {args.csv}: {len(phis)} rows, {len(table.columns)} columns", file=info)
     dxf_plot = bool(args.plot) and args.plot.lower().endswith(".dxf")  # not a picture: the geometry
+    pose = sketched_pose(mech, dtype) if args.export or dxf_plot else None  # a sketch: drawn as sketched
     for option, path in (("--plot", args.plot if dxf_plot else None), ("--export", args.export)):
         if path:
             from ..report import export as _export
 
             with writing(option, path):
-                _export.export(path, mech, table)
+                _export.export(path, mech, table, pose)
             print(f"wrote {path} (geometry in {_export.file_units(mech).length})", file=info)
     picture = args.plot if args.plot and not dxf_plot else None
     if picture or args.animate:
