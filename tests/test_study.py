@@ -1241,7 +1241,9 @@ def test_the_command_lines_tolerances_distributions_and_limits_are_the_tables():
         '[study]\ndistribution = "uniform"\n[study.tolerances]\ncrank = 0.01\nO1 = { box = [0.01, 0.02] }\n')
     for kw, words in ((dict(tol=["crnk=0.01"]), ("--tol crnk=0.01", "did you mean 'crank'?")),
                       (dict(tol=["rod=sigm:1"]), ("--tol rod=sigm:1", "did you mean 'sigma'?")),
-                      (dict(dist=["beta"]), ("--dist beta", "'distribution' must be one of")),
+                      (dict(dist=["beta"]), ("--dist beta", "unknown distribution 'beta'", "truncated-normal")),
+                      (dict(dist=["unifrm"]), ("--dist unifrm", "did you mean 'uniform'?")),
+                      (dict(dist=["rod=nromal"]), ("--dist rod=nromal", "did you mean 'normal'?")),
                       (dict(dist=["rdo=normal"]), ("--dist rdo=normal", "did you mean 'rod'?")),
                       (dict(dist=["O1=triangular"]), ("--dist O1=triangular", "circular zone")),
                       (dict(limits=["stroke(s_B)=2,1"]), ("--limits stroke(s_B)=2,1", "low < high")),

@@ -107,7 +107,13 @@ def study_table(raw, *, tol=(), dist=(), limits=()) -> tuple[dict | None, dict[s
         blame[f"study.tolerances.{name}"] = f"--tol {item}"
     if tol:
         table["tolerances"] = entries
+    from ..study.distributions import DISTRIBUTIONS
+
     for item in dist or ():
+        value = item.split("=", 1)[-1].strip()
+        if value not in DISTRIBUTIONS:
+            raise MechanismError(f"--dist {item}: unknown distribution '{value}'{_suggest(value, DISTRIBUTIONS)}; "
+                                 f"distributions: {', '.join(DISTRIBUTIONS)}")
         if "=" in item:
             name, value = _pair("--dist", item, "D (every tolerance without its own) or NAME=D")
             if name not in entries:
