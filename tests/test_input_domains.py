@@ -449,6 +449,7 @@ def test_optimize_without_method_runs_the_documented_default(monkeypatch):
     with contextlib.redirect_stdout(out):
         assert main(["optimize", "sewing-feed-opt", "--progress", "off"]) == 0
         assert main(["optimize", "sewing-feed-opt", "--method", "montecarlo", "--progress", "off"]) == 0
+    refused(cli("optimize", "sewing-feed-opt", "--uniform", "coordinate"), "--uniform coordinate", "--method uniform")
     assert called == ["gradient", "montecarlo"]
     heads = [line for line in out.getvalue().splitlines() if line.startswith("method")]
     assert heads == ["method      gradient (the default; --method uniform or montecarlo for the others)",

@@ -135,6 +135,9 @@ def cmd_optimize(args) -> int:
     chunk = args.chunk if args.chunk is not None else problem.option("chunk", None)
     progress = sys.stderr.isatty() if args.progress == "auto" else args.progress == "on"
     default = args.method is None
+    if default and args.uniform:
+        raise MechanismError(f"--uniform {args.uniform}: an option of --method uniform (without --method the search "
+                             f"is {DEFAULT_METHOD}); give --method uniform")
     if default:
         args.method = DEFAULT_METHOD
     knobs = {}
