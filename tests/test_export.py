@@ -180,3 +180,48 @@ def test_layer_names_are_distinct_in_a_dxf():
 def test_export_refuses_a_picture_format(tmp_path, capsys):
     code, _, stderr = run(capsys, "kinematics", "four-bar", "--export", str(tmp_path / "x.png"))
     assert code == 2 and "--export" in stderr and ".dxf, .svg" in stderr
+
+
+def test_a_sketch_is_exported_in_its_sketched_pose(tmp_path, capsys):
+    """A sketch drawn with its crank at 40° is exported in that pose (the joints where the file puts
+    them), not at the table's first input (0°); its paths are still the table's. The pose closes the
+    loop: B is on the coupler circle about A and the rocker circle about B0 (numpy, here)."""
+    a, b, c, d = 20.0, 60.0, 45.0, 55.0
+    A = a * np.array([math.cos(math.radians(40)), math.sin(math.radians(40))])
+    B0 = np.array([d, 0.0])
+    e = B0 - A
+    L = np.hypot(*e)
+    along = (b * b - c * c + L * L) / (2 * L)
+    B = A + along * e / L + math.sqrt(b * b - along * along) * np.array([-e[1], e[0]]) / L  # the upper branch
+    text = f"""
+[mechanism]
+name = "posed"
+length_unit = "mm"
+angle_unit = "deg"
+
+[sketch]
+frame = ["A0", "B0"]
+
+[sketch.input]
+crank = "crank"
+
+[sketch.joints]
+A0 = [0, 0]
+B0 = [{d!r}, 0]
+A = [{float(A[0])!r}, {float(A[1])!r}]
+B = [{float(B[0])!r}, {float(B[1])!r}]
+
+[sketch.links]
+crank = ["A0", "A"]
+coupler = ["A", "B"]
+rocker = ["B0", "B"]
+"""
+    src, dxf = tmp_path / "posed.toml", tmp_path / "posed.dxf"
+    src.write_text(text, encoding="utf-8")
+    code, stdout, err = run(capsys, "kinematics", str(src), "--outputs", "position", "--export", str(dxf))
+    assert code == 0, err
+    msp = ezdxf.readfile(dxf).modelspace()
+    joints = sorted(tuple(np.round(ci.dxf.center, 9)[:2] + 0.0) for ci in msp.query('CIRCLE[layer=="JOINTS"]'))
+    assert joints == sorted(tuple(np.round(v, 9) + 0.0) for v in (A, B))
+    crank_path = [np.array(p.get_points("xy")) for p in msp.query("LWPOLYLINE") if p.dxf.layer == "PATH_A"]
+    assert len(crank_path) == 1 and np.allclose(crank_path[0][0], [a, 0.0], atol=1e-9)  # the table starts at 0°

@@ -339,3 +339,192 @@ def test_a_link_length_keeps_its_domain(tmp_path, old, new, words):
     path = tmp_path / "tiny.toml"
     path.write_text(TINY_PIVOT.replace(old, new), encoding="utf-8")
     refused(cli("check", str(path)), *words)
+
+
+# ----------------------------------------------------------------------------- the command line's conventions
+
+
+@pytest.mark.parametrize("broken,line", [
+    ("b = [60.0, 1.0", 12),                 # `]` forgotten: TOML reads on to `c = 45.0` (line 13)
+    ("b = [60.0, 1.0  # coupler\n\n# x", 12),  # a comment, a blank line and a comment line after it
+    ("b = [\n  60.0\n  1.0\n]", 13),        # a ',' missing after 60.0 (line 13); TOML stops at 1.0
+])
+def test_an_unclosed_array_is_refused_on_its_own_line(tmp_path, broken, line):
+    """tomllib finds a forgotten `]` only at the next value, a line or more later ("Unclosed array
+    (at line 13, column 1)" for line 12): the message names the line where the `]` or `,` is
+    missing (the line written broken here)."""
+    f = four_bar(tmp_path, "b = 60.0     # coupler", broken)
+    assert FOUR_BAR.splitlines()[11].startswith("b = 60.0")  # line 12 of the file
+    refused(cli("check", f), f"m.toml:{line}: not valid TOML", f"missing on line {line}")
+
+
+def test_every_unknown_option_gets_its_commands_usage_and_a_suggestion():
+    """An unknown option is refused by its sub-command (its usage, exit 2) with the closest option
+    it has, or the commands that have it; a mistyped choice gets the closest choice."""
+    import argparse
+
+    from jaxlink.cli import build_parser
+
+    rc, err = cli("kinematics", "four-bar", "--rmp", "60")
+    refused((rc, err), "usage: jaxlink kinematics", "unrecognized arguments: --rmp 60", "did you mean '--rpm'?")
+    refused(cli("kinematics", "four-bar", "--rmp=60"), "did you mean '--rpm'?")
+    refused(cli("check", "four-bar", "--rpm", "60"), "usage: jaxlink check", "--rpm is an option of kinematics")
+    refused(cli("kinematics", "four-bar", "--change-points", "smoth"), "did you mean 'smooth'?")
+    # every option of every sub-command, with its second and third letters swapped
+    sub = next(a for a in build_parser()._actions if isinstance(a, argparse._SubParsersAction))
+    for command, p in sub.choices.items():
+        for flag in (s for a in p._actions for s in a.option_strings if s.startswith("--") and len(s) > 5):
+            typo = flag[:3] + flag[4] + flag[3] + flag[5:]
+            if any(typo in a.option_strings for a in p._actions):
+                continue
+            rc, err = cli(command, "x", typo, "1")
+            assert rc == 2 and f"usage: jaxlink {command}" in err and f"did you mean '{flag}'?" in err, (command, err)
+
+
+@pytest.mark.parametrize("args,option,formats", [
+    (("kinematics", "four-bar", "--csv", "out.xlsx"), "--csv out.xlsx", ".csv"),
+    (("kinematics", "four-bar", "--json", "x.txt"), "--json x.txt", ".json"),
+    (("kinematics", "four-bar", "--plot", "x.docx"), "--plot x.docx", ".png"),
+    (("kinematics", "four-bar", "--export", "x.png"), "--export x.png", ".dxf"),
+    (("reactions", "slider-crank-mass", "--csv", "x.txt"), "--csv x.txt", ".csv"),
+    (("reactions", "slider-crank-mass", "--plot", "x"), "--plot x", ".png"),
+    (("simulate", "sinker-cam", "--csv", "x.xls"), "--csv x.xls", ".csv"),
+    (("jamming", "sinker-cam", "--out", "x.txt"), "--out x.txt", ".json"),
+    (("optimize", "sewing-feed-opt", "--method", "montecarlo", "--out", "r.txt"), "--out r.txt", ".json"),
+])
+def test_an_unknown_output_extension_is_refused_before_any_work(tmp_path, monkeypatch, args, option, formats):
+    monkeypatch.chdir(tmp_path)
+    refused(cli(*args), option, "unknown format", formats)
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_scenes_shows_each_path_and_copies_a_scene_to_edit(tmp_path, monkeypatch):
+    """`jaxlink scenes` prints each scene's file under its name; `--copy NAME [DEST]` writes that
+    file's bytes (to NAME.toml here, into a folder, or to a .toml path), refuses to overwrite
+    without --force, and suggests the scene a mistyped name was meant to be."""
+    out = io.StringIO()
+    with contextlib.redirect_stdout(out):
+        assert main(["scenes"]) == 0
+    lines = out.getvalue().splitlines()
+    for path in sorted(SCENES.glob("*.toml")):
+        k = next(i for i, line in enumerate(lines) if line.split()[0] == path.stem)
+        assert lines[k + 1].strip() == str(path)
+    monkeypatch.chdir(tmp_path)
+    base = (SCENES / "four-bar.toml").read_bytes()
+    assert cli("scenes", "--copy", "four-bar") == (0, "")
+    assert (tmp_path / "four-bar.toml").read_bytes() == base
+    (tmp_path / "four-bar.toml").write_text("mine", encoding="utf-8")
+    refused(cli("scenes", "--copy", "four-bar"), "four-bar.toml exists", "--force")
+    assert (tmp_path / "four-bar.toml").read_text(encoding="utf-8") == "mine"  # not overwritten
+    assert cli("scenes", "--copy", "four-bar", "--force")[0] == 0
+    assert (tmp_path / "four-bar.toml").read_bytes() == base
+    (tmp_path / "d").mkdir()
+    assert cli("scenes", "--copy", "slider-crank", "d")[0] == 0
+    assert (tmp_path / "d" / "slider-crank.toml").read_bytes() == (SCENES / "slider-crank.toml").read_bytes()
+    assert cli("scenes", "--copy", "whitworth", "mine.toml")[0] == 0
+    assert (tmp_path / "mine.toml").read_bytes() == (SCENES / "whitworth.toml").read_bytes()
+    refused(cli("scenes", "--copy", "four-bra"), "'four-bra' is not a built-in scene", "did you mean 'four-bar'?")
+    refused(cli("scenes", "--copy", "four-bar", "x.txt"), "--copy x.txt", ".toml")
+    assert cli("check", "mine.toml")[0] == 0  # the copy is a file to give as FILE
+
+
+def test_optimize_without_method_runs_the_documented_default(monkeypatch):
+    """No --method: the gradient search, the one docs/methods/optimize.md lets size itself (no
+    budget needed), said so on the summary's first line. The search itself is replaced by a
+    stub (the gradient search compiles for about 25 s); every other step is the command's."""
+    import types
+
+    import jaxlink.optimize as jo
+
+    called = []
+
+    def fake_run(ev, method, **kw):
+        called.append(method)
+        return types.SimpleNamespace(method=method, parameters={"l2": 1.0}, value=0.5, metrics={}, fallback=0,
+                                     evaluations=1, designs=1, infeasible_fraction=0.0, wall_s=0.0,
+                                     search_wall_s=0.0, compile_s=0.0, extra={}, best_file=None)
+
+    monkeypatch.setattr(jo, "run", fake_run)
+    out = io.StringIO()
+    with contextlib.redirect_stdout(out):
+        assert main(["optimize", "sewing-feed-opt", "--progress", "off"]) == 0
+        assert main(["optimize", "sewing-feed-opt", "--method", "montecarlo", "--progress", "off"]) == 0
+    refused(cli("optimize", "sewing-feed-opt", "--uniform", "coordinate"), "--uniform coordinate", "--method uniform")
+    assert called == ["gradient", "montecarlo"]
+    heads = [line for line in out.getvalue().splitlines() if line.startswith("method")]
+    assert heads == ["method      gradient (the default; --method uniform or montecarlo for the others)",
+                     "method      montecarlo"]
+    text = (pathlib.Path(__file__).resolve().parent.parent / "docs" / "reference" / "cli.md").read_text()
+    assert "| `--method` | `uniform`, `montecarlo`, `gradient` | `gradient` |" in text
+
+
+def test_ctrl_c_in_optimize_says_what_was_saved_and_how_to_resume(tmp_path):
+    """SIGINT to `jaxlink optimize --out r.json` after its first checkpoint: exit 130, the best so
+    far printed and saved (r.json `"complete": false`, `"stopped_by": "interrupted"`, r.best.toml),
+    the state in r.state.npz, and standard error says so and how --resume continues. Before: one
+    line, "interrupted", and r.json as of the last checkpoint (up to 2 s older)."""
+    import json
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    out = tmp_path / "r.json"
+    cmd = [sys.executable, "-m", "jaxlink.cli", "optimize", "sewing-feed-opt", "--method", "montecarlo",
+           "--budget", "100000000", "--chunk", "4", "--seed", "1", "--progress", "off", "--out", str(out)]
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        deadline = time.monotonic() + 300
+        while not out.exists() and proc.poll() is None and time.monotonic() < deadline:
+            time.sleep(0.1)
+        assert out.exists(), proc.stderr.read() if proc.poll() is not None else "no checkpoint in 300 s"
+        time.sleep(0.5)
+        proc.send_signal(signal.SIGINT)
+        stdout, stderr = proc.communicate(timeout=300)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    assert proc.returncode == 130, stderr
+    doc = json.loads(out.read_text(encoding="utf-8"))
+    assert doc["complete"] is False and doc["stopped_by"] == "interrupted"
+    assert 0 < doc["evaluations"] < 100000000 and (tmp_path / "r.state.npz").is_file()
+    assert doc["best_file"] == str(tmp_path / "r.best.toml") and (tmp_path / "r.best.toml").is_file()
+    log = [json.loads(line) for line in (tmp_path / "r.log.jsonl").read_text().splitlines()]
+    assert log[-1]["evaluations"] == doc["evaluations"]  # the state saved is the last chunk's
+    best = ", ".join(f"{k} = {v:.6g}" for k, v in doc["best"]["parameters"].items())
+    assert f"best        {best}" in stdout and "stopped     interrupted (Ctrl-C)" in stdout
+    for words in (f"interrupted after {doc['evaluations']} evaluations", f"saved the best so far in {out}",
+                  "r.best.toml", "r.state.npz", "--resume"):
+        assert words in stderr, (words, stderr)
+
+
+def test_ctrl_c_in_optimize_without_out_prints_the_best_so_far(monkeypatch):
+    """Without --out a Ctrl-C (here raised by the search's third chunk) ends the search as its end
+    would: the best so far printed, the command says nothing was written and how --out and --resume
+    keep a search, exit 130."""
+    import jaxlink.optimize.searches.runner as runner
+
+    real = runner.searcher
+
+    def interrupted_after_two(*a, **kw):
+        search = real(*a, **kw)
+        step, calls = search.step, [0]
+
+        def stepping(st):
+            calls[0] += 1
+            if calls[0] == 3:
+                raise KeyboardInterrupt
+            return step(st)
+
+        search.step = stepping
+        return search
+
+    monkeypatch.setattr(runner, "searcher", interrupted_after_two)
+    err, out = io.StringIO(), io.StringIO()
+    with contextlib.redirect_stderr(err), contextlib.redirect_stdout(out):
+        rc = main(["optimize", "sewing-feed-opt", "--method", "montecarlo", "--budget", "64", "--chunk", "4",
+                   "--progress", "off"])
+    assert rc == 130, err.getvalue()
+    assert "evaluations 8 (8 designs" in out.getvalue() and "best        l2 = " in out.getvalue()
+    assert "interrupted after 8 evaluations: the best design so far is printed above; nothing was written" \
+        in err.getvalue() and "--resume" in err.getvalue()

@@ -1206,3 +1206,76 @@ def test_correlated_first_order_against_monte_carlo(setup):
     ind = first_order_stats(f.jacobian, tol._replace(correlation=())).sigma_rss[rows]
     assert np.mean(np.abs(mc.std[rows] - ind) > 4 * mc.std_error[rows]) > 0.75
     np.testing.assert_allclose(f.importance.sum(1)[live], 1.0, rtol=1e-12)
+
+
+def test_the_command_lines_tolerances_distributions_and_limits_are_the_tables():
+    """`jaxlink study --tol/--dist/--limits` mean what `[study.tolerances]`, `[study] distribution`
+    and `[study] limits` mean: the inputs they give equal those of the file written with the same
+    keys (no compile), and a wrong name is refused on the option with the file's message and a
+    did-you-mean."""
+    from jaxlink.errors import MechanismError
+    from jaxlink.files.overrides import blamed, study_table
+
+    mech = jl.loads(FILE)
+
+    def via_options(m, **kw):
+        table, blame = study_table(m.tables.get("study"), **kw)
+        try:
+            return st.read_study(m, table)
+        except MechanismError as e:
+            raise blamed(e, blame) from None
+
+    def via_file(study_text):
+        return st.read_study(jl.loads(FILE.split("[study]")[0] + study_text))
+
+    head = 'positions = 72\nsamples = 4096\nchunk = 4096\nmetrics = ["stroke", "deviation"]\n'
+    got = via_options(mech, tol=["crank=0.02", "O1=0.03", "rod=sigma:0.004"], dist=["normal", "crank=triangular"],
+                      limits=["stroke(s_B)=-inf,80.5", "deviation(B)=0,0.1"])
+    want = via_file("[study]\n" + head + 'distribution = "normal"\nlimits = { "stroke(s_B)" = ["-inf", 80.5], '
+                    '"deviation(B)" = [0, 0.1] }\n[study.tolerances]\ncrank = { tol = 0.02, distribution = '
+                    '"triangular" }\nrod = { sigma = 0.004 }\nO1 = { radius = 0.03 }\n')
+    assert got == want
+    # a file without [study]: the options alone
+    bare = jl.loads(FILE.split("[study]")[0])
+    assert via_options(bare, tol=["crank=0.01", "O1=box:0.01,0.02"], dist=["uniform"]) == via_file(
+        '[study]\ndistribution = "uniform"\n[study.tolerances]\ncrank = 0.01\nO1 = { box = [0.01, 0.02] }\n')
+    for kw, words in ((dict(tol=["crnk=0.01"]), ("--tol crnk=0.01", "did you mean 'crank'?")),
+                      (dict(tol=["rod=sigm:1"]), ("--tol rod=sigm:1", "did you mean 'sigma'?")),
+                      (dict(dist=["beta"]), ("--dist beta", "unknown distribution 'beta'", "truncated-normal")),
+                      (dict(dist=["unifrm"]), ("--dist unifrm", "did you mean 'uniform'?")),
+                      (dict(dist=["rod=nromal"]), ("--dist rod=nromal", "did you mean 'normal'?")),
+                      (dict(dist=["rdo=normal"]), ("--dist rdo=normal", "did you mean 'rod'?")),
+                      (dict(dist=["O1=triangular"]), ("--dist O1=triangular", "circular zone")),
+                      (dict(limits=["stroke(s_B)=2,1"]), ("--limits stroke(s_B)=2,1", "low < high")),
+                      (dict(tol=["rod=-1"]), ("--tol rod=-1", "must be > 0"))):
+        with pytest.raises(MechanismError) as e:
+            via_options(mech, **kw)
+        assert all(w in str(e.value) for w in words) and "line" not in str(e.value), (kw, str(e.value))
+
+
+def test_the_command_line_studies_a_file_without_study_from_its_options(setup, capsys, monkeypatch):
+    """`jaxlink study FILE --tol … --dist uniform` on a file without [study], first order: the crank
+    pin A = O1 + a (cos θ, sin θ) has σ(A.x)² = σ(O1_x)² + cos²θ σ_a², largest at θ = 0 with σ_a =
+    t / √3 (uniform on ±t) and σ(O1_x) = r / 2 (uniform in the disc); with --dist normal σ_a = t / 3
+    and σ(O1_x) = r / 3. A limit's unknown response is refused on --limits before any work. The
+    module's compiled study is moved to the command's inputs (`Study.moved`: nothing compiled)."""
+    import importlib
+    import pathlib
+    import tempfile
+
+    from jaxlink.cli import main
+
+    tol_mod = importlib.import_module("jaxlink.study.tolerance")  # the module (`st.tolerance` is its function)
+
+    monkeypatch.setattr(tol_mod, "study_for", lambda m, inputs, **kw: setup[2].moved(inputs=inputs))
+    opts = ["--tol", "crank=0.01", "--tol", "rod=0.01", "--tol", "O1=radius:0.01", "--samples", "0",
+            "--positions", "72"]
+    with tempfile.TemporaryDirectory() as d:
+        src = pathlib.Path(d) / "bare.toml"
+        src.write_text(FILE.split("[study]")[0], encoding="utf-8")
+        assert main(["study", str(src), *opts, "--limits", "stroke(sB)=1,2"]) == 2
+        assert "--limits stroke(sB)=1,2: " in capsys.readouterr().err
+        for dist, sa, so in (("uniform", 0.01 / math.sqrt(3), 0.005), ("normal", 0.01 / 3, 0.01 / 3)):
+            assert main(["study", str(src), *opts, "--dist", dist]) == 0
+            row = next(line for line in capsys.readouterr().out.splitlines() if line.startswith("A.x "))
+            assert float(row.split()[2]) == pytest.approx(math.hypot(sa, so), rel=1e-3)  # printed to 4 digits

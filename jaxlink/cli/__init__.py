@@ -19,6 +19,7 @@ import contextlib
 import difflib
 import importlib
 import os
+import re
 import sys
 import time
 
@@ -37,16 +38,66 @@ COMMAND_MODULES = (
 
 
 class _Parser(argparse.ArgumentParser):
-    """argparse with "did you mean" for a mistyped command."""
+    """argparse with "did you mean" for a mistyped command, option or choice: an unknown option of
+    a sub-command (`kinematics four-bar --rmp 60`) is refused by that sub-command (its usage, exit
+    status 2) with the closest of its options, or with the commands that have it
+    (`check four-bar --rpm 60`)."""
+
+    def parse_args(self, args=None, namespace=None):  # type: ignore[override]
+        ns, extras = self.parse_known_args(args, namespace)
+        if extras:
+            sub = getattr(self, "_subcommands", {}).get(getattr(ns, "command", None))
+            target = sub if sub is not None else self
+            target.error(f"unrecognized arguments: {' '.join(extras)}{_flag_hint(extras, target, self)}")
+        return ns
 
     def error(self, message):
-        if "invalid choice:" in message and "argument COMMAND" in message:
-            word = message.split("invalid choice:", 1)[1].split("'")[1] if "'" in message else ""
-            names = [a.dest for a in getattr(self, "_commands", [])]
-            close = difflib.get_close_matches(word, names, n=1)
+        m = re.search(r"argument (\S+): invalid choice: '([^']*)'", message)
+        if m and " — did you mean" not in message:
+            action = next((a for a in self._actions if m.group(1) in (*a.option_strings, a.metavar, a.dest)), None)
+            choices = [str(c) for c in (getattr(action, "choices", None) or ())]
+            close = difflib.get_close_matches(m.group(2), choices, n=1)
             if close:
                 message += f" — did you mean '{close[0]}'?"
         super().error(message)
+
+
+def _flag_hint(extras: list[str], parser: argparse.ArgumentParser, top: argparse.ArgumentParser) -> str:
+    """" — did you mean '--rpm'?" for the first unknown option of `extras` close to one of
+    `parser`'s; else, for one that another command has, " — --rpm is an option of kinematics, …"."""
+    flags = [s for a in parser._actions for s in a.option_strings if s.startswith("--")]
+    words = [e.split("=", 1)[0] for e in extras if e.startswith("-") and len(e) > 1]
+    for word in words:
+        close = _closest(word, flags)
+        if close:
+            return f" — did you mean '{close}'?"
+    for word in words:
+        owners = [name for name, p in getattr(top, "_subcommands", {}).items()
+                  if any(word in a.option_strings for a in p._actions)]
+        if owners:
+            return f" — {word} is an option of {', '.join(owners)}"
+    return ""
+
+
+def _closest(word: str, names: list[str]) -> str | None:
+    """The name nearest to `word` by edits (a letter added, dropped, changed, or two neighbours
+    swapped), at most a third of its letters and at most 3; ties go to the name of the same
+    length (`--setp` is `--step` swapped, rather than `--set` with a letter more), then to
+    difflib's closer match. None if none is that near."""
+    def edits(a: str, b: str) -> int:  # the optimal string alignment distance
+        d = [[i + j if i * j == 0 else 0 for j in range(len(b) + 1)] for i in range(len(a) + 1)]
+        for i in range(1, len(a) + 1):
+            for j in range(1, len(b) + 1):
+                d[i][j] = min(d[i - 1][j] + 1, d[i][j - 1] + 1, d[i - 1][j - 1] + (a[i - 1] != b[j - 1]))
+                if i > 1 and j > 1 and a[i - 1] == b[j - 2] and a[i - 2] == b[j - 1]:
+                    d[i][j] = min(d[i][j], d[i - 2][j - 2] + 1)
+        return d[-1][-1]
+
+    bare = word.lstrip("-")
+    scored = [(edits(bare, n.lstrip("-")), abs(len(n) - len(word)), -difflib.SequenceMatcher(None, word, n).ratio(), n)
+              for n in names]
+    scored = [s for s in scored if s[0] <= min(3, max(1, len(bare) // 3))]
+    return min(scored)[-1] if scored else None
 
 
 def _version() -> str:
@@ -71,7 +122,7 @@ def build_parser() -> argparse.ArgumentParser:
     sub.required = True
     for name in COMMAND_MODULES:
         importlib.import_module(name).register(sub)
-    parser._commands = list(sub._choices_actions)  # type: ignore[attr-defined]
+    parser._subcommands = dict(sub.choices)  # type: ignore[attr-defined]
     return parser
 
 

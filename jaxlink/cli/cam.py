@@ -82,9 +82,9 @@ def _simulate_cmd(args) -> int:
 
     from ..cam import RESULTS, make_cam, maxima, product_cases, simulate_batch
     from ..cam.scene import load_scene
-    from .mechanism import PLOT_FORMATS, check_output
+    from .mechanism import CSV_FORMATS, PLOT_FORMATS, check_output
 
-    check_output("--csv", args.csv)
+    check_output("--csv", args.csv, CSV_FORMATS)
     check_output("--plot", args.plot, PLOT_FORMATS)
     scene = load_scene(args.file, args.overrides)
     geoms = [scene.geometry(n) for n in scene.sim_geometries]
@@ -188,7 +188,7 @@ def _jamming_cmd(args) -> int:
     from ..cam.scene import load_scene
     from .mechanism import check_output
 
-    check_output("--out", args.out)
+    check_output("--out", args.out, ("json",))
     scene = load_scene(args.file, args.overrides)
     tol = scene.jam_tol if args.tol is None else args.tol
     if not (math.isfinite(tol) and 0 < tol < 0.1):

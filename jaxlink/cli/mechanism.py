@@ -24,6 +24,8 @@ MAX_POSITIONS = 1_000_000
 MAX_OMEGA = 1e6
 #: picture formats of --plot (matplotlib's, by the file's extension)
 PLOT_FORMATS = ("png", "pdf", "svg", "svgz", "eps", "ps", "jpg", "jpeg", "tif", "tiff", "webp", "pgf")
+#: the table formats of --csv (comma-separated text)
+CSV_FORMATS = ("csv",)
 #: geometry formats of --export (`jaxlink/report/export.py`); `kinematics --plot` takes .dxf too
 EXPORT_FORMATS = ("dxf", "svg")
 
@@ -56,15 +58,11 @@ def finite(text: str) -> float:
 
 def check_output(option: str, path: str | None, formats: tuple | None = None) -> None:
     """Refuse, before any work, an output that cannot be written: a folder, a path through a file
-    or a missing folder, a place not writable, or (`formats`) an unknown extension. `-` (standard
-    output) and special files (a named pipe, a device) are written to as they are."""
+    or a missing folder, a place not writable, or (`formats`) an unknown extension (`--csv
+    out.xlsx`: the file would hold CSV under another format's name). `-` (standard output) and
+    special files (a named pipe, a device) are written to as they are, whatever their name."""
     if path is None or path == "-":
         return
-    if formats is not None:
-        ext = os.path.splitext(path)[1].lower().lstrip(".")
-        if ext not in formats:
-            raise MechanismError(f"{option} {path}: unknown format {('.' + ext) if ext else '(no extension)'}; "
-                                 f"the file name must end in one of {', '.join('.' + f for f in formats)}")
     try:
         st = os.stat(path)
     except FileNotFoundError:
@@ -73,9 +71,15 @@ def check_output(option: str, path: str | None, formats: tuple | None = None) ->
         st = None
     except OSError as exc:
         raise MechanismError(f"{option} {path}: {exc.strerror}") from None
+    if st is not None and stat.S_ISDIR(st.st_mode):
+        raise MechanismError(f"{option} {path}: is a folder; give a file name")
+    special = st is not None and not stat.S_ISREG(st.st_mode)
+    if formats is not None and not special:
+        ext = os.path.splitext(path)[1].lower().lstrip(".")
+        if ext not in formats:
+            raise MechanismError(f"{option} {path}: unknown format {('.' + ext) if ext else '(no extension)'}; "
+                                 f"the file name must end in {_one_of(formats)}")
     if st is not None:
-        if stat.S_ISDIR(st.st_mode):
-            raise MechanismError(f"{option} {path}: is a folder; give a file name")
         if not os.access(path, os.W_OK):
             raise MechanismError(f"{option} {path}: not writable")
         return
@@ -91,6 +95,11 @@ def check_output(option: str, path: str | None, formats: tuple | None = None) ->
         raise MechanismError(f"{option} {path}: '{parent}' is a file, not a folder")
     if not os.access(parent, os.W_OK):
         raise MechanismError(f"{option} {path}: the folder '{parent}' is not writable")
+
+
+def _one_of(formats: tuple) -> str:
+    names = ["." + f for f in formats]
+    return names[0] if len(names) == 1 else "one of " + ", ".join(names)
 
 
 @contextlib.contextmanager
@@ -331,9 +340,17 @@ def omega_from_args(args, mech=None) -> float:
 
 
 def register(sub) -> None:
-    p = sub.add_parser("scenes", help="list the built-in scenes",
-                       description="List the built-in scenes (name and one-line description). "
-                                   "Any FILE argument accepts these names.")
+    p = sub.add_parser("scenes", help="list the built-in scenes (--copy NAME: write one's file to edit)",
+                       description="List the built-in scenes: name, one-line description and, below, the "
+                                   "scene's file. Any FILE argument accepts these names. --copy NAME [DEST] "
+                                   "writes a scene's file to edit (DEST: a .toml file or a folder; default "
+                                   "NAME.toml here).")
+    p.add_argument("--copy", metavar="NAME", default=None,
+                   help="write the built-in scene NAME's file to DEST (a .toml file, or a folder: NAME.toml in "
+                        "it; default ./NAME.toml), to edit and give as FILE; an existing file is refused "
+                        "without --force")
+    p.add_argument("dest", metavar="DEST", nargs="?", default=None, help="--copy: where to write the file")
+    p.add_argument("--force", action="store_true", help="--copy: overwrite DEST if it exists")
     p.set_defaults(func=cmd_scenes)
 
     p = sub.add_parser(
@@ -384,7 +401,8 @@ def register(sub) -> None:
                         "OUT.dxf writes the geometry, as --export does")
     p.add_argument("--export", metavar="OUT.dxf",
                    help="write the geometry in the file's length unit: the traced paths of the points and moving "
-                        "joints and the linkage at its first position, as layers of a DXF file (.dxf) or groups of "
+                        "joints and the linkage in one pose (a sketch's own, else the first position), as layers of a "
+                        "DXF file (.dxf) or groups of "
                         "an SVG file (.svg)")
     p.add_argument("--animate", metavar="OUT.gif", help="animated GIF of the moving linkage")
     p.add_argument("--json", metavar="OUT.json",
@@ -435,12 +453,23 @@ def _whole_curve(mech, args) -> int:
 
 
 def cmd_scenes(args) -> int:
-    from ..scenes import describe, scene_paths
+    from ..scenes import copy, describe, named, scene_paths
 
+    if args.copy is not None:
+        name, dest = args.copy, args.dest
+        src = named(name)
+        if dest is not None and not os.path.isdir(dest):
+            check_output("--copy", dest, ("toml",))
+        written = copy(name, dest, force=args.force)
+        print(f"wrote {written} (a copy of {src}): edit it, then e.g. jaxlink check {written}")
+        return 0
+    if args.force or args.dest is not None:
+        raise MechanismError(f"{'--force' if args.force else args.dest!r} goes with --copy NAME [DEST]")
     paths = scene_paths()
     width = max((len(n) for n in paths), default=0)
     for name, path in paths.items():
         print(f"{name:<{width}}  {describe(path)}")
+        print(f"{'':<{width}}  {path}")
     return 0
 
 
@@ -482,6 +511,39 @@ def _start_arrays(mech, phi, p):
     sol = solve(mech, jnp.stack([phi, phi]), p, points=False)
     q = sol.q[0]
     return q, sol.result[0], sol.residual[0], sol.steps[0], jax.jacfwd(mech.residual)(q, phi, p)
+
+
+def _at_start(mech, dtype) -> tuple:
+    """`(q, result code, residual, Newton steps, Jacobian)` at `[input] start` (numpy), solved in
+    `dtype`: a linkage of dyads driven by an angle takes it from the designer's numbers' turn (its
+    first input, in their dtype: the same numbers as the start solved alone); else the start alone
+    (`_start_arrays`, a stored trace)."""
+    import jax
+
+    from ..analysis import motion as _motion
+    from ..cache import traced
+
+    p = np.asarray(mech.parameters, dtype)  # the solve in the asked dtype
+    at_start = _motion.start(mech) if p.dtype == jax.dtypes.canonicalize_dtype(np.float64) else None
+    if at_start is None:
+        at_start = traced("check_start", _start_arrays, (
+            mech.replace(parameters=p, guess=np.asarray(mech.guess, dtype)), np.asarray(mech.input_start, dtype), p))
+    return tuple(np.asarray(x) for x in at_start)
+
+
+def sketched_pose(mech, dtype) -> tuple | None:
+    """`(q, input)` of a sketch file's own pose — the solve at its `[input] start`, where its
+    joints are drawn — for the exports (`--export`, `--plot OUT.dxf`); None for a loop file, or
+    when the start does not assemble (the exports then draw the table's first position)."""
+    from ..cache import traced
+    from ..results import RESULTS
+
+    if mech.sketch is None:
+        return None
+    p = np.asarray(mech.parameters, dtype)
+    q, result = (np.asarray(x) for x in traced("check_start", _start_arrays, (  # the start alone, as `check`'s
+        mech.replace(parameters=p, guess=np.asarray(mech.guess, dtype)), np.asarray(mech.input_start, dtype), p))[:2])
+    return (q, float(mech.input_start)) if int(result) == RESULTS.converged else None
 
 
 def cmd_check(args) -> int:
@@ -556,18 +618,7 @@ def cmd_check(args) -> int:
         g = info["grubler"]
         print(f"            {g['mobility']} by Grübler: u = {g['members']} members, s = {g['joint_count']} "
               f"joint count, n = 3(u−1) − 2s; independent loops k = s − u + 1 = {g['loops']}")
-    p = np.asarray(mech.parameters, dtype)  # the solve in the asked dtype
-    import jax
-
-    from ..cache import traced
-
-    # a linkage of dyads driven by an angle: the start is the first input of the designer's numbers'
-    # turn (in their dtype; the same numbers as the start solved alone); else the start alone
-    at_start = _motion.start(mech) if p.dtype == jax.dtypes.canonicalize_dtype(np.float64) else None
-    if at_start is None:
-        at_start = traced("check_start", _start_arrays, (
-            mech.replace(parameters=p, guess=np.asarray(mech.guess, dtype)), np.asarray(mech.input_start, dtype), p))
-    q, result, resid, steps, jac = (np.asarray(x) for x in at_start)
+    q, result, resid, steps, jac = _at_start(mech, dtype)
     code = int(result)
     cond = np.linalg.cond(jac)
     how = ("closed-form dyads" if method_for(mech, NewtonOptions()) == "closed_form"
@@ -589,7 +640,7 @@ def cmd_kinematics(args) -> int:
     for o in outputs:
         if o not in OUTPUTS:
             raise MechanismError(f"--outputs: unknown output '{o}'; choose from {', '.join(OUTPUTS)}")
-    check_output("--csv", args.csv)
+    check_output("--csv", args.csv, CSV_FORMATS)
     check_output("--plot", args.plot, PLOT_FORMATS + ("dxf",))
     check_output("--export", args.export, EXPORT_FORMATS)
     check_output("--animate", args.animate, ("gif",))
@@ -637,12 +688,13 @@ def cmd_kinematics(args) -> int:
         if args.csv != "-":
             print(f"wrote {args.csv}: {len(phis)} rows, {len(table.columns)} columns", file=info)
     dxf_plot = bool(args.plot) and args.plot.lower().endswith(".dxf")  # not a picture: the geometry
+    pose = sketched_pose(mech, dtype) if args.export or dxf_plot else None  # a sketch: drawn as sketched
     for option, path in (("--plot", args.plot if dxf_plot else None), ("--export", args.export)):
         if path:
             from ..report import export as _export
 
             with writing(option, path):
-                _export.export(path, mech, table)
+                _export.export(path, mech, table, pose)
             print(f"wrote {path} (geometry in {_export.file_units(mech).length})", file=info)
     picture = args.plot if args.plot and not dxf_plot else None
     if picture or args.animate:

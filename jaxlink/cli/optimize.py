@@ -9,6 +9,10 @@ import sys
 
 from ..errors import MechanismError
 
+#: the method without --method: the gradient search, the one that needs no budget (it sizes its
+#: presample and starts from the problem and stops by itself; docs/methods/optimize.md "Methods")
+DEFAULT_METHOD = "gradient"
+
 
 def register(sub) -> None:
     from .mechanism import add_mechanism_arguments
@@ -26,8 +30,9 @@ def register(sub) -> None:
         ),
     )
     add_mechanism_arguments(p, positions=False)
-    p.add_argument("--method", required=True, choices=("uniform", "montecarlo", "gradient"),
-                   help="search method")
+    p.add_argument("--method", default=None, choices=("uniform", "montecarlo", "gradient"),
+                   help=f"search method (default {DEFAULT_METHOD}: it sizes its search from the problem and stops "
+                        "when no start improves, docs/methods/optimize.md)")
     p.add_argument("--budget", type=int, default=None,
                    help="mechanism evaluations allowed (default: [optimize] budget; else the gradient search "
                         "chooses its sizes from the problem and stops when no start improves or after 400000, "
@@ -87,7 +92,8 @@ def _distributed(args) -> bool:
 
 
 _STOPPED = {"budget": "at the budget (the evaluations allowed)", "iterations": "after its iterations",
-            "converged": "by itself: no start improves", "interrupted": "interrupted"}
+            "converged": "by itself: no start improves",
+            "interrupted": "interrupted (Ctrl-C): the best design found so far, not the search's end"}
 
 
 def cmd_optimize(args) -> int:
@@ -119,6 +125,7 @@ def cmd_optimize(args) -> int:
             raise MechanismError(f"--out {args.out}: the checkpoint files (OUT.state.npz, OUT.log.jsonl) are "
                                  f"written beside OUT, and {folder} is no place for them; give a file (or a named "
                                  "pipe) in an ordinary folder")
+        check_output("--out", args.out, ("json",))
     mech = load_from_args(args)
     problem = problem_from(mech)
     budget = args.budget if args.budget is not None else problem.option("budget")
@@ -128,6 +135,12 @@ def cmd_optimize(args) -> int:
     time_s = args.time if args.time is not None else problem.option("time")  # the key: checked by problem_from
     chunk = args.chunk if args.chunk is not None else problem.option("chunk", None)
     progress = sys.stderr.isatty() if args.progress == "auto" else args.progress == "on"
+    default = args.method is None
+    if default and args.uniform:
+        raise MechanismError(f"--uniform {args.uniform}: an option of --method uniform (without --method the search "
+                             f"is {DEFAULT_METHOD}); give --method uniform")
+    if default:
+        args.method = DEFAULT_METHOD
     knobs = {}
     if args.method == "uniform":
         knobs["uniform"] = args.uniform or problem.option("uniform", "grid")
@@ -143,7 +156,8 @@ def cmd_optimize(args) -> int:
                      progress=progress and printer, time=time_s, started=started, **knobs)
     if not printer:
         return 0 if result.parameters else 1
-    print(f"method      {result.method}" + (f" ({knobs['uniform']})" if "uniform" in knobs else ""))
+    print(f"method      {result.method}" + (f" ({knobs['uniform']})" if "uniform" in knobs else "")
+          + (" (the default; --method uniform or montecarlo for the others)" if default else ""))
     if result.parameters:
         print("best        " + ", ".join(f"{k} = {v:.6g}" for k, v in result.parameters.items()))
         print(f"objective   {result.value:.10g}" if result.value is not None else "objective   -")
@@ -167,4 +181,24 @@ def cmd_optimize(args) -> int:
     if args.out:
         print(f"wrote {args.out}" + (f" and {result.best_file} (the best design: jaxlink kinematics "
                                      f"{result.best_file})" if result.best_file else ""))
+    if stopped_by == "interrupted":
+        print(_interrupted(args, result), file=sys.stderr)
+        return 130
     return 0 if result.parameters else 1
+
+
+def _interrupted(args, result) -> str:
+    """What a Ctrl-C saved and how to go on."""
+    head = f"jaxlink optimize: interrupted after {result.evaluations} evaluations"
+    if not args.out:
+        return (f"{head}: the best design so far is printed above; nothing was written (no --out). With --out "
+                "OUT.json the search writes its best so far and its state as it goes, and --resume continues an "
+                "interrupted one to the uninterrupted result")
+    from ..optimize.checkpoint import paths
+
+    state = paths(args.out)[1]
+    best = f" and the best design as a file in {result.best_file}" if result.best_file else ""
+    return (f"{head}: saved the best so far in {args.out} (\"complete\": false){best}, the search's state in "
+            f"{state}; the same command with --resume continues it to the result of an uninterrupted search: "
+            f"jaxlink optimize {args.file} --method {args.method} --out {args.out} --resume (and the same "
+            "--set, --budget, --seed and other options)")

@@ -13,6 +13,7 @@ import sys
 
 from ..report.reactions import failure_summary, plot, print_summary, reactions_table, write_csv
 from .mechanism import (
+    CSV_FORMATS,
     PLOT_FORMATS,
     add_change_points_argument,
     add_mechanism_arguments,
@@ -56,7 +57,7 @@ def register(sub) -> None:
 
 def cmd_reactions(args) -> int:
     dtype = enable_dtype(args.dtype)
-    check_output("--csv", args.csv)
+    check_output("--csv", args.csv, CSV_FORMATS)
     check_output("--plot", args.plot, PLOT_FORMATS)
     from ..model import bodies as _bodies
 

@@ -66,6 +66,16 @@ def register(sub) -> None:
                         "half-width is at most EPS (default: [study] precision, else no rule)")
     p.add_argument("--max-samples", type=int, default=None, metavar="N",
                    help="the stopping rule's cap on the samples (default: [study] max_samples, else 65536)")
+    p.add_argument("--tol", action="append", default=[], metavar="NAME=T",
+                   help="set a tolerance of [study.tolerances], in the file's units (repeatable): NAME=T (±t; a "
+                        "zone's radius where the file gives one), NAME=sigma:S, NAME=radius:R, NAME=box:WX,WY; the "
+                        "entry's distribution and k are kept. A file without [study] is studied with these")
+    p.add_argument("--dist", action="append", default=[], metavar="D|NAME=D",
+                   help="D: [study] distribution, that of the tolerances without their own; NAME=D: NAME's own "
+                        "(uniform, normal, triangular, truncated-normal; repeatable)")
+    p.add_argument("--limits", action="append", default=[], metavar="OUTPUT=LOW,HIGH",
+                   help="a specification limit of a scalar response, file units, as [study] limits (repeatable; "
+                        "-inf or inf for a one-sided limit), e.g. --limits 'stroke(s_B)=4.9,5.1'")
     p.add_argument("--no-plot", action="store_true", help="do not draw the plots")
     p.add_argument("--progress", choices=("auto", "on", "off"), default="auto",
                    help="progress bar of the sampled designs (auto: when stderr is a terminal)")
@@ -91,12 +101,23 @@ def cmd_study(args) -> int:
                        ("--chunk", args.chunk, 1), ("--bootstrap", args.bootstrap, 0)):
         if v is not None and v < lo:
             raise MechanismError(f"{opt} must be at least {lo}, got {v}")
-    inputs = read_study(mech, method=args.method, samples=args.samples, positions=args.positions, seed=args.seed,
-                        chunk=args.chunk, sampler=args.sampler, bootstrap=args.bootstrap, robust=args.robust,
-                        precision=args.precision, max_samples=args.max_samples, second_order=args.second_order)
-    study = study_for(mech, inputs)  # in one process (tests, scripts calling `main`): compiled once per key
+    from ..files.overrides import blamed, study_table
+    from ..study.tolerance import limited_responses
+
+    table, blame = study_table(mech.tables.get("study"), tol=args.tol, dist=args.dist, limits=args.limits)
+    try:
+        inputs = read_study(mech, table, method=args.method, samples=args.samples, positions=args.positions,
+                            seed=args.seed, chunk=args.chunk, sampler=args.sampler, bootstrap=args.bootstrap,
+                            robust=args.robust, precision=args.precision, max_samples=args.max_samples,
+                            second_order=args.second_order)
+        study = study_for(mech, inputs)  # in one process (tests, scripts calling `main`): compiled once per key
+        if inputs.limits and inputs.method == "tolerance":
+            limited_responses(mech, inputs, study.responses.labels)  # the names, before any work
+    except MechanismError as e:
+        raise blamed(e, blame) from None
     extra = {"chunk": study.chunk, "command_line": {"set": list(args.set), "dtype": args.dtype,
-                                                    "resume": bool(args.resume)}}
+                                                    "resume": bool(args.resume), "tol": list(args.tol),
+                                                    "dist": list(args.dist), "limits": list(args.limits)}}
     show = sys.stderr.isatty() if args.progress == "auto" else args.progress == "on"
     from . import study_methods
 

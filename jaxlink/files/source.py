@@ -88,8 +88,8 @@ def parse_toml(text: str, file: str) -> dict:
     try:
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
-        m = re.search(r"line (\d+)", str(exc))
-        raise MechanismError(f"not valid TOML: {exc}", file=file, line=int(m.group(1)) if m else None) from None
+        message, line = _located(str(exc), text)
+        raise MechanismError(f"not valid TOML: {message}", file=file, line=line) from None
     except ValueError as exc:  # e.g. an integer of more digits than Python converts
         raise MechanismError(f"not valid TOML: {exc}", file=file) from None
     except RecursionError:
@@ -100,6 +100,35 @@ def parse_toml(text: str, file: str) -> dict:
         raise MechanismError(f"values nested {levels} levels deep; at most {MAX_NESTING} levels of arrays and "
                              "tables inside one another", file=file, key=key)
     return data
+
+
+def _located(message: str, text: str) -> tuple[str, int | None]:
+    """tomllib's `message` and the line it names, except where tomllib names a later line than the
+    mistake's. An array left open (`b = [1, 2` with its `]` forgotten) is found only at the next
+    value, on the next line that is not blank or a comment: "Unclosed array (at line 13, column
+    1)" for the `b` of line 12. The line given is then that of the last text before that point —
+    where the `]` (or a `,` between two values) is missing."""
+    m = re.search(r"\(at line (\d+), column (\d+)\)", message)
+    lines = text.splitlines()
+    if m:
+        line, col = int(m.group(1)), int(m.group(2))
+    elif message.startswith("Unclosed array") and "end of document" in message:
+        line, col = len(lines) + 1, 1
+    else:
+        return message, None
+    if not message.startswith("Unclosed array"):
+        return message, line
+    # that line's text before the column, then the lines above (1-based numbers)
+    before = [(line, lines[line - 1][:col - 1])] if line <= len(lines) else []
+    before += [(k + 1, lines[k]) for k in range(min(line, len(lines) + 1) - 2, -1, -1)]
+    for at, part in before:
+        if part.strip() and not part.lstrip().startswith("#"):
+            if at == line:
+                return message, line
+            read = f"line {line}, column {col}" if m else "the end of the file"
+            return (f"an array not closed: ']' (or a ',' between two values) missing on line {at}, after its "
+                    f"last value (TOML read on to {read}: Unclosed array)"), at
+    return message, line
 
 
 def _deepest(data: dict) -> tuple[str, int]:

@@ -9,7 +9,8 @@ program. `geometry` collects it from the table and the linkage drawing (`jaxlink
   position is left out);
 - `JOINT_PATH_<joint>`: the same for each moving joint the drawing knows (not the ground pivots, not
   a joint at a point's place, whose path is the point's);
-- `LINKAGE`: the linkage in one pose, the first converged position (else the first assembled): every
+- `LINKAGE`: the linkage in one pose — a sketch file's own pose (solved at its `[input] start`: the
+  sketch as drawn), else the first converged position (else the first assembled): every
   link as a line from joint to joint, each plate as a closed polyline (its outline: a sketch's plates,
   a loop file's bodies with three or more `[joints]`), each point's arm from its last joint as a
   polyline;
@@ -88,7 +89,8 @@ class Label:
 class Geometry:
     """What `write_dxf`/`write_svg` write, in the file's length `unit`: `polylines` (two-vertex
     open ones on `LINKAGE`, `CONSTRUCTION` and `SLIDERS` are lines), `circles`, `labels`; `layers`
-    in order; `pose`: the row of the table drawn in `LINKAGE`, `title` (name and pose)."""
+    in order; `pose`: the row of the table drawn in `LINKAGE` (None: a pose given apart, a
+    sketch's), `title` (name and pose)."""
 
     unit: str
     polylines: list
@@ -131,9 +133,11 @@ def _pieces(xy: np.ndarray, ok: np.ndarray, periodic: bool) -> list:
     return out
 
 
-def geometry(mech, table) -> Geometry:
+def geometry(mech, table, pose: tuple | None = None) -> Geometry:
     """The paths of a kinematics table and its linkage in one pose (see the module docstring), in
-    the file's length unit."""
+    the file's length unit. `pose`: `(q, input)` (SI) of the pose to draw instead of a row of the
+    table — a sketch file's own pose, solved at its `[input] start` (`jaxlink kinematics` passes it
+    for a sketch, so that the drawing is the sketch as drawn, not the table's first input)."""
     units = file_units(mech)
     s = units.length_factor
     d = drawing(mech, table.q, table.inputs, table.parameters, table.assembled)
@@ -159,16 +163,23 @@ def geometry(mech, table) -> Geometry:
         polylines += [Polyline(lay, v, c) for v, c in _pieces(xy, ok, table.periodic)]
     layers += list(LAYERS)
 
-    conv, shown = np.flatnonzero(table.converged), np.flatnonzero(d.shown)
-    pose = int(conv[0]) if conv.size else (int(shown[0]) if shown.size else None)
+    points = np.asarray(table.points, dtype=float)
     title = mech.name
-    if pose is None:
-        return Geometry(units.length, polylines, circles, labels, layers, pose, title + " (no position assembled)")
-    title += f" at input {_grid.format_input(table.input_values[pose], table.input_kind)}"
+    if pose is not None:  # the pose given, drawn from a drawing of its own (row 0)
+        q, phi = pose
+        d = drawing(mech, np.asarray(q, float)[None], np.asarray([phi], float), table.parameters, np.ones(1, bool))
+        points, row, value = d.points, 0, mech.from_si(mech.input_name, float(phi))
+        title += f" at input {_grid.format_input(float(f'{value:.12g}'), table.input_kind)} (the sketched pose)"
+    else:
+        conv, shown = np.flatnonzero(table.converged), np.flatnonzero(d.shown)
+        if not (conv.size or shown.size):
+            return Geometry(units.length, polylines, circles, labels, layers, None, title + " (no position assembled)")
+        row = int(conv[0]) if conv.size else int(shown[0])
+        title += f" at input {_grid.format_input(table.input_values[row], table.input_kind)}"
     size = d.extent * s
     seen: list = []  # a link in two loops is drawn once
     for v_all, kinds in zip(d.loops, d.kinds):
-        v = v_all[pose] * s
+        v = v_all[row] * s
         n = len(kinds)
         for j, kind in enumerate(kinds):
             seg = np.stack([v[j], v[(j + 1) % n]])
@@ -181,43 +192,44 @@ def geometry(mech, table) -> Geometry:
             seen.append(key)
             polylines.append(Polyline(lay, seg))
     for body in d.bodies:  # a sketch's links (lines) and plates (closed outlines), a loop file's plates
-        xy = body.outline[pose] * s
+        xy = body.outline[row] * s
         if np.isfinite(xy).all():
             polylines.append(Polyline("LINKAGE", xy, body.plate))
     for arm in d.arms:
-        xy = arm[pose] * s
+        xy = arm[row] * s
         if len(xy) >= 2 and np.isfinite(xy).all():
             polylines.append(Polyline("LINKAGE", xy))
     h, w = 0.05 * size, 0.032 * size  # as the plots draw a block
     for sl in d.sliders:
-        guide = sl.guide[pose] * s
+        guide = sl.guide[row] * s
         if np.isfinite(guide).all():
             polylines.append(Polyline("SLIDERS", guide))
-        u = sl.axis[pose]
+        u = sl.axis[row]
         nrm = np.array([-u[1], u[0]])
-        b = sl.block[pose] * s
+        b = sl.block[row] * s
         if np.isfinite(b).all():
             polylines.append(Polyline("SLIDERS", np.array([b - h * u - w * nrm, b + h * u - w * nrm,
                                                            b + h * u + w * nrm, b - h * u + w * nrm]), True))
     r, text_h = 0.012 * size, 0.03 * size
     for k, name in enumerate(d.joint_names):
-        c = d.joints[pose, k] * s
+        c = d.joints[row, k] * s
         if np.isfinite(c).all():
             circles.append(Circle("GROUND" if d.ground[k] else "JOINTS", c, r))
             labels.append(Label("LABELS", c + np.array([1.5 * r, 1.5 * r]), name, text_h))
     joint_names = set(d.joint_names)
     for i, name in enumerate(d.mark_names):  # a sketch's joints on one body only: points of it
-        c = d.marks[pose, i] * s
+        c = d.marks[row, i] * s
         if np.isfinite(c).all() and name not in mech.point_names:
             circles.append(Circle("POINTS", c, 0.6 * r))
             labels.append(Label("LABELS", c + np.array([1.5 * r, -1.5 * r - text_h]), name, text_h))
     for i, name in enumerate(mech.point_names):
-        c = np.asarray(table.points[pose, i], dtype=float) * s
+        c = np.asarray(points[row, i], dtype=float) * s
         if np.isfinite(c).all():
             circles.append(Circle("POINTS", c, 0.6 * r))
             if name not in joint_names:
                 labels.append(Label("LABELS", c + np.array([1.5 * r, -1.5 * r - text_h]), name, text_h))
-    return Geometry(units.length, polylines, circles, labels, layers, pose, title)
+    return Geometry(units.length, polylines, circles, labels, layers, None if pose is not None else row,
+                    title)
 
 
 def _is_line(p: Polyline) -> bool:
@@ -315,10 +327,11 @@ def write_svg(path: str, geo: Geometry) -> None:
     tree.write(path, encoding="utf-8", xml_declaration=True)
 
 
-def export(path: str, mech, table) -> None:
-    """Write the geometry of `table` to `path`, DXF or SVG by its extension (`FORMATS`)."""
+def export(path: str, mech, table, pose: tuple | None = None) -> None:
+    """Write the geometry of `table` to `path`, DXF or SVG by its extension (`FORMATS`); `pose`:
+    as `geometry`'s."""
     ext = path.rsplit(".", 1)[-1].lower() if "." in path else ""
     if ext not in FORMATS:
         raise ValueError(f"{path}: the geometry formats are {', '.join('.' + f for f in FORMATS)}")
-    geo = geometry(mech, table)
+    geo = geometry(mech, table, pose)
     (write_dxf if ext == "dxf" else write_svg)(path, geo)

@@ -39,15 +39,37 @@ def resolve(name_or_path: str) -> pathlib.Path:
     p = pathlib.Path(name_or_path)
     if p.is_file():
         return p
-    scenes = scene_paths()
-    if name_or_path in scenes:
-        return scenes[name_or_path]
-    if p.suffix == ".toml" or "/" in name_or_path:
+    if name_or_path not in scene_paths() and (p.suffix == ".toml" or "/" in name_or_path):
         raise MechanismError(f"no such file: {name_or_path}")
+    return named(name_or_path, "is neither a file nor a built-in scene")
+
+
+def named(name: str, what: str = "is not a built-in scene") -> pathlib.Path:
+    """The file of the built-in scene `name`; a `MechanismError` with the closest name otherwise."""
+    from ..errors import MechanismError
+
+    scenes = scene_paths()
+    if name in scenes:
+        return scenes[name]
     import difflib
 
-    close = difflib.get_close_matches(name_or_path, list(scenes), n=1)
+    close = difflib.get_close_matches(name, list(scenes), n=1)
     hint = f" — did you mean '{close[0]}'?" if close else ""
-    raise MechanismError(
-        f"'{name_or_path}' is neither a file nor a built-in scene{hint}; built-in scenes: " + ", ".join(scenes)
-    )
+    raise MechanismError(f"'{name}' {what}{hint}; built-in scenes: " + ", ".join(scenes))
+
+
+def copy(name: str, dest: str | pathlib.Path | None = None, *, force: bool = False) -> pathlib.Path:
+    """Write the file of the built-in scene `name` to `dest` (default `NAME.toml` in the current
+    folder; a folder: `NAME.toml` in it), to be edited (a `[study]` table added, dimensions
+    changed) and given as FILE. A scene is one file (none refers to another). An existing file is
+    refused unless `force`. Returns the path written."""
+    from ..errors import MechanismError
+
+    src = named(name)
+    out = pathlib.Path(dest) if dest is not None else pathlib.Path(src.name)
+    if out.is_dir():
+        out = out / src.name
+    if out.exists() and not force:
+        raise MechanismError(f"{out} exists: give --force to overwrite it, or another DEST")
+    out.write_bytes(src.read_bytes())
+    return out

@@ -428,12 +428,14 @@ def limited_responses(mech, inputs: StudyInputs, labels) -> tuple:
     `labels` (a metric: stroke(…), swing(…), max_speed(…), …); raises `MechanismError` naming the
     scalar responses where a limit names none of them."""
     from ..errors import MechanismError
+    from ..files.keys import suggest
 
     scalar = {name: i for i, (name, _u, k) in enumerate(labels) if k is None}
     unknown = [name for name, _lo, _hi in inputs.limits if name not in scalar]
     if unknown:
-        raise MechanismError(f"limits: no scalar response {', '.join(map(repr, unknown))}; the scalar responses: "
-                             f"{', '.join(scalar) or '(none)'}", file=mech.file, key="study.limits")
+        raise MechanismError(f"limits: no scalar response {', '.join(map(repr, unknown))}"
+                             f"{suggest(unknown[0], scalar)}; the scalar responses: {', '.join(scalar) or '(none)'}",
+                             file=mech.file, key=f"study.limits.{unknown[0]}")
     return tuple((name, lo, hi, scalar[name]) for name, lo, hi in inputs.limits)
 
 

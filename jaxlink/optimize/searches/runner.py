@@ -66,7 +66,11 @@ def run(problem_or_evaluator: Problem | Evaluator, method: str, *, budget: int |
       `time.perf_counter()` time; default: this call), e.g. the command's start, so that loading
       the file and building the evaluator count too.
     - `extra["stopped_by"]` says what ended the search: "time_limit", "budget", "iterations" or
-      "converged" (the gradient search: no start improves), "interrupted" (`stop_after_chunks`).
+      "converged" (the gradient search: no start improves), "interrupted" (`stop_after_chunks`, or
+      Ctrl-C). A `KeyboardInterrupt` (Ctrl-C) once a design was found ends the search at its last
+      whole chunk as its end would: the result is the best so far (certified as always), and with
+      `out` the checkpoint, `OUT` and `OUT.best.toml` are written, from which `resume` continues to
+      the uninterrupted result; before any design was found it is raised (nothing to keep).
     - `out`: the JSON document's path; the state is checkpointed beside it (`checkpoint_s`)
       (`OUT.state.npz`, `OUT.log.jsonl`, `OUT` rewritten with the best so far) and `OUT` ends
       with `SearchResult.to_json()`. `resume`: continue the interrupted search of `out`; it ends
@@ -146,50 +150,55 @@ def run(problem_or_evaluator: Problem | Evaluator, method: str, *, budget: int |
             pending.clear()
             return
         _checkpoint.save_state(files[1], st, fp)
-        for record in pending:
-            _checkpoint.append_log(files[2], record)
-        pending.clear()
+        while pending:  # one by one: a Ctrl-C between two leaves the rest for the next checkpoint
+            _checkpoint.append_log(files[2], pending[0])
+            pending.pop(0)
         _checkpoint.write_json_atomic(files[0], result(False).to_json())
         saved_at = _time.perf_counter()
 
-    timed_out = False
+    timed_out = interrupted = False
     try:
-        while not search.done(st):
-            if stop_after_chunks is not None and chunks >= stop_after_chunks:
-                break
-            if time is not None:
-                spent = float(st.progress.wall_s) + (_time.perf_counter() - t_call - stepped)
-                if spent + last > float(time):
-                    timed_out = True
+        try:
+            while not search.done(st):
+                if stop_after_chunks is not None and chunks >= stop_after_chunks:
                     break
-            t0 = _time.perf_counter()
-            before = int(st.progress.evaluations)
-            best_before = float(st.progress.best_value)
-            with compile_clock() as clock:
-                st = search.step(st)
-            dt = _time.perf_counter() - t0
-            stepped += dt
-            last = max(0.0, dt - clock[0])
-            p = st.progress._replace(wall_s=np.float64(st.progress.wall_s + dt),
-                                     compile_s=np.float64(st.progress.compile_s + clock[0]))
-            st = st._replace(progress=p)
-            if p.found and float(p.best_value) < best_before:
-                trace.append(trace_point(p))
-            chunks += 1
-            if bar is not None:
-                bar.update(int(p.evaluations) - before)
-                if p.found:
-                    bar.set_postfix(best=f"{float(p.best_value):.6g}")
-            if files:
-                pending.append({
-                    "chunk": int(p.chunk), "evaluations": int(p.evaluations), "designs": int(p.designs),
-                    "infeasible": int(p.infeasible), "best_value": float(p.best_value) if p.found else None,
-                    "best_parameters": (dict(zip(ev.problem.names, map(float, ev.problem.to_file_units(p.best_u))))
-                                        if p.found else None),
-                    "wall_s": float(p.wall_s), "compile_s": float(p.compile_s),
-                })
-                if _time.perf_counter() - saved_at >= checkpoint_s:
-                    checkpoint()
+                if time is not None:
+                    spent = float(st.progress.wall_s) + (_time.perf_counter() - t_call - stepped)
+                    if spent + last > float(time):
+                        timed_out = True
+                        break
+                t0 = _time.perf_counter()
+                before = int(st.progress.evaluations)
+                best_before = float(st.progress.best_value)
+                with compile_clock() as clock:
+                    st = search.step(st)
+                dt = _time.perf_counter() - t0
+                stepped += dt
+                last = max(0.0, dt - clock[0])
+                p = st.progress._replace(wall_s=np.float64(st.progress.wall_s + dt),
+                                         compile_s=np.float64(st.progress.compile_s + clock[0]))
+                st = st._replace(progress=p)
+                if p.found and float(p.best_value) < best_before:
+                    trace.append(trace_point(p))
+                chunks += 1
+                if bar is not None:
+                    bar.update(int(p.evaluations) - before)
+                    if p.found:
+                        bar.set_postfix(best=f"{float(p.best_value):.6g}")
+                if files:
+                    pending.append({
+                        "chunk": int(p.chunk), "evaluations": int(p.evaluations), "designs": int(p.designs),
+                        "infeasible": int(p.infeasible), "best_value": float(p.best_value) if p.found else None,
+                        "best_parameters": (dict(zip(ev.problem.names, map(float, ev.problem.to_file_units(p.best_u))))
+                                            if p.found else None),
+                        "wall_s": float(p.wall_s), "compile_s": float(p.compile_s),
+                    })
+                    if _time.perf_counter() - saved_at >= checkpoint_s:
+                        checkpoint()
+        except KeyboardInterrupt:  # Ctrl-C: the search ends at its last whole chunk (the one cut is dropped)
+            if not bool(st.progress.found):
+                raise  # nothing found yet: nothing to keep
+            interrupted = True
         if files and pending:
             checkpoint()  # the last chunks (also of a search stopped by stop_after_chunks)
     finally:
@@ -197,8 +206,8 @@ def run(problem_or_evaluator: Problem | Evaluator, method: str, *, budget: int |
             bar.close()
     if timed_out:
         extra["stopped_by"] = "time_limit"
-    elif not search.done(st):
-        extra["stopped_by"] = "interrupted"  # stop_after_chunks
+    elif interrupted or not search.done(st):
+        extra["stopped_by"] = "interrupted"  # Ctrl-C, or stop_after_chunks
     else:
         reason = getattr(search, "stop_reason", None)
         extra["stopped_by"] = reason(st) if reason is not None else "budget"
