@@ -17,6 +17,9 @@ import subprocess
 import sys
 
 COUNT = 12
+# the kinematics commands' count: more rows than a pipe holds (`| head -1`), and one program for
+# both (the second loads it from the run's compile cache)
+ROWS = 3000
 
 
 def _run_closed(args: list[str], *, head: bool = False) -> subprocess.CompletedProcess:
@@ -44,10 +47,10 @@ def _rows(path) -> list[dict]:
 
 def test_kinematics_writes_its_files_into_a_closed_pipe(tmp_path):
     out = {k: tmp_path / f"k.{k}" for k in ("csv", "json", "png")}
-    done = _run_closed(["kinematics", "four-bar", "--count", str(COUNT), "--csv", str(out["csv"]),
+    done = _run_closed(["kinematics", "four-bar", "--count", str(ROWS), "--csv", str(out["csv"]),
                         "--json", str(out["json"]), "--plot", str(out["png"])])
     assert done.returncode == 0, done.stderr
-    assert len(_rows(out["csv"])) == COUNT
+    assert len(_rows(out["csv"])) == ROWS
     json.loads(out["json"].read_text())
     assert out["png"].read_bytes()[-8:-4] == b"IEND"
 
@@ -63,7 +66,7 @@ def test_the_export_after_a_table_cut_by_head(tmp_path):
     """`--csv -` sends 3000 rows (more than a pipe holds) to `head -1`; the export written after
     the table is written whole."""
     path = tmp_path / "k.dxf"
-    done = _run_closed(["kinematics", "four-bar", "--count", "3000", "--csv", "-", "--export", str(path)],
+    done = _run_closed(["kinematics", "four-bar", "--count", str(ROWS), "--csv", "-", "--export", str(path)],
                        head=True)
     assert done.returncode == 0, done.stderr
     assert path.read_text().rstrip().endswith("EOF")
