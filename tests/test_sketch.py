@@ -337,6 +337,9 @@ rocker = ["B0", "B"]
     ('[sketch.links]', '[loops]\nx = ["a @ b"]\n\n[sketch.links]', ["derives [loops]"], 19),
     ('rocker = ["B0", "B"]', 'rocker = ["B0", "B"]\nbase = ["A0", "B0"]', ["two frame joints"], 23),
     ('points = ["P"]', 'points = ["P"]\nsliders = 3', ["[sketch.sliders] must be a table"], 8),
+    ('crank = "crank"', 'link = "cuopler"', ["'cuopler' is not a link", "did you mean 'coupler'"], 10),
+    ('crank = "crank"', 'crank = "crank"\nlink = "coupler"', ["needs one of crank", "slider = "], 9),
+    ('crank = "crank"', 'slider = "B"', ["'B' is not a slider of [sketch.sliders]"], 10),
 ])
 def test_bad_sketches_name_the_line_and_the_reason(old, new, words, line):
     assert old in FOUR_BAR
@@ -638,3 +641,69 @@ def test_klann_sketch_designers_numbers_are_its_loop_forms():
     assert len(ma.transmission) == len(mb.transmission) == 2
     for x, y in zip(ma.transmission, mb.transmission):
         assert abs(x["min"] - y["min"]) < 1e-10 and abs(x["max"] - y["max"]) < 1e-10
+
+
+# ----------------------------------------------------------------------------- inputs a designer drives
+# A floating link's angle and a slider's signed position on its guide as the sketch's input: the
+# elliptic trammel (a bar AB, A on the x axis, B on the y axis) driven both ways. A point P of the
+# bar at p from A: P = ((p − L) cos θ, p sin θ), on the ellipse x² / (L − p)² + y² / p² = 1.
+
+TRAMMEL_L, TRAMMEL_P = 0.1, 0.03  # the bar's length, P's distance from A along it (m)
+
+
+def _trammel(drive: str):
+    L, p, th = TRAMMEL_L, TRAMMEL_P, math.radians(50.0)
+    a, b = (-L * math.cos(th), 0.0), (0.0, L * math.sin(th))
+    sk = (jl.Sketch("trammel").frame("O", 0, 0).joint("A", *a).joint("B", *b)
+          .joint("P", a[0] + p * math.cos(th), p * math.sin(th)).link("bar", "A", "B", "P")
+          .slider("A", on="frame", along=(1, 0)).slider("B", on="frame", along=(0, 1)).points("P"))
+    if drive == "link":
+        sk.link_angle("bar", name="theta")
+    else:
+        sk.slider_position("A", name="x")
+    return sk.mechanism()
+
+
+def _off_ellipse(P, a, b) -> float:
+    """The largest distance (m) of the points P from the ellipse x²/a² + y²/b² = 1, to first order:
+    |F| / |∇F| with F = x²/a² + y²/b² − 1."""
+    F = (P[:, 0] / a) ** 2 + (P[:, 1] / b) ** 2 - 1
+    return float(np.max(np.abs(F) / np.hypot(2 * P[:, 0] / a**2, 2 * P[:, 1] / b**2)))
+
+
+def test_elliptic_trammel_driven_by_its_bars_angle_is_exact_on_the_ellipse():
+    mech = _trammel("link")
+    assert mech.input_name == "theta" and mech.input_kind == "angle"
+    assert set(mech.unknown_names) == {"s_A", "s_B"}
+    assert _closed_form(mech) and [d.kind for d in dyads.classify(mech)] == ["PP"]
+    assert mech.input_start == pytest.approx(math.radians(50.0), abs=1e-15)
+    phis = np.linspace(0.0, 2 * np.pi, 49)
+    sol = jl.solve(mech, phis)
+    assert bool(np.all(sol.converged))
+    P = np.asarray(sol.points)[:, 0]
+    L, p = TRAMMEL_L, TRAMMEL_P
+    want = np.stack([(p - L) * np.cos(phis), p * np.sin(phis)], axis=1)
+    assert np.abs(P - want).max() < 1e-15
+    assert _off_ellipse(P, L - p, p) < 1e-15
+    assert mech.sketch.input == ("link", "bar")
+
+
+def test_elliptic_trammel_driven_by_a_sliders_signed_position_is_exact_on_the_ellipse():
+    mech = _trammel("slider")
+    assert mech.input_name == "x" and mech.input_kind == "length"
+    assert set(mech.unknown_names) == {"theta_bar", "s_B"}
+    assert _closed_form(mech) and [d.kind for d in dyads.classify(mech)] == ["RRP"]
+    L, p = TRAMMEL_L, TRAMMEL_P
+    assert mech.input_start == pytest.approx(-L * math.cos(math.radians(50.0)), abs=1e-16)  # 15 digits
+    xs = np.linspace(-0.099, 0.099, 45)  # signed: A on either side of the origin, B stays above
+    sol = jl.solve(mech, xs)
+    assert bool(np.all(sol.converged))
+    P = np.asarray(sol.points)[:, 0]
+    yb = np.sqrt(L * L - xs * xs)  # B = (0, yb), the sketch's branch (above)
+    want = np.stack([xs * (L - p) / L, p * yb / L], axis=1)  # P = A + p (B − A) / L
+    assert np.abs(P - want).max() < 1e-15
+    assert _off_ellipse(P, L - p, p) < 1e-15
+    assert mech.sketch.input == ("slider", "A")
+    # its range: signed, between the toggles where the bar lies on the x axis (B at the origin)
+    m = jl.motion(mech)
+    assert abs(m.lower + L) < 1e-15 and abs(m.upper - L) < 1e-15

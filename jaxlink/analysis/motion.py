@@ -345,10 +345,12 @@ def motion(mech: Mechanism, p=None, *, samples: int = 3600) -> Motion | None:
 def _length_motion(mech: Mechanism, dyads, p, samples: int) -> Motion:
     """`motion` of a length input (an actuator, a cylinder): its range around `[input] start` —
     the toggles on either side, where a dyad's reach margin reaches zero, scanned in `samples`
-    steps of (start + the sum of the design's lengths) / `samples` (no linkage of links reaches
-    further; past the scan, or below zero length, no limit: `lower`/`upper` None) and bisected to
-    adjacent floats (`whole_curve.limit`) —, the transmission angles over it, and each output's
-    range over it (`jaxlink.analysis.stroke.outputs_over`)."""
+    steps of (|start| + the sum of the design's lengths) / `samples` each way (no linkage of links
+    reaches further; a positive distance, an actuator's length, down to zero only, a slider's signed
+    position — a sketch's `slider` input, or a start ≤ 0 — past zero; past the scan no limit:
+    `lower`/`upper` None) and bisected to adjacent floats (`whole_curve.limit`) —, the
+    transmission angles over it, and each output's range over it
+    (`jaxlink.analysis.stroke.outputs_over`)."""
     from .stroke import outputs_over
     from .whole_curve import limit
 
@@ -361,12 +363,15 @@ def _length_motion(mech: Mechanism, dyads, p, samples: int) -> Motion:
     q0 = q_s[0]
     lengths = [abs(float(v)) for v, k in zip(p, mech.parameter_kinds) if k == "length"]
     step = (abs(start) + sum(lengths)) / samples
+    # a distance (an actuator's length) stays above zero; a slider's signed position need not
+    signed = start <= 0 or (mech.sketch is not None and mech.sketch.input[0] == "slider")
+    n_down = samples if signed else max(1, int(np.ceil(start / step)) - 1)
     up = limit(mech, dyads, sigma, q0, p, start, 1.0, samples, step=step)
-    down = limit(mech, dyads, sigma, q0, p, start, -1.0, max(1, int(np.ceil(start / step)) - 1), step=step)
+    down = limit(mech, dyads, sigma, q0, p, start, -1.0, n_down, step=step)
     upper = None if up is None else up[0]
     lower = None if down is None else down[0]
     hi_end = start + samples * step if upper is None else upper
-    lo_end = start - (max(1, int(np.ceil(start / step)) - 1)) * step if lower is None else lower
+    lo_end = start - n_down * step if lower is None else lower
     trans = _transmission(mech, dyads, sigma, q0, p, lo_end, hi_end, samples)
     outs = outputs_over(mech, sigma, q0, lo_end, hi_end, p, samples)
     return Motion(False, lower, upper, trans, outs, [], lo_end, hi_end)

@@ -43,8 +43,8 @@ def lines(mech, fbs, m, lu: str) -> list:
         def inp(x, digits=10):
             return f"{x / mech.units.length:.{digits}g} {lu}"
 
-        ends = [inp(m.low) + ("" if m.lower is not None else " (no limit position: the scan's end, zero length)"),
-                inp(m.high) + ("" if m.upper is not None else " (no limit position up to the sum of the lengths)")]
+        ends = [inp(m.low) + ("" if m.lower is not None else " (no limit position down to there: the scan's end)"),
+                inp(m.high) + ("" if m.upper is not None else " (no limit position up to there: the scan's end)")]
         if m.low is None:
             out.append(f"motion      {name}: the start does not assemble")
             return out
