@@ -36,6 +36,16 @@ def whitworth():
     return jl.load("whitworth")
 
 
+@pytest.fixture(scope="module")
+def whitworth_motion(whitworth):
+    return motion(whitworth)
+
+
+@pytest.fixture(scope="module")
+def slider_crank_motion():
+    return motion(jl.load("slider-crank"))
+
+
 def test_whitworth_takes_the_closed_form_and_matches_geometry(whitworth):
     dy = _dyads.classify(whitworth)
     assert [d.kind for d in dy] == ["RPR", "RRP"]
@@ -159,13 +169,14 @@ def test_a_link_written_as_two_terms_is_an_rrr_dyad():
     assert np.max(np.abs(np.asarray(jl.solve(two, phis).q) - np.asarray(jl.solve(fb, phis).q))) < 1e-12
 
 
-def test_whitworth_swing_dead_centres_and_time_ratio(whitworth):
+def test_whitworth_swing_dead_centres_and_time_ratio(whitworth_motion):
     """The lever's extremes are where the crank is perpendicular to it: φ = −90° ± acos(r/d), a
     swing of 2 asin(r/d), a time ratio (π + 2 asin(r/d)) / (π − 2 asin(r/d)); the ram's x is
     monotonic in θ over the swing, so its dead centres are the same inputs."""
-    m = motion(whitworth)
+    m = whitworth_motion
     outs = {o["name"]: o for o in m.outputs}
     assert set(outs) == {"theta", "s", "x"}  # psi (the connecting rod) is not a rocker
+    assert [outs[n]["kind"] for n in ("theta", "s", "x")] == ["rocker", "slot", "slider"]
     beta = math.asin(R / D)
     ratio = (math.pi + 2 * beta) / (math.pi - 2 * beta)
     dead = np.sort(np.mod([-math.pi / 2 + math.acos(R / D), -math.pi / 2 - math.acos(R / D)], 2 * math.pi))
@@ -186,12 +197,11 @@ def test_whitworth_swing_dead_centres_and_time_ratio(whitworth):
     assert abs(th["velocity_max"] - R / (R + D)) < 1e-9 and abs(th["velocity_min"] + R / (D - R)) < 1e-9
 
 
-def test_offset_slider_crank_stroke_and_time_ratio():
+def test_offset_slider_crank_stroke_and_time_ratio(slider_crank_motion):
     """Crank a, rod b, the guide e above the crank pivot: the slider's dead centres are where crank
     and rod are in line, x = √((b ± a)² − e²), at φ = atan2(e, x₊) and atan2(e, x₋) + π."""
-    mech = jl.load("slider-crank")
     e, a, b = 0.012, 0.025, 0.080
-    (o,) = motion(mech).outputs
+    (o,) = slider_crank_motion.outputs
     x_out, x_in = math.sqrt((b + a) ** 2 - e * e), math.sqrt((b - a) ** 2 - e * e)
     assert o["name"] == "p14" and abs(o["stroke"] - (x_out - x_in)) < 1e-12
     phi_out, phi_in = math.atan2(e, x_out), math.atan2(e, x_in) + math.pi
@@ -200,3 +210,57 @@ def test_offset_slider_crank_stroke_and_time_ratio():
     rise = (phi_out - phi_in) % (2 * math.pi)
     ratio = max(rise, 2 * math.pi - rise) / min(rise, 2 * math.pi - rise)
     assert abs(o["time_ratio"] - ratio) < 1e-9 and abs(o["rise"] - rise) < 1e-10
+
+
+# ----------------------------------------------------------------------------- transmission angles
+# μ = 90° − the pressure angle (Balli & Chand 2002): RRP the rod against the guide's normal, RPR the
+# slot's push (normal to the slot) against the path of the lever's point at the block.
+
+
+def test_offset_slider_crank_transmission_angle(slider_crank_motion):
+    """Crank a, rod b, the guide e above the crank pivot: the rod's rise across the guide is
+    e − a sin φ, cos μ = |e − a sin φ| / b: least μ = acos((e + a) / b) at φ = 270°, 90° where
+    a sin φ = e."""
+    mech = jl.load("slider-crank")
+    e, a, b = 0.012, 0.025, 0.080
+    (t,) = slider_crank_motion.transmission
+    assert t["kind"] == "RRP" and t["unknowns"] == ("psi13", "p14")
+    assert abs(np.degrees(t["min"]) - np.degrees(np.arccos((e + a) / b))) < 1e-9
+    assert abs(math.remainder(t["min_at"] - 1.5 * math.pi, 2 * math.pi)) < 1e-6
+    assert abs(np.degrees(t["max"]) - 90.0) < 1e-9 and abs(t["worst"] - t["min"]) < 1e-15
+    phi = t["max_at"]
+    assert abs(a * math.sin(phi) - e) < 1e-9
+    # at the samples: the rod's angle of the solve against the closed form
+    phis = np.radians(np.arange(0.0, 360.0, 15.0))
+    psi = np.asarray(jl.solve(mech, phis).q)[:, 0]
+    rod = np.stack([np.cos(psi), np.sin(psi)], axis=1)
+    assert np.allclose(np.abs(rod[:, 1]), np.abs(e - a * np.sin(phis)) / b, atol=1e-13)
+
+
+def test_whitworth_transmission_angles(whitworth_motion):
+    """The slotted lever (RPR, the slot through its pivot): the block pushes normal to the lever,
+    along its point's path: 90° throughout. The rod and ram (RRP, the ram on y = H): cos μ =
+    |H − l sin θ| / c, least at the lever's extremes sin θ = √(1 − (r/d)²), largest at θ = 90°."""
+    slot, ram = whitworth_motion.transmission
+    assert (slot["kind"], ram["kind"]) == ("RPR", "RRP")
+    assert abs(np.degrees(slot["min"]) - 90.0) < 1e-9 and abs(np.degrees(slot["max"]) - 90.0) < 1e-9
+    mu_min = np.arccos((H - L * np.sqrt(1 - (R / D) ** 2)) / C)
+    mu_max = np.arccos((H - L) / C)
+    assert abs(np.degrees(ram["min"] - mu_min)) < 1e-9 and abs(np.degrees(ram["max"] - mu_max)) < 1e-9
+    dead = np.mod([-math.pi / 2 + math.acos(R / D), -math.pi / 2 - math.acos(R / D)], 2 * math.pi)
+    assert min(abs(math.remainder(ram["min_at"] - x, 2 * math.pi)) for x in dead) < 1e-6
+
+
+def test_offset_slot_transmission_angle():
+    """A slot e off the lever's pivot O2, the crank r about O1 = (0, d) turning fully (d − r > e):
+    cos μ = e / |O2 A|, |O2 A| from d − r (φ = 270°, the least μ) to d + r (90°, the largest)."""
+    mech = loads(OFFSET.replace("r = 60.0", "r = 30.0"))
+    d, r, e = 0.1, 0.03, 0.05
+    m = motion(mech)
+    assert m.full_turn
+    (t,) = m.transmission
+    assert t["kind"] == "RPR"
+    assert abs(np.degrees(t["min"] - np.arccos(e / (d - r)))) < 1e-9
+    assert abs(np.degrees(t["max"] - np.arccos(e / (d + r)))) < 1e-9
+    assert abs(math.remainder(t["min_at"] - 1.5 * math.pi, 2 * math.pi)) < 1e-6
+    assert abs(math.remainder(t["max_at"] - 0.5 * math.pi, 2 * math.pi)) < 1e-6

@@ -219,3 +219,33 @@ def test_design_search_over_the_stroke(boom):
     sagitta = 400.0 * ((th[1] - th[0]) / 239) ** 2 / 8
     assert 0 < res.value <= 3 * sagitta**2
     assert res.certificate["certificate"] == "dense re-solve" and res.certificate["certified"]
+
+
+def test_designers_numbers_of_an_oscillating_cylinder(capsys):
+    """The cylinder from C = (d, 0) to the boom's point A (|OA| = r < d): its length runs between
+    the toggles d − r (boom and cylinder in line, A between O and C) and d + r; over that range
+    the boom swings π, the cylinder sin⁻¹(r/d) (its extreme where it is tangent to A's circle, at
+    s = √(d² − r²), a dead centre), and the angle between them at A, cos μ = (r² + s² − d²) /
+    (2 r s), runs from π to 0."""
+    from jaxlink.analysis.motion import motion
+
+    r, d = 0.25, 0.3
+    mech = jl.load(FILE, overrides={"r": 250.0})
+    m = motion(mech)
+    assert abs(m.lower - (d - r)) < 1e-15 and abs(m.upper - (d + r)) < 1e-15
+    assert (m.low, m.high) == (m.lower, m.upper)
+    outs = {o["name"]: o for o in m.outputs}
+    assert [(o["name"], o["kind"]) for o in m.outputs] == [("theta", "rocker"), ("psi", "rocker")]
+    assert abs(outs["theta"]["stroke"] - math.pi) < 1e-7  # the root of a toggle: √ of a float's spacing
+    psi = outs["psi"]
+    assert abs(psi["stroke"] - math.asin(r / d)) < 1e-7
+    ((at, value),) = psi["dead_centres"]
+    assert abs(at - math.sqrt(d * d - r * r)) < 1e-12 and abs(value - (math.pi - math.asin(r / d))) < 1e-12
+    (t,) = m.transmission
+    assert t["kind"] == "RRR" and abs(t["min"]) < 1e-7 and abs(t["max"] - math.pi) < 1e-7
+    assert abs(t["min_at"] - (d + r)) < 1e-9 and abs(t["max_at"] - (d - r)) < 1e-9
+    # the command prints them in the file's units
+    assert main(["check", str(FILE), "--set", "r=250"]) == 0
+    out = capsys.readouterr().out
+    assert "motion      s from 50 mm to 550 mm (limit positions: toggles), a range of 500 mm" in out
+    assert f"rocker psi: swing {math.degrees(math.asin(r / d)):.6f}" in out

@@ -7,6 +7,7 @@ intersection of two circles (numpy, branch held from the sketch's pose).
 
 from __future__ import annotations
 
+import functools
 import math
 import pathlib
 
@@ -23,6 +24,7 @@ jax.config.update("jax_enable_x64", True)
 pytestmark = pytest.mark.xdist_group("sketch")
 
 SCENES = pathlib.Path(jl.__file__).parent / "scenes"
+DATA = pathlib.Path(__file__).parent / "data"
 TURN = np.linspace(0.0, 2 * np.pi, 73)
 
 
@@ -59,8 +61,8 @@ def _closed_form(mech) -> bool:
 # ----------------------------------------------------------------------------- the scenes
 
 
-def test_four_bar_sketch_equals_loop_form_and_file_equals_builder():
-    loop = jl.load("four-bar")
+@functools.lru_cache(maxsize=None)  # one build per module run: the tests share it
+def _four_bar_sketch():
     j = _joints_of("four-bar", {"A": ["a @ phi2"], "B": ["a @ phi2", "b @ phi3"]}, 0.0)
     p = _joints_of("four-bar", {"P": ["a @ phi2", "cx @ phi3", "cy @ phi3 + 90"]}, 0.0)["P"]
     sk = (jl.Sketch("four-bar", length_unit="mm", angle_unit="deg")
@@ -68,6 +70,12 @@ def test_four_bar_sketch_equals_loop_form_and_file_equals_builder():
           .joint("A", *j["A"]).joint("B", *j["B"]).joint("P", *p)
           .link("crank", "A0", "A").link("coupler", "A", "B", "P").link("rocker", "B0", "B")
           .crank("crank", name="phi2"))
+    return sk
+
+
+def test_four_bar_sketch_equals_loop_form_and_file_equals_builder():
+    loop = jl.load("four-bar")
+    sk = _four_bar_sketch()
     mech = sk.mechanism()
     assert mech.point_names == ("A", "B", "P")  # every moving joint by default
     assert mech.unknown_names == ("theta_coupler", "theta_rocker")
@@ -90,16 +98,22 @@ def test_four_bar_sketch_equals_loop_form_and_file_equals_builder():
     _compare(jl.load("four-bar", overrides={"a": 22.0}), longer, ["P"])
 
 
-@pytest.mark.parametrize("scene", ["slider-crank", "slider-crank-mass"])
-def test_slider_crank_sketch_equals_loop_form(scene):
-    loop = jl.load(scene)
+@functools.lru_cache(maxsize=None)  # one build per module run: the tests share it
+def _slider_crank_sketch(scene):
     start = math.radians(30.0)
     j = _joints_of(scene, {"A": ["h2 @ psi12"], "B": ["h1 @ alpha1", "p14 @ alpha4"]}, start)
     sk = (jl.Sketch("slider-crank", length_unit="mm", angle_unit="deg")
           .frame("O1", 0, 0).joint("A", *j["A"]).joint("B", *j["B"])
           .link("crank", "O1", "A").link("rod", "A", "B")
           .slider("B", on="frame", along=(1, 0)).crank("crank"))
-    mech = sk.mechanism()
+    return sk
+
+
+@pytest.mark.parametrize("scene", ["slider-crank", "slider-crank-mass"])
+def test_slider_crank_sketch_equals_loop_form(scene):
+    loop = jl.load(scene)
+    start = math.radians(30.0)
+    mech = _slider_crank_sketch(scene).mechanism()
     assert mech.input_start == pytest.approx(start, 1e-14)
     assert set(mech.unknown_names) == {"theta_rod", "s_B"}
     assert _closed_form(mech) and [d.kind for d in dyads.classify(mech)] == ["RRP"]
@@ -114,7 +128,14 @@ def test_sewing_feed_sketch_equals_loop_form(scene):
     """The seed's bottom-feed six-bar: a crank plate with two arms, a lever plate pivoted between
     its ends, a collinear carrier plate; two dyads."""
     loop = jl.load(scene)
-    start = loop.input_start
+    mech = _sewing_feed_sketch(scene).mechanism()
+    assert _closed_form(mech) and [d.kind for d in dyads.classify(mech)] == ["RRR", "RRR"]
+    _compare(loop, mech, ["Z"], phis=TURN + loop.input_start)
+
+
+@functools.lru_cache(maxsize=None)  # one build per module run: the tests share it
+def _sewing_feed_sketch(scene):
+    start = jl.load(scene).input_start
     j = _joints_of(scene, {
         "B": ["l2 @ phi2"], "C": ["-l22 @ phi2 + gamma"], "D": ["l2 @ phi2", "l3 @ phi3"],
         "E": ["l2 @ phi2", "l3 @ phi3", "l44 @ phi4"],  # the lever's frame pivot: (l8, l7)
@@ -127,15 +148,20 @@ def test_sewing_feed_sketch_equals_loop_form(scene):
         sk.joint(n, *j[n])
     sk.link("crank", "A", "B", "C").link("coupler", "B", "D").link("lever", "E", "D", "F")
     sk.link("link5", "H", "C").link("carrier", "F", "H", "Z").crank("crank", name="phi2").points("Z", "D")
-    mech = sk.mechanism()
-    assert _closed_form(mech) and [d.kind for d in dyads.classify(mech)] == ["RRR", "RRR"]
-    _compare(loop, mech, ["Z"], phis=TURN + start)
+    return sk
 
 
 @pytest.mark.parametrize("scene", ["needle-arachne", "needle-dwell", "needle-arachne-unit"])
 def test_needle_arachne_sketch_equals_loop_form(scene):
     """The ARACHNE needle six-bar: a bell crank (plate C0, C, D) and a vertical needle slider."""
     loop = jl.load(scene)
+    mech = _needle_sketch(scene).mechanism()
+    assert _closed_form(mech) and [d.kind for d in dyads.classify(mech)] == ["RRR", "RRP"]
+    _compare(loop, mech, ["B"])
+
+
+@functools.lru_cache(maxsize=None)  # one build per module run: the tests share it
+def _needle_sketch(scene):
     j = _joints_of(scene, {
         "A": ["l2 @ phi2"], "C0": ["(l1, 0)"], "C": ["(l1, 0)", "l4r @ psi"], "D": ["(l1, 0)", "l4a @ psi - beta"],
         "B2": ["(l1 + l7, 0)", "s @ 90"]}, 0.0)
@@ -145,15 +171,20 @@ def test_needle_arachne_sketch_equals_loop_form(scene):
           .joint("A", *j["A"]).joint("C", *j["C"]).joint("D", *j["D"]).joint("B", *j["B2"])
           .link("crank", "A0", "A").link("coupler", "A", "C").link("bellcrank", "C0", "C", "D")
           .link("rod", "D", "B").slider("B", on="frame", along=(0, 1)).crank("crank", name="phi2"))
-    mech = sk.mechanism()
-    assert _closed_form(mech) and [d.kind for d in dyads.classify(mech)] == ["RRR", "RRP"]
-    _compare(loop, mech, ["B"])
+    return sk
 
 
 def test_needle_arachne_original_sketch_equals_loop_form():
     """The thesis's original needle drive: the rocker itself drives the rod; frame pivot C0 off
     the crank's axis."""
     loop = jl.load("needle-arachne-original")
+    mech = _needle_original_sketch().mechanism()
+    assert _closed_form(mech) and [d.kind for d in dyads.classify(mech)] == ["RRR", "RRP"]
+    _compare(loop, mech, ["B"])
+
+
+@functools.lru_cache(maxsize=None)  # one build per module run: the tests share it
+def _needle_original_sketch():
     j = _joints_of("needle-arachne-original", {
         "A": ["l2 @ phi2"], "C0": ["(l1, l6)"], "C": ["l2 @ phi2", "l3 @ phi3"],
         "B2": ["(l1, l6)", "l4 @ psi", "l5 @ phi5"]}, 0.0)
@@ -162,9 +193,7 @@ def test_needle_arachne_original_sketch_equals_loop_form():
           .joint("A", *j["A"]).joint("C", *j["C"]).joint("B", *j["B2"])
           .link("crank", "A0", "A").link("coupler", "A", "C").link("rocker", "C0", "C")
           .link("rod", "C", "B").slider("B", on="frame", along=(0, 1)).crank("crank", name="phi2"))
-    mech = sk.mechanism()
-    assert _closed_form(mech) and [d.kind for d in dyads.classify(mech)] == ["RRR", "RRP"]
-    _compare(loop, mech, ["B"])
+    return sk
 
 
 # ----------------------------------------------------------------------------- textbook six-bars
@@ -308,6 +337,9 @@ rocker = ["B0", "B"]
     ('[sketch.links]', '[loops]\nx = ["a @ b"]\n\n[sketch.links]', ["derives [loops]"], 19),
     ('rocker = ["B0", "B"]', 'rocker = ["B0", "B"]\nbase = ["A0", "B0"]', ["two frame joints"], 23),
     ('points = ["P"]', 'points = ["P"]\nsliders = 3', ["[sketch.sliders] must be a table"], 8),
+    ('crank = "crank"', 'link = "cuopler"', ["'cuopler' is not a link", "did you mean 'coupler'"], 10),
+    ('crank = "crank"', 'crank = "crank"\nlink = "coupler"', ["needs one of crank", "slider = "], 9),
+    ('crank = "crank"', 'slider = "B"', ["'B' is not a slider of [sketch.sliders]"], 10),
 ])
 def test_bad_sketches_name_the_line_and_the_reason(old, new, words, line):
     assert old in FOUR_BAR
@@ -374,6 +406,13 @@ def test_whitworth_sketch_equals_loop_form():
     """The Whitworth quick-return as a sketch: the crank pin A slides in the lever's slot through
     its pivot O2 (an RPR dyad), the ram C on a horizontal guide (RRP); both in closed form."""
     loop = jl.load("whitworth")
+    mech = _whitworth_sketch().mechanism()
+    assert _closed_form(mech) and [d.kind for d in dyads.classify(mech)] == ["RPR", "RRP"]
+    _compare(loop, mech, ["A", "B", "C"])
+
+
+@functools.lru_cache(maxsize=None)  # one build per module run: the tests share it
+def _whitworth_sketch():
     j = _joints_of("whitworth", {"A": ["(0, d)", "r @ phi"], "B": ["l @ theta"], "C": ["(0, H)", "x @ 0"]}, 0.0)
     sk = (jl.Sketch("whitworth", length_unit="mm", angle_unit="deg")
           .frame("O2", 0, 0).frame("O1", 0, 300)
@@ -381,9 +420,7 @@ def test_whitworth_sketch_equals_loop_form():
           .link("crank", "O1", "A").link("lever", "O2", "B").link("rod", "B", "C")
           .slider("A", on="lever", through="O2").slider("C", on="frame", along=(1, 0))
           .crank("crank", name="phi"))
-    mech = sk.mechanism()
-    assert _closed_form(mech) and [d.kind for d in dyads.classify(mech)] == ["RPR", "RRP"]
-    _compare(loop, mech, ["A", "B", "C"])
+    return sk
 
 
 def test_a_triad_is_closed_by_newton_and_matches_scipy():
@@ -441,3 +478,232 @@ def test_a_designs_sketch_file_moves_the_joints_and_reads_back_as_the_design():
     phis = np.linspace(0.0, 2 * np.pi, 13)
     a, b = jl.solve(mech, phis, p).points, jl.solve(back, phis).points
     assert np.abs(np.asarray(a) - np.asarray(b)).max() < 1e-12 * 0.1
+
+
+# ----------------------------------------------------------------------------- the designer's numbers
+# A sketch's designer's numbers are those of its loop form (issue 48): the same outputs, classified
+# by the mechanism's links (a coupler, a connecting rod is never a rocker), and the same Grashof
+# lines — whatever the names of the joints, which decide where the derived loops start.
+
+
+def _docs_sketch(name: str) -> str:
+    """The ```toml block `# example: NAME` of docs/reference/file-format.md."""
+    import re
+
+    text = (pathlib.Path(__file__).resolve().parent.parent / "docs" / "reference" / "file-format.md").read_text()
+    for m in re.finditer(r"^```toml\n(.*?)^```", text, re.S | re.M):
+        if m.group(1).startswith(f"# example: {name}\n"):
+            return m.group(1)
+    raise LookupError(name)
+
+
+def _klann_pose():
+    """A Klann-type leg (crank M Q; arm plate Q B X on the rocker O1 B; leg plate X D F on the
+    rocker O2 D) at the crank angle 0 by circle intersections (numpy), in m. Its joints are named
+    so that the sketch closes its first loop from the rocker's pivot O1 (`O1` < `Q`)."""
+    frame = {"M": (0.0, 0.0), "O1": (-2.0, 1.5), "O2": (-3.5, -0.5)}
+    up = lambda c1, c2, pos: c1[1] > c2[1]  # noqa: E731
+    dy = [("B", "Q", "O1", 3.0, 1.8, up), ("X", "Q", "B", 4.2, 2.6, lambda c1, c2, pos: c1[0] < c2[0]),
+          ("D", "X", "O2", 1.6, 2.2, up), ("F", "X", "D", 4.5, 5.0, lambda c1, c2, pos: c1[1] < c2[1])]
+    return _reference(frame, ("M", "Q", 0.8), dy, [], 0.0)[0]
+
+
+@functools.lru_cache(maxsize=None)
+def _klann_sketch():
+    pose = _klann_pose()
+    sk = jl.Sketch("klann").frame("M", 0, 0).frame("O1", -2.0, 1.5).frame("O2", -3.5, -0.5)
+    for n in ("Q", "B", "X", "D", "F"):
+        sk.joint(n, *pose[n])
+    return (sk.link("crank", "M", "Q").link("arm", "Q", "B", "X").link("r1", "O1", "B")
+            .link("leg", "X", "D", "F").link("r2", "O2", "D").crank("crank", name="phi"))
+
+
+def _klann_loops() -> str:
+    """The Klann leg in the loop form, written by hand around its polygons (M → Q → B → O1 → M and
+    M → Q → X → D → O2 → M), its numbers from the pose (numpy)."""
+    P = {k: np.asarray(v) for k, v in _klann_pose().items()}
+
+    def ang(a, b):
+        d = P[b] - P[a]
+        return math.atan2(d[1], d[0])
+
+    def dist(a, b):
+        return float(np.linalg.norm(P[b] - P[a]))
+
+    foot = math.remainder(ang("X", "F") - ang("X", "D"), 2 * math.pi)
+    return f"""
+[mechanism]
+name = "klann-loops"
+[parameters]
+crank = {dist("M", "Q")!r}
+arm = {dist("Q", "B")!r}
+arm_x = {dist("Q", "X")!r}
+gamma = {math.remainder(ang("Q", "X") - ang("Q", "B"), 2 * math.pi)!r}
+r1 = {dist("O1", "B")!r}
+leg = {dist("X", "D")!r}
+r2 = {dist("O2", "D")!r}
+o1x = -2.0
+o1y = 1.5
+o2x = -3.5
+o2y = -0.5
+[input]
+name = "phi"
+start = 0.0
+[unknowns]
+th_arm = {ang("Q", "B")!r}
+th_r1 = {ang("O1", "B")!r}
+th_leg = {ang("X", "D")!r}
+th_r2 = {ang("O2", "D")!r}
+[loops]
+upper = ["crank @ phi", "arm @ th_arm", "-r1 @ th_r1", "-(o1x, o1y)"]
+lower = ["crank @ phi", "arm_x @ th_arm + gamma", "leg @ th_leg", "-r2 @ th_r2", "-(o2x, o2y)"]
+[points]
+F = ["(o2x, o2y)", "r2 @ th_r2", "-leg @ th_leg", "{dist("X", "F")!r} @ th_leg + {foot!r}"]
+"""
+
+
+# (the sketch, its loop form, the sketch's unknowns by the loop form's names)
+PAIRS = {
+    "docs sketch-four-bar": (lambda: jl.loads(_docs_sketch("sketch-four-bar")), lambda: jl.load("four-bar"),
+                             {"theta_coupler": "phi3", "theta_rocker": "phi4"}),
+    "docs study-tolerance": (lambda: jl.loads(_docs_sketch("study-tolerance")), lambda: jl.load("four-bar"),
+                             {"theta_coupler": "phi3", "theta_rocker": "phi4"}),
+    "scene four-bar-sketch": (lambda: jl.load("four-bar-sketch"), lambda: jl.load("four-bar"),
+                              {"theta_coupler": "phi3", "theta_rocker": "phi4"}),
+    "four-bar": (lambda: _four_bar_sketch().mechanism(), lambda: jl.load("four-bar"),
+                 {"theta_coupler": "phi3", "theta_rocker": "phi4"}),
+    "docs sketch-slider-crank": (lambda: jl.loads(_docs_sketch("sketch-slider-crank")),
+                                 lambda: jl.load("slider-crank"), {"theta_rod": "psi13", "s_B": "p14"}),
+    "slider-crank": (lambda: _slider_crank_sketch("slider-crank").mechanism(), lambda: jl.load("slider-crank"),
+                     {"theta_rod": "psi13", "s_B": "p14"}),
+    "sewing-feed": (lambda: _sewing_feed_sketch("sewing-feed").mechanism(), lambda: jl.load("sewing-feed"),
+                    {"theta_coupler": "phi3", "theta_lever": "phi4", "theta_link5": "phi5", "theta_carrier": "phi6"}),
+    "needle-arachne": (lambda: _needle_sketch("needle-arachne").mechanism(), lambda: jl.load("needle-arachne"),
+                       {"theta_coupler": "phi3", "theta_bellcrank": "psi", "theta_rod": "phi5", "s_B": "s"}),
+    "needle-arachne-original": (lambda: _needle_original_sketch().mechanism(),
+                                lambda: jl.load("needle-arachne-original"),
+                                {"theta_coupler": "phi3", "theta_rocker": "psi", "theta_rod": "phi5", "s_B": "s"}),
+    "whitworth": (lambda: _whitworth_sketch().mechanism(), lambda: jl.load("whitworth"),
+                  {"theta_lever": "theta", "s_A": "s", "theta_rod": "psi", "s_C": "x"}),
+    "luffing cylinder": (lambda: jl.Sketch("luffing", length_unit="mm", angle_unit="deg").frame("O", 0, 0)
+                         .frame("C", 300, 0).joint("A", 0, 400).link("boom", "O", "A").actuator("C", "A", name="s")
+                         .mechanism(), lambda: jl.load(DATA / "luffing-cylinder.toml"),
+                         {"theta_boom": "theta", "theta_C_A": "psi"}),
+    "klann": (lambda: _klann_sketch().mechanism(), lambda: jl.loads(_klann_loops()),
+              {"theta_arm": "th_arm", "theta_r1": "th_r1", "theta_leg": "th_leg", "theta_r2": "th_r2"}),
+}
+
+
+@pytest.mark.parametrize("pair", list(PAIRS))
+def test_a_sketchs_outputs_and_grashof_lines_are_its_loop_forms(pair):
+    """For every sketch of the docs and the tests with a loop form: the same outputs, of the same
+    kinds (the sketch's by its links, the loop form's by its loops), and the same four-bar loops
+    with the same Grashof class, type, shortest link and lengths."""
+    from jaxlink.analysis.grashof import four_bars
+    from jaxlink.analysis.stroke import _kinds_of_loops, kinds
+
+    make_sketch, make_loops, names = PAIRS[pair]
+    sk, lp = make_sketch(), make_loops()
+    assert set(sk.unknown_names) == set(names) and set(lp.unknown_names) == set(names.values())
+    assert {names[n]: k for n, k in kinds(sk).items()} == kinds(lp)
+    assert _kinds_of_loops(sk) == kinds(sk)  # the derived loops are the linkage's polygons
+    a, b = four_bars(sk), four_bars(lp)
+    assert len(a) == len(b)
+    for x, y in zip(a, b):
+        assert (x.grashof, x.type, x.shortest) == (y.grashof, y.type, y.shortest)
+        assert set(x.links) == set(y.links)
+        for role in x.links:
+            assert np.allclose(x.links[role], y.links[role], rtol=1e-12, atol=0), role
+        assert np.allclose([x.s, x.longest, x.pq], [y.s, y.longest, y.pq], rtol=1e-12, atol=0)
+
+
+def test_klann_sketch_designers_numbers_are_its_loop_forms():
+    """The Klann leg: the outputs are the two rockers, never the arm or the leg (the couplers); the
+    crank–arm–rocker loop is a Grashof crank-rocker (s + l = 0.8 + 3 < p + q = 1.8 + |M O1|, from
+    the coordinates); swings, dead centres and transmission angles equal the loop form's."""
+    from jaxlink.analysis.grashof import four_bars
+    from jaxlink.analysis.motion import motion
+
+    sk, lp = _klann_sketch().mechanism(), jl.loads(_klann_loops())
+    (fb,) = four_bars(sk)
+    lengths = sorted([0.8, 3.0, 1.8, math.hypot(2.0, 1.5)])
+    assert fb.type == "crank-rocker" and lengths[0] + lengths[3] < lengths[1] + lengths[2]
+    assert abs(fb.s + fb.longest - (lengths[0] + lengths[3])) < 1e-14
+    assert abs(fb.pq - (lengths[1] + lengths[2])) < 1e-14
+    ma, mb = motion(sk), motion(lp)
+    assert ma.full_turn and mb.full_turn
+    assert [(o["name"], o["kind"]) for o in ma.outputs] == [("theta_r1", "rocker"), ("theta_r2", "rocker")]
+    assert [o["name"] for o in mb.outputs] == ["th_r1", "th_r2"]
+    for x, y in zip(ma.outputs, mb.outputs):
+        assert abs(x["stroke"] - y["stroke"]) < 1e-12 and abs(x["time_ratio"] - y["time_ratio"]) < 1e-9
+        assert np.allclose(sorted(a for a, _ in x["dead_centres"]), sorted(a for a, _ in y["dead_centres"]),
+                           atol=1e-9, rtol=0)
+    assert len(ma.transmission) == len(mb.transmission) == 2
+    for x, y in zip(ma.transmission, mb.transmission):
+        assert abs(x["min"] - y["min"]) < 1e-10 and abs(x["max"] - y["max"]) < 1e-10
+
+
+# ----------------------------------------------------------------------------- inputs a designer drives
+# A floating link's angle and a slider's signed position on its guide as the sketch's input: the
+# elliptic trammel (a bar AB, A on the x axis, B on the y axis) driven both ways. A point P of the
+# bar at p from A: P = ((p − L) cos θ, p sin θ), on the ellipse x² / (L − p)² + y² / p² = 1.
+
+TRAMMEL_L, TRAMMEL_P = 0.1, 0.03  # the bar's length, P's distance from A along it (m)
+
+
+def _trammel(drive: str):
+    L, p, th = TRAMMEL_L, TRAMMEL_P, math.radians(50.0)
+    a, b = (-L * math.cos(th), 0.0), (0.0, L * math.sin(th))
+    sk = (jl.Sketch("trammel").frame("O", 0, 0).joint("A", *a).joint("B", *b)
+          .joint("P", a[0] + p * math.cos(th), p * math.sin(th)).link("bar", "A", "B", "P")
+          .slider("A", on="frame", along=(1, 0)).slider("B", on="frame", along=(0, 1)).points("P"))
+    if drive == "link":
+        sk.link_angle("bar", name="theta")
+    else:
+        sk.slider_position("A", name="x")
+    return sk.mechanism()
+
+
+def _off_ellipse(P, a, b) -> float:
+    """The largest distance (m) of the points P from the ellipse x²/a² + y²/b² = 1, to first order:
+    |F| / |∇F| with F = x²/a² + y²/b² − 1."""
+    F = (P[:, 0] / a) ** 2 + (P[:, 1] / b) ** 2 - 1
+    return float(np.max(np.abs(F) / np.hypot(2 * P[:, 0] / a**2, 2 * P[:, 1] / b**2)))
+
+
+def test_elliptic_trammel_driven_by_its_bars_angle_is_exact_on_the_ellipse():
+    mech = _trammel("link")
+    assert mech.input_name == "theta" and mech.input_kind == "angle"
+    assert set(mech.unknown_names) == {"s_A", "s_B"}
+    assert _closed_form(mech) and [d.kind for d in dyads.classify(mech)] == ["PP"]
+    assert mech.input_start == pytest.approx(math.radians(50.0), abs=1e-15)
+    phis = np.linspace(0.0, 2 * np.pi, 49)
+    sol = jl.solve(mech, phis)
+    assert bool(np.all(sol.converged))
+    P = np.asarray(sol.points)[:, 0]
+    L, p = TRAMMEL_L, TRAMMEL_P
+    want = np.stack([(p - L) * np.cos(phis), p * np.sin(phis)], axis=1)
+    assert np.abs(P - want).max() < 1e-15
+    assert _off_ellipse(P, L - p, p) < 1e-15
+    assert mech.sketch.input == ("link", "bar")
+
+
+def test_elliptic_trammel_driven_by_a_sliders_signed_position_is_exact_on_the_ellipse():
+    mech = _trammel("slider")
+    assert mech.input_name == "x" and mech.input_kind == "length"
+    assert set(mech.unknown_names) == {"theta_bar", "s_B"}
+    assert _closed_form(mech) and [d.kind for d in dyads.classify(mech)] == ["RRP"]
+    L, p = TRAMMEL_L, TRAMMEL_P
+    assert mech.input_start == pytest.approx(-L * math.cos(math.radians(50.0)), abs=1e-16)  # 15 digits
+    xs = np.linspace(-0.099, 0.099, 45)  # signed: A on either side of the origin, B stays above
+    sol = jl.solve(mech, xs)
+    assert bool(np.all(sol.converged))
+    P = np.asarray(sol.points)[:, 0]
+    yb = np.sqrt(L * L - xs * xs)  # B = (0, yb), the sketch's branch (above)
+    want = np.stack([xs * (L - p) / L, p * yb / L], axis=1)  # P = A + p (B − A) / L
+    assert np.abs(P - want).max() < 1e-15
+    assert _off_ellipse(P, L - p, p) < 1e-15
+    assert mech.sketch.input == ("slider", "A")
+    # its range: signed, between the toggles where the bar lies on the x axis (B at the origin)
+    m = jl.motion(mech)
+    assert abs(m.lower + L) < 1e-15 and abs(m.upper - L) < 1e-15

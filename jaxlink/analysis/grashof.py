@@ -15,8 +15,10 @@ lengths and p, q the others (Grashof's law):
   two assembly branches cross (`jaxlink.branch_points`).
 
 Which unknown link is the coupler follows the loop as written around the polygon (the way the
-file format teaches: A0 → A → B → B0 → A0): the coupler is the input's neighbour that is not the
-frame. A loop whose input and frame terms are not neighbours gets its class but no type.
+file format teaches: A0 → A → B → B0 → A0; a sketch's derived loops are written so too): the
+coupler is the input's neighbour that is not the frame. A loop whose input and frame terms are
+not neighbours, or whose frame vectors are apart (summed into one frame link), gets its class but
+no type.
 
 Host-side and exact: the lengths are the design's numbers (`p`), nothing is solved.
 """
@@ -92,7 +94,11 @@ def four_bars(mech: Mechanism, p=None) -> list:
                 groups[-1][1].append(t)
             else:
                 groups.append(("frame" if c else "moving", [t]))
-        if len(groups) != 4 or sum(g[0] == "frame" for g in groups) != 1:
+        together = sum(g[0] == "frame" for g in groups) == 1
+        if not together:  # frame vectors apart (a loop not written around its polygon): one frame link,
+            frames = [t for g in groups if g[0] == "frame" for t in g[1]]  # their sum; no coupler known
+            groups = [("frame", frames)] + [g for g in groups if g[0] != "frame"]
+        if len(groups) != 4:
             continue
         roles: list = []
         lengths: list = []
@@ -121,7 +127,7 @@ def four_bars(mech: Mechanism, p=None) -> list:
         i_in, i_fr = roles.index("input"), roles.index("frame")
         links: dict = {"input": lengths[i_in], "frame": lengths[i_fr], "coupler": None, "output": None}
         neighbours = {(i_in - 1) % 4, (i_in + 1) % 4}
-        if i_fr in neighbours:
+        if together and i_fr in neighbours:
             i_cp = (neighbours - {i_fr}).pop()
             i_out = ({0, 1, 2, 3} - {i_in, i_fr, i_cp}).pop()
             links["coupler"], links["output"] = lengths[i_cp], lengths[i_out]

@@ -16,9 +16,25 @@ input can reach, or a full turn (certified between the samples). A full turn's *
 method on the margin's derivative (`_change_points`), for the outputs' extremes there
 (`jaxlink.analysis.stroke`).
 
-**Transmission angle** of a dyad of two links L_a, L_b (RRR) over its known diagonal w: the
-angle μ between the two links at their joint, cos μ = (L_a² + L_b² − |w|²) / (2 |L_a| |L_b|)
-(for a four-bar, the angle between coupler and rocker). Its extremes over the reachable inputs
+**Transmission angle** (Alt 1932; Balli & Chand, "Transmission angle in mechanisms", Mechanism
+and Machine Theory 37 (2002) 175–195): μ = 90° − the pressure angle, the angle between the force
+the dyad's driving part passes on (along a two-pin link, normal to a sliding pair without
+friction) and the velocity of the point it acts on, relative to the dyad's other end; 90° is
+ideal, near 0 the linkage jams. Per dyad kind, from its closed form's known vectors
+(`jaxlink.solvers.dyads.geometry`):
+
+- RRR, two links L_a, L_b over their known diagonal w: the angle between the links at their
+  joint, cos μ = (L_a² + L_b² − |w|²) / (2 |L_a| |L_b|) (a four-bar: coupler and rocker), 0 … π;
+- RRP, a link a to a joint on a guide d (a slider-crank's connecting rod and slider; Whitworth's
+  rod and ram): the link against the guide's normal, cos μ = |w × d| / (|a| |d|), 0 … π/2 (the
+  force along the rod, the slider's velocity along the guide);
+- RPR, a block on a known joint sliding in the slot b of a link turning about the dyad's other
+  joint (the slotted lever of a Whitworth or crank-shaper quick return): the block's push, normal
+  to the slot, against the velocity of the lever's point there, normal to the pivot–block line
+  u: sin μ = |u · b| / (|u| |b|), cos μ = |e| / |u| with e the slot's offset from the pivot, 0 …
+  π/2 — 90° throughout for a slot through the pivot.
+
+A PP dyad (two sliders) has none. Its extremes over the reachable inputs
 are found on the samples and refined by golden-section search (60 reductions of a bracket of two
 sample steps: the input to about 1e-13 rad, the angle — stationary there — to rounding); an end
 of the range counts where the extreme lies at a limit position. The designer's *worst*
@@ -53,15 +69,19 @@ class Motion:
     - `full_turn`: the input turns fully (every sample assembled, no limit position).
     - `lower`, `upper`: the limit positions around `start` (None with a full turn; `lower` <
       `start` < `upper`, as reached turning back and forward from it).
-    - `transmission`: per RRR dyad (solve order), a dict `loop`, `unknowns`, `min`, `min_at`,
-      `max`, `max_at` (μ in rad, where in the input's SI unit) and `worst` (rad, the angle
-      farthest from 90°).
+    - `transmission`: per RRR, RRP and RPR dyad (solve order), a dict `loop`, `kind`,
+      `unknowns`, `min`, `min_at`, `max`, `max_at` (μ in rad, where in the input's SI unit) and
+      `worst` (rad, the angle farthest from 90°).
     - `outputs`: with a full turn, per slider or rocker the stroke or swing, its dead centres (and
       flat positions), the time ratio and the velocity ratio (`jaxlink.analysis.stroke.outputs`);
       else empty.
     - `change_points`: with a full turn, the inputs (rad, in the turn from `start`) where a dyad's
       links come into line and two assembly branches cross (`_change_points`): the *flat
       positions*, where the linkage can switch branch and an output's rate may jump.
+    - `low`, `high`: a length input (an actuator): the range its numbers cover (m) — `lower` and
+      `upper` where they are limit positions, else the end of the scan (`_length_motion`) — and
+      `outputs` each output's range over it (`jaxlink.analysis.stroke.outputs_over`); None for an
+      angle input.
     """
 
     full_turn: bool
@@ -70,15 +90,36 @@ class Motion:
     transmission: list
     outputs: list = dataclasses.field(default_factory=list)
     change_points: list = dataclasses.field(default_factory=list)
+    low: float | None = None
+    high: float | None = None
+
+
+TRANSMITTED = ("RRR", "RRP", "RPR")
+"""The dyad kinds with a transmission angle (a PP dyad, two sliders, has no link to push)."""
 
 
 def _cos_mu(mech, dyads, j, sigma, q_ref, phi, p):
-    """cos μ of RRR dyad j at input φ (the dyads before it on their sides σ)."""
+    """cos μ of dyad j at input φ (the dyads before it on their sides σ): RRR the angle between
+    its links (0 … π); RRP the link against the guide's normal, RPR the slotted link's push (normal
+    to the slot) against the path of its point at the block (about the dyad's other joint), both
+    0 … π/2 (the module's docstring)."""
+    from ..solvers.dyads.forms import cross, safe_norm
+
     q, _, _, _, _, trig = _dyads._solve(mech, dyads[:j], sigma[:j], q_ref, phi, p, None, with_trig=True)
     env = mech.env(q, phi, p)
-    (wx, wy), a, b = _dyads.geometry(mech, dyads[j], env, trig)
-    La, Lb = a.L, b.L
-    return (La * La + Lb * Lb - (wx * wx + wy * wy)) / (2.0 * jnp.abs(La) * jnp.abs(Lb))
+    d = dyads[j]
+    (wx, wy), a, b = _dyads.geometry(mech, d, env, trig)
+    if d.kind == "RRR":
+        La, Lb = a.L, b.L
+        return (La * La + Lb * Lb - (wx * wx + wy * wy)) / (2.0 * jnp.abs(La) * jnp.abs(Lb))
+    dv = b[0]
+    nd = safe_norm(dv[0] * dv[0] + dv[1] * dv[1])
+    if d.kind == "RRP":  # a e(θ) + ℓ d = w: |w × d| / (|a| |d|), the rod's share across the guide
+        return jnp.abs(cross((wx, wy), dv)) / (jnp.abs(a.L) * nd)
+    # RPR, R(θ)(a + ℓ b) = w: |a × b| / (|b| |w|) = the slot's offset from the pivot over |w|
+    e = jnp.zeros_like(wx) if a is None else jnp.abs(cross(a, dv))
+    nw = safe_norm(wx * wx + wy * wy)
+    return e / jnp.where(nw * nd > 0, nw * nd, 1.0)
 
 
 # ---------------------------------------------------------------- the compiled parts, stored
@@ -109,7 +150,7 @@ def _certificate(mech, sigma, q_ref, phis, p):
 
 
 def _cos_mus(mech, sigma, q_ref, phis, p, js):
-    """cos μ of the RRR dyads `js` (static) at the inputs `phis` (M,): (len(js), M)."""
+    """cos μ of the dyads `js` (static) at the inputs `phis` (M,): (len(js), M)."""
     dyads = _dyads.classify(mech)
     return jnp.stack([jax.vmap(lambda ph, j=j: _cos_mu(mech, dyads, j, sigma, q_ref, ph, p))(phis) for j in js])
 
@@ -218,7 +259,7 @@ def prepare(mech: Mechanism, p=None, *, samples: int = 3600) -> None:
     from .whole_curve import _margins
 
     _prepare("reach_margins", _margins, (arg, sigma, q0, np.zeros(BLOCK, p.dtype), p))
-    js = tuple(j for j, d in enumerate(dyads) if d.kind == "RRR")
+    js = tuple(j for j, d in enumerate(dyads) if d.kind in TRANSMITTED)
     if js:
         _prepare("motion_cos_mu", _cos_mus, (arg, sigma, q0, np.zeros(BLOCK, p.dtype), p), (js,))
 
@@ -249,8 +290,10 @@ def motion(mech: Mechanism, p=None, *, samples: int = 3600) -> Motion | None:
     is a dyad. Host-side (a few compiled calls, stored traces where the compilation cache is on:
     `jaxlink.cache.traced`)."""
     dyads = _dyads.classify(mech)
-    if dyads is None or mech.input_kind != "angle":
+    if dyads is None:
         return None
+    if mech.input_kind != "angle":
+        return _length_motion(mech, dyads, p, samples)
     phis, p = _turn_inputs(mech, p, samples)
     start = float(mech.input_start)
     q_all, res, sigma, _, _ = (np.asarray(x) for x in traced("motion_turn", _turn_arrays, (_arg(mech, p), phis, p)))
@@ -288,8 +331,57 @@ def motion(mech: Mechanism, p=None, *, samples: int = 3600) -> Motion | None:
             full, upper, lower = False, window[0], window[1] - 2 * np.pi
     lo_end = start if full or lower is None else lower
     hi_end = start + 2 * np.pi if full or upper is None else upper
+    trans = _transmission(mech, dyads, sigma, q0, p, lo_end, hi_end, samples)
+    outs: list = []
+    flats: list = []
+    if full:
+        from .stroke import outputs
+
+        flats = _change_points(mech, sigma, q0, phis, p)
+        outs = outputs(mech, dyads, sigma, q0, phis, p, flats)
+    return Motion(full, lower, upper, trans, outs, flats)
+
+
+def _length_motion(mech: Mechanism, dyads, p, samples: int) -> Motion:
+    """`motion` of a length input (an actuator, a cylinder): its range around `[input] start` —
+    the toggles on either side, where a dyad's reach margin reaches zero, scanned in `samples`
+    steps of (|start| + the sum of the design's lengths) / `samples` each way (no linkage of links
+    reaches further; a positive distance, an actuator's length, down to zero only, a slider's signed
+    position — a sketch's `slider` input, or a start ≤ 0 — past zero; past the scan no limit:
+    `lower`/`upper` None) and bisected to adjacent floats (`whole_curve.limit`) —, the
+    transmission angles over it, and each output's range over it
+    (`jaxlink.analysis.stroke.outputs_over`)."""
+    from .stroke import outputs_over
+    from .whole_curve import limit
+
+    p = np.asarray(mech.parameters if p is None else p, dtype=jax.dtypes.canonicalize_dtype(np.float64))
+    start = float(mech.input_start)
+    q_s, res, sigma, _, _ = (np.asarray(x) for x in traced(
+        "motion_turn", _turn_arrays, (_arg(mech, p), np.asarray([start, start], p.dtype), p)))
+    if not (res[0] == RESULTS.converged or res[0] == RESULTS.singular):
+        return Motion(False, None, None, [])
+    q0 = q_s[0]
+    lengths = [abs(float(v)) for v, k in zip(p, mech.parameter_kinds) if k == "length"]
+    step = (abs(start) + sum(lengths)) / samples
+    # a distance (an actuator's length) stays above zero; a slider's signed position need not
+    signed = start <= 0 or (mech.sketch is not None and mech.sketch.input[0] == "slider")
+    n_down = samples if signed else max(1, int(np.ceil(start / step)) - 1)
+    up = limit(mech, dyads, sigma, q0, p, start, 1.0, samples, step=step)
+    down = limit(mech, dyads, sigma, q0, p, start, -1.0, n_down, step=step)
+    upper = None if up is None else up[0]
+    lower = None if down is None else down[0]
+    hi_end = start + samples * step if upper is None else upper
+    lo_end = start - n_down * step if lower is None else lower
+    trans = _transmission(mech, dyads, sigma, q0, p, lo_end, hi_end, samples)
+    outs = outputs_over(mech, sigma, q0, lo_end, hi_end, p, samples)
+    return Motion(False, lower, upper, trans, outs, [], lo_end, hi_end)
+
+
+def _transmission(mech, dyads, sigma, q0, p, lo_end, hi_end, samples) -> list:
+    """The transmission angles of the dyads over the inputs [lo_end, hi_end] (`samples` + 1 of
+    them, the extremes refined by golden section): `Motion.transmission`."""
     trans = []
-    js = tuple(j for j, d in enumerate(dyads) if d.kind == "RRR")
+    js = tuple(j for j, d in enumerate(dyads) if d.kind in TRANSMITTED)
     if js:
         def f(x):  # (len(js), len(x)), numpy (indexing a JAX array would dispatch an operation)
             return _cos_mus_blocked(mech, js, sigma, q0, x, p)
@@ -310,18 +402,11 @@ def motion(mech: Mechanism, p=None, *, samples: int = 3600) -> Motion | None:
         for i, j in enumerate(js):
             d = dyads[j]
             mu_max, mu_min = float(mu[2 * i]), float(mu[2 * i + 1])
-            trans.append({"loop": mech.loops[d.loop][0],
+            trans.append({"loop": mech.loops[d.loop][0], "kind": d.kind,
                           "unknowns": tuple(mech.unknown_names[u] for u in d.unknowns),
                           "min": mu_min, "min_at": float(best_x[2 * i + 1]), "max": mu_max,
                           "max_at": float(best_x[2 * i]), "worst": min(mu_min, np.pi - mu_max)})
-    outs: list = []
-    flats: list = []
-    if full:
-        from .stroke import outputs
-
-        flats = _change_points(mech, sigma, q0, phis, p)
-        outs = outputs(mech, dyads, sigma, q0, phis, p, flats)
-    return Motion(full, lower, upper, trans, outs, flats)
+    return trans
 
 
 def _margin_minimum(mech, sigma, q_ref, lo, hi, p, j):

@@ -1,10 +1,15 @@
 """The outputs of a linkage whose input turns fully: each slider's stroke and each rocker's swing,
 their dead-centre positions, the time ratio and the velocity ratio (mechanical advantage).
 
-**Outputs.** Every unknown that is a length (a slider, a slot's block, a ram) and every angle
-unknown of a *rocker*: a link pivoted to the frame — its term is next to a frame vector (no
-unknown, no input) in some loop — that does not turn fully while the input does (its angle comes
-back to where it started, not ±2π, after the input's turn).
+**Outputs**, classified by the mechanism's links (`kinds`): every *rocker* — the angle of a link
+pivoted to the frame that does not turn fully while the input does (its angle comes back to where
+it started, not ±2π, after the input's turn) —, every *slider* (a joint's position on a guide
+fixed to the frame: a ram, a needle bar) and every *slot* (a block's position in the slot of a
+moving link: the length the slot needs). A coupler, a connecting rod or a floating plate is none
+of these: its angle is not an output. A sketch file says which links hold a frame joint and which
+body each slider's line is fixed to; a loop file says it by its loops, written as the linkage's
+polygon (a rocker's vector lies next to a frame vector; a slider's direction holds no unknown;
+the link of a slider dyad on a frame guide is its connecting rod, wherever it is written).
 
 **Dead centres** (limit positions of the output) are the inputs where its velocity dq/dφ is zero.
 On the equally spaced samples of the turn (the closed form, `jaxlink.solvers.dyads`, and its
@@ -48,24 +53,67 @@ from .blocks import BLOCK, in_blocks
 from .golden import golden
 
 
-def rockers(mech: Mechanism) -> tuple:
-    """The angle unknowns whose term lies next to a frame vector in some loop (pivoted to the
-    frame), in unknown order (candidates: `outputs` keeps those that do not turn fully)."""
-    unknowns = set(mech.unknown_names) | {mech.input_name}
-    angles = {n for n, k in zip(mech.unknown_names, mech.unknown_kinds) if k == "angle"}
-    found = set()
-    for _, terms in mech.loops:
-        def names(t):
-            return {n.name for nd in t.nodes() for n in _expr.names_in(nd)}
+def kinds(mech: Mechanism) -> dict:
+    """The candidate outputs by the mechanism's links: unknown name -> "rocker" (the angle of a
+    link pivoted to the frame), "slider" (a joint's position on a guide fixed to the frame) or
+    "slot" (a block's position in the slot of a moving link: the slot's length); a coupler, a
+    connecting rod, a floating plate are not outputs. A sketch file names its links
+    (`Mechanism.sketch`): a link holding a frame joint is a rocker (an actuator's cylinder too, with
+    a frame joint), a slider `on = "frame"` a slider, on a link a slot. A loop file by its loops
+    (`_kinds_of_loops`). In unknown order; `outputs` keeps the rockers that do not turn fully."""
+    lay = mech.sketch
+    if lay is None:
+        return _kinds_of_loops(mech)
+    frame = set(lay.frame)
+    found = {f"theta_{b}": "rocker" for b, js in lay.bodies
+             if not (lay.input[0] == "crank" and b == lay.input[1]) and frame & set(js)}
+    if lay.input[0] == "actuator" and frame & set(lay.input[1]):
+        found["theta_{}_{}".format(*lay.input[1])] = "rocker"
+    for j, on in lay.sliders:
+        found[f"s_{j}"] = "slider" if on == "frame" else "slot"
+    return {n: found[n] for n in mech.unknown_names if n in found}
 
-        frame = [not (names(t) & unknowns) for t in terms]
+
+def rockers(mech: Mechanism) -> tuple:
+    """The angle unknowns of links pivoted to the frame (`kinds`), in unknown order."""
+    return tuple(n for n, k in kinds(mech).items() if k == "rocker")
+
+
+def _kinds_of_loops(mech: Mechanism) -> dict:
+    """`kinds` of a loop file, from its loops written as the linkage's polygon (A0 → A → B → B0 →
+    A0, as the file format teaches): an angle unknown is a rocker where its vector lies next to a
+    frame vector (no unknown, no input: the vector between two frame joints) in some loop — its
+    link has a joint on the frame; a length unknown is a slider where the direction it runs along
+    holds no unknown and no input (a guide fixed to the frame), else a slot."""
+    moving = set(mech.unknown_names) | {mech.input_name}
+    angles = {n for n, k in zip(mech.unknown_names, mech.unknown_kinds) if k == "angle"}
+    lengths = set(mech.unknown_names) - angles
+    found: dict = {}
+
+    def names(nodes):
+        return {n.name for nd in nodes if nd is not None for n in _expr.names_in(nd)}
+
+    for _, terms in mech.loops:
+        frame = [not (names(t.nodes()) & moving) for t in terms]
         for j, t in enumerate(terms):
-            if not t.polar or not (frame[j - 1] or frame[(j + 1) % len(terms)]):
-                continue
-            held = {n.name for n in _expr.names_in(t.angle)} & angles
-            if len(held) == 1:
-                found |= held
-    return tuple(n for n in mech.unknown_names if n in found)
+            if t.polar:
+                held = names([t.angle]) & angles
+                if len(held) == 1 and (frame[j - 1] or frame[(j + 1) % len(terms)]):
+                    found[held.pop()] = "rocker"
+                for n in names([t.length]) & lengths:
+                    if found.get(n) != "slot":
+                        found[n] = "slot" if names([t.angle]) & moving else "slider"
+            else:
+                for n in names(t.nodes()) & lengths:
+                    found.setdefault(n, "slider")
+    # the link of a slider dyad (RRP) whose joint runs on a guide fixed to the frame is the
+    # connecting rod, whatever its neighbours in a loop not written around its polygon (pivoted to
+    # the frame as well, the dyad could not move)
+    for d in _dyads.classify(mech) or ():
+        if d.kind == "RRP" and found.get(mech.unknown_names[d.unknowns[1]]) == "slider":
+            if found.get(mech.unknown_names[d.unknowns[0]]) == "rocker":
+                del found[mech.unknown_names[d.unknowns[0]]]
+    return {n: found[n] for n in mech.unknown_names if n in found}
 
 
 def _jets_of(mech, sigma, q_ref, phis, p, idx):
@@ -108,10 +156,8 @@ def prepare(mech: Mechanism, sigma, q_ref, p) -> None:
 
 
 def output_columns(mech: Mechanism) -> tuple:
-    """`(names, idx)`: the candidate outputs (every length unknown and every rocker) and their
-    unknowns' indices."""
-    rock = rockers(mech)
-    names = [n for n, k in zip(mech.unknown_names, mech.unknown_kinds) if k != "angle" or n in rock]
+    """`(names, idx)`: the candidate outputs (`kinds`) and their unknowns' indices."""
+    names = list(kinds(mech))
     return names, tuple(mech.unknown_names.index(n) for n in names)
 
 
@@ -235,6 +281,7 @@ def outputs(mech: Mechanism, dyads, sigma, q0, phis, p, flats=()) -> list:
     names, idx = output_columns(mech)
     if not names:
         return []
+    kind = kinds(mech)
     ev = _Eval(mech, idx, sigma, q0, p)
     grid = np.asarray(phis, float)
     m = len(idx)
@@ -269,7 +316,7 @@ def outputs(mech: Mechanism, dyads, sigma, q0, phis, p, flats=()) -> list:
         at, val, near, is_flat = at[order], val[order], near[order], is_flat[order]
         if angle[j]:  # the refined values near the unwrapped samples
             val = val + 2 * np.pi * np.round((near - val) / (2 * np.pi))
-        entry = {"name": name, "kind": "rocker" if angle[j] else "slider",
+        entry = {"name": name, "kind": kind[name],
                  "dead_centres": list(zip(at[~is_flat], val[~is_flat])),
                  "flat_positions": list(zip(at[is_flat], val[is_flat])),
                  "velocity_min": float(vmin[j]), "velocity_min_at": float(vmin_at[j]),
@@ -287,4 +334,47 @@ def outputs(mech: Mechanism, dyads, sigma, q0, phis, p, flats=()) -> list:
                          min_at=None, max_at=None, rise=None, fall=None, time_ratio=None, min_flat=False,
                          max_flat=False)
         out.append(entry)
+    return out
+
+
+def outputs_over(mech: Mechanism, sigma, q0, lo: float, hi: float, p, samples: int) -> list:
+    """The outputs' ranges while a length input (an actuator) runs over [lo, hi] (SI) on the
+    branches σ (the closed form with reference `q0`): one dict per output (`kinds`), in unknown
+    order — `name`, `kind`, `min`, `max`, `stroke` (the swing of a rocker, SI), `min_at`,
+    `max_at` (the input there), `dead_centres` (inputs inside the range where the output's rate is
+    zero: an extreme there, (input, value)). The extremes are those of `samples` + 1 equally
+    spaced inputs, the ends and the roots of q′ between them (Newton's method on q′, `_zeros`;
+    not in the first and last intervals, where a toggle's rate is rounding: the ends stand for
+    them).
+    Where the range ends at a toggle, the output's rate grows without bound there: no velocity
+    ratio is given (`velocity_*` None), nor a time ratio (the input does not turn)."""
+    names, idx = output_columns(mech)
+    if not names:
+        return []
+    kind = kinds(mech)
+    ev = _Eval(mech, idx, sigma, q0, p)
+    grid = np.linspace(lo, hi, samples + 1)
+    q, v, _ = _jets(mech, idx, sigma, q0, grid, p)
+    angle = np.array([mech.unknown_kinds[i] == "angle" for i in idx])
+    q = np.where(angle, np.unwrap(q, axis=0), q)
+    change = (v[:-1] * v[1:] < 0) | ((v[:-1] == 0) & (v[1:] != 0))
+    change[[0, -1]] = False  # beside a toggle the rate is rounding over a vanishing root: the ends count
+    ks, cs = np.nonzero(change)
+    roots = _zeros(ev, grid[ks], grid[ks + 1], cs) if ks.size else np.zeros(0)
+    vals = ev(roots, cs)[0] if ks.size else np.zeros(0)
+    out = []
+    for j, name in enumerate(names):
+        mine = cs == j
+        val = vals[mine]
+        if angle[j]:  # the refined values near the unwrapped samples
+            val = val + 2 * np.pi * np.round((q[ks[mine], j] - val) / (2 * np.pi))
+        at = np.concatenate([[grid[0], grid[-1]], roots[mine]])
+        every = np.concatenate([[q[0, j], q[-1, j]], val])
+        lo_i, hi_i = int(np.argmin(every)), int(np.argmax(every))
+        out.append({"name": name, "kind": kind[name], "min": float(every[lo_i]), "max": float(every[hi_i]),
+                    "stroke": float(every[hi_i] - every[lo_i]), "min_at": float(at[lo_i]),
+                    "max_at": float(at[hi_i]), "dead_centres": list(zip(roots[mine], val)),
+                    "flat_positions": [], "min_flat": False, "max_flat": False, "rise": None, "fall": None,
+                    "time_ratio": None, "velocity_min": None, "velocity_min_at": None, "velocity_max": None,
+                    "velocity_max_at": None})
     return out

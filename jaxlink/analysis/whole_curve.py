@@ -88,13 +88,15 @@ def _positions(mech, dyads, sigma, q_ref, phis, p):
 _positions_jit = jax.jit(_positions, static_argnums=(1,))
 
 
-def limit(mech: Mechanism, dyads, sigma, q_ref, p, phi0: float, direction: float, samples: int):
+def limit(mech: Mechanism, dyads, sigma, q_ref, p, phi0: float, direction: float, samples: int,
+          step: float | None = None):
     """Where the branch σ ends going from φ0 in `direction` (±1): `(a, b, j)`, the adjacent
     floats on either side of the toggle of dyad j (its reach margin > 0 at a, ≤ 0 at b), or None
-    if the branch goes on for a whole turn (`samples` per turn). Bisection on the margin from the
-    last sample where every dyad assembles: it needs only the margin's sign, so it finds the same
-    floats whatever the compiler does with the arithmetic around it."""
-    h = 2 * np.pi / samples
+    if the branch goes on for a whole turn (`samples` per turn; a length input: `samples` steps of
+    `step`). Bisection on the margin from the last sample where every dyad assembles: it needs
+    only the margin's sign, so it finds the same floats whatever the compiler does with the
+    arithmetic around it."""
+    h = 2 * np.pi / samples if step is None else step
     del dyads  # (classified again inside the stored program)
 
     def margins(phis):

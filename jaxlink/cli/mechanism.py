@@ -592,6 +592,11 @@ def cmd_check(args) -> int:
         if lay.input[0] == "crank":
             pivot = dict(lay.bodies)[lay.input[1]][0]
             drive = f"{mech.input_name}, the angle of link {lay.input[1]} about {pivot}"
+        elif lay.input[0] == "link":
+            first, second = dict(lay.bodies)[lay.input[1]][:2]
+            drive = f"{mech.input_name}, the angle of link {lay.input[1]} ({first} → {second})"
+        elif lay.input[0] == "slider":
+            drive = f"{mech.input_name}, the position of slider {lay.input[1]} on its line"
         else:
             drive = f"{mech.input_name}, the length of the actuator {lay.input[1][0]}–{lay.input[1][1]}"
         print(f"sketch      frame {', '.join(lay.frame)}; links " + ", ".join(

@@ -8,6 +8,8 @@ unknowns, loops, points) that the rest of jaxlink reads.
     [sketch.input]
     crank = "crank"                   # a link turning about its frame joint ...
     # actuator = ["C1", "C2"]         # ... or a linear actuator: the input is the distance C1–C2
+    # link = "bar"                    # ... or any link's angle (a floating link's too)
+    # slider = "B"                    # ... or a slider's signed position on its line
     name = "phi2"                     # default: theta_<crank> (crank), s_<C1>_<C2> (actuator)
     [sketch.joints]                   # NAME = [x, y], file length unit, all in the same pose
     A0 = [0, 0]
@@ -30,7 +32,9 @@ unknowns, loops, points) that the rest of jaxlink reads.
   `along` (in the sketch) or towards J from the joint `through`: `J_angle` its direction (from
   b's direction r → j2; on the frame, from the x axis), `J_offset` its distance from b's first
   joint (or the origin; absent with `through`), the unknown `s_J` the position along it;
-- an actuator between C1 and C2: the input is their distance, `theta_C1_C2` the unknown angle.
+- an actuator between C1 and C2: the input is their distance, `theta_C1_C2` the unknown angle;
+- a driven link (`link`): its angle θ_b is the input (no unknown), pivoted or floating; a driven
+  slider (`slider = "J"`): `s_J` is the input (a length), no unknown.
 
 **The loops** are found dyad by dyad: from the joints already placed (the frame, then the crank),
 the shortest chain of bodies through unplaced joints that closes on placed joints with exactly two
@@ -61,7 +65,8 @@ from .sketch_loops import text as _text
 FRAME = "frame"
 _NAME = re.compile(r"[A-Za-z_][A-Za-z0-9_]*")
 _SKETCH_KEYS = {"frame", "points", "input", "joints", "links", "sliders", "masses"}
-_INPUT_KEYS = {"crank", "actuator", "name"}
+_INPUT_KEYS = {"crank", "actuator", "link", "slider", "name"}
+_DRIVES = ("crank", "actuator", "link", "slider")
 _SLIDER_KEYS = {"on", "along", "through"}
 #: tables a sketch file may not have: the sketch derives them
 DERIVED_TABLES = ("parameters", "input", "unknowns", "loops", "points", "bodies", "joints")
@@ -76,7 +81,8 @@ class Layout:
       (`derive` gives the terms as strings of the loop form; the model holds them parsed, as
       `jaxlink.files.expr.Term`s with the derived parameters expanded: `Structure.joint_positions`);
     - `frame`: the frame joints; `bodies`: `(name, joint names)` of every link and plate;
-    - `sliders`: `(joint, body)`; `input`: `("crank", link)` or `("actuator", (C1, C2))`.
+    - `sliders`: `(joint, body)`; `input`: `("crank", link)`, `("actuator", (C1, C2))`,
+      `("link", link)` (a floating link's angle) or `("slider", joint)` (its signed position).
     """
 
     joints: tuple
@@ -161,12 +167,25 @@ def derive(data: dict, err: Callable[..., MechanismError], file: str) -> tuple[d
     inp = sk.get("input")
     if isinstance(inp, dict):
         check_keys(inp, _INPUT_KEYS, "sketch.input", lambda m, k: err(m, "sketch.input", k))
-    if not isinstance(inp, dict) or ("crank" in inp) == ("actuator" in inp):
-        raise err("[sketch.input] needs crank = \"LINK\" (a link turning about its frame joint) or "
-                  "actuator = [\"C1\", \"C2\"] (a linear actuator: the input is their distance)", "sketch", "input")
+    if not isinstance(inp, dict) or sum(k in inp for k in _DRIVES) != 1:
+        raise err("[sketch.input] needs one of crank = \"LINK\" (a link turning about its frame joint), "
+                  "actuator = [\"C1\", \"C2\"] (a linear actuator: the input is their distance), link = \"LINK\" "
+                  "(any link's angle, a floating link's too) or slider = \"J\" (the signed position of slider J "
+                  "on its line)", "sketch", "input")
     crank = None
     actuator = None
-    if "crank" in inp:
+    driven_slider = None
+    drive = next(k for k in _DRIVES if k in inp)
+    if drive == "link":  # a link's angle, pivoted to the frame or not: the direction of its first two joints
+        crank = inp["link"]
+        if not isinstance(crank, str) or crank not in bodies:
+            raise err(f"link = {crank!r} is not a link of [sketch.links]{_suggest(str(crank), bodies)}",
+                      "sketch.input", "link")
+        input_name = inp.get("name", f"theta_{crank}")
+    elif drive == "slider":
+        driven_slider = inp["slider"]
+        input_name = inp.get("name", f"s_{driven_slider}")
+    elif "crank" in inp:
         crank = inp["crank"]
         if not isinstance(crank, str) or crank not in bodies:
             raise err(f"crank = {crank!r} is not a link of [sketch.links]{_suggest(str(crank), bodies)}",
@@ -179,7 +198,7 @@ def derive(data: dict, err: Callable[..., MechanismError], file: str) -> tuple[d
         if math.dist(xy[piv[0]], xy[rest[0]]) <= tiny:
             raise err(f"the crank '{crank}': {piv[0]} and {rest[0]} are at the same place", "sketch.input", "crank")
         input_name = inp.get("name", f"theta_{crank}")
-    else:
+    elif drive == "actuator":
         actuator = joint_list(inp["actuator"], "sketch.input", "actuator", "'actuator'", least=2)
         if len(actuator) != 2:
             raise err("actuator = [\"C1\", \"C2\"]: the two joints it pushes apart", "sketch.input", "actuator")
@@ -229,6 +248,9 @@ def derive(data: dict, err: Callable[..., MechanismError], file: str) -> tuple[d
                           "sketch.sliders", j)
             t = None  # type: ignore[assignment]
         sliders[j] = {"on": on, "dir": (float(d[0]), float(d[1])), "through": t}  # type: ignore[dict-item]
+    if driven_slider is not None and driven_slider not in sliders:
+        raise err(f"slider = {driven_slider!r} is not a slider of [sketch.sliders]"
+                  f"{_suggest(str(driven_slider), sliders)}", "sketch.input", "slider")
 
     # ------------------------------------------------------------------ Grübler
     members = {j: sum(j in js for js in bodies.values()) + (j in frame) for j in xy}
@@ -315,14 +337,14 @@ def derive(data: dict, err: Callable[..., MechanismError], file: str) -> tuple[d
                     edges.append(_Edge(u, v, ("lazy", b), vs, b))  # terms made when used
     for j, sl in sliders.items():
         on, t = sl["on"], sl["through"]
-        s_name = f"s_{j}"
+        s_name = input_name if j == driven_slider else f"s_{j}"
         d = sl["dir"]
         dn = math.hypot(*d)
         dx, dy = d[0] / dn, d[1] / dn
         alpha = wrap(math.atan2(dy, dx) - body_angle[on])
         params[f"{j}_angle"] = num(ang(alpha))
         th = "" if on == FRAME else f"{theta[on]} + "
-        vs = frozenset({s_name} | (set() if on in (FRAME, crank) else {theta[on]}))
+        vs = frozenset(({s_name} - {input_name}) | (set() if on in (FRAME, crank) else {theta[on]}))
         if t is not None:
             ref = t
         else:
@@ -336,7 +358,10 @@ def derive(data: dict, err: Callable[..., MechanismError], file: str) -> tuple[d
             params[f"{j}_offset"] = num(abs(e))
             terms.append((1, f"{j}_offset @ {th}{j}_angle {'+' if e >= 0 else '-'} {quarter}"))
         terms.append((1, f"{s_name} @ {th}{j}_angle"))
-        unknowns[s_name] = num(s0)
+        if j == driven_slider:
+            start = num(s0)
+        else:
+            unknowns[s_name] = num(s0)
         edges.append(_Edge(ref, j, tuple(terms), vs, on))
     if actuator is not None:
         c1, c2 = actuator
@@ -373,6 +398,10 @@ def derive(data: dict, err: Callable[..., MechanismError], file: str) -> tuple[d
         return [_text(s, t) for s, t in pos[j]]
 
     out = {k: v for k, v in data.items() if k != "sketch"}
+    if ("masses" in sk or "loads" in data or "environment" in data) and drive in ("link", "slider"):
+        raise err(f"reactions of a sketch driven by a {drive}'s {'angle' if drive == 'link' else 'position'} are "
+                  "not derived yet: drive it by a crank, or write [bodies] and [joints] in the loop form",
+                  "sketch.input", drive)
     if "masses" in sk or "loads" in data or "environment" in data:
         bodies_t, joints_t, loads_t = body_tables(
             sk.get("masses", {}), data.get("loads", {}), err, bodies=bodies, frame=frame, sliders=sliders,
@@ -395,7 +424,7 @@ def derive(data: dict, err: Callable[..., MechanismError], file: str) -> tuple[d
         frame=frame,
         bodies=tuple(bodies.items()),
         sliders=tuple((j, sl["on"]) for j, sl in sliders.items()),
-        input=("crank", crank) if crank is not None else ("actuator", actuator),
+        input=(drive, crank if drive in ("crank", "link") else actuator if drive == "actuator" else driven_slider),
     )
     return out, layout
 

@@ -7,7 +7,10 @@ input) its vectors use. From the joints already placed (whose position is a chai
 the origin), the shortest chain of edges through joints not yet placed that closes on placed
 joints with exactly two new unknowns is one loop (an Assur group of class II): its vectors, from
 the origin to the chain's start, along it, and back from its end, with every vector that meets its
-opposite cancelled. Its unknowns are then known, the joints they place are placed, and the search
+opposite cancelled: the polygon of the linkage, each vector from the joint where the one before
+it ends (the origin, the frame joints, the moving joints in the order the chain passes them;
+`jaxlink.analysis.grashof` and `jaxlink.analysis.stroke` read which links are neighbours, as in a
+loop written by hand). Its unknowns are then known, the joints they place are placed, and the search
 goes on. What cannot be split so (a group of higher class) is closed by the fundamental cycles of
 a spanning tree over the joints left (each plate a star from its first joint), solved together by
 Newton.
@@ -70,8 +73,8 @@ def close_loops(edges, input_name: str, unknowns: set, terms_of: Callable, err) 
         ts = list(pos[u])
         for e, fwd in path:
             ts.extend(terms_of(e, fwd))
-        ts.extend(neg(pos[v]))
-        out: list = []
+        ts.extend(neg(pos[v][::-1]))  # back to the origin the way it came: each vector joins the
+        out: list = []                 # joints it lies between, the loop is the linkage's polygon
         for s, t in ts:  # cancel a vector and its opposite (a shared chain from the origin)
             if (-s, t) in out:
                 out.remove((-s, t))

@@ -79,6 +79,18 @@ class Sketch:
         self._input = {"actuator": [joint_a, joint_b], **({"name": name} if name else {})}
         return self
 
+    def link_angle(self, link: str, *, name: str | None = None) -> Sketch:
+        """The input: the angle of `link` (the direction from its first joint to its second), pivoted
+        to the frame or floating (the bar of an elliptic trammel)."""
+        self._input = {"link": link, **({"name": name} if name else {})}
+        return self
+
+    def slider_position(self, joint: str, *, name: str | None = None) -> Sketch:
+        """The input: the signed position of the slider `joint` along its line (`slider`), from the
+        line's foot nearest its body's first joint (on the frame: the origin)."""
+        self._input = {"slider": joint, **({"name": name} if name else {})}
+        return self
+
     def points(self, *names: str) -> Sketch:
         """The joints whose paths are reported (default: every moving joint)."""
         self._points = list(names)

@@ -38,6 +38,33 @@ def lines(mech, fbs, m, lu: str) -> list:
         x = float(np.mod(x, 2 * np.pi))
         return ang(0.0 if x > 2 * np.pi - 1e-12 else x, 6)
 
+    length = mech.input_kind != "angle"
+    if length:  # an actuator: its range, the outputs over it
+        def inp(x, digits=10):
+            return f"{x / mech.units.length:.{digits}g} {lu}"
+
+        ends = [inp(m.low) + ("" if m.lower is not None else " (no limit position down to there: the scan's end)"),
+                inp(m.high) + ("" if m.upper is not None else " (no limit position up to there: the scan's end)")]
+        if m.low is None:
+            out.append(f"motion      {name}: the start does not assemble")
+            return out
+        out.append(f"motion      {name} from {ends[0]} to {ends[1]}"
+                   + (" (limit positions: toggles)" if m.lower is not None and m.upper is not None else "")
+                   + f", a range of {inp(m.high - m.low)}")
+        for i, t in enumerate(m.transmission):
+            label = f"loop '{t['loop']}' ({', '.join(t['unknowns'])}{_MEASURED.get(t.get('kind', 'RRR'), '')})"
+            out.append(f"{'transmission' if i == 0 else '':<13}{label}: {ang(t['min'])} at {name} = "
+                       f"{inp(t['min_at'], 6)} … {ang(t['max'])} at {inp(t['max_at'], 6)}; worst (farthest from 90°) "
+                       f"{ang(t['worst'])}")
+        for i, o in enumerate(m.outputs):
+            def val(x, digits=10, o=o):
+                return ang(x, digits) if o["kind"] == "rocker" else inp(x, digits)
+
+            what = "swing" if o["kind"] == "rocker" else "stroke"
+            out.append(f"{'outputs' if i == 0 else '':<12}{o['kind']} {o['name']}: {what} {val(o['stroke'])} "
+                       f"({val(o['min'], 8)} at {name} = {inp(o['min_at'], 6)} … {val(o['max'], 8)} at "
+                       f"{inp(o['max_at'], 6)}) over the range")
+        return out
     if m.full_turn:
         flats = " and ".join(where_(x) for x in m.change_points)
         through = (f", through the flat position{'s' if len(m.change_points) > 1 else ''} at {name} = {flats} (a "
@@ -56,13 +83,18 @@ def lines(mech, fbs, m, lu: str) -> list:
         return ang(x, 6)
 
     for i, t in enumerate(m.transmission):
-        label = f"loop '{t['loop']}' ({', '.join(t['unknowns'])})"
+        label = f"loop '{t['loop']}' ({', '.join(t['unknowns'])}{_MEASURED.get(t.get('kind', 'RRR'), '')})"
         out.append(f"{'transmission' if i == 0 else '':<13}{label}: {ang(t['min'])} at {name} = "
                    f"{where(t['min_at'])} … {ang(t['max'])} at {where(t['max_at'])}; worst (farthest from 90°) "
                    f"{ang(t['worst'])}")
     for i, o in enumerate(m.outputs):
         out.append(f"{'outputs' if i == 0 else '':<12}" + _output_line(o, name, ang, where, mech.units.length, lu))
     return out
+
+
+_MEASURED = {"RRP": "; the link against the guide's normal",
+             "RPR": "; the block's push against the slotted link's path"}
+"""What a transmission angle measures, where it is not the angle between two links (RRR)."""
 
 
 def _output_line(o, name, ang, where, length_factor, lu) -> str:
@@ -96,7 +128,9 @@ def _f(x):
 
 def to_json(mech, fbs, m) -> dict:
     """The `designer` object of the kinematics JSON: SI, every key with its unit (`_m`, `_rad`,
-    `_m_per_rad` for a slider's velocity ratio)."""
+    `_m_per_rad` for a slider's velocity ratio); where things happen in the input's unit (`_at_rad`,
+    `input_rad`; a length input `_at_m`, `input_m`, its range `lower_m`, `upper_m`, `low_m`,
+    `high_m`)."""
     out: dict = {"four_bars": [
         {"loop": fb.loop, "grashof": fb.grashof, "type": fb.type, "shortest": fb.shortest,
          "links_m": {k: (None if v is None else (list(map(float, v)) if isinstance(v, tuple) else float(v)))
@@ -105,6 +139,7 @@ def to_json(mech, fbs, m) -> dict:
     if m is None:
         out["motion"] = None
         return out
+    iu = "rad" if mech.input_kind == "angle" else "m"  # the input's unit: where things are
     outputs = []
     for o in m.outputs:
         u = "rad" if o["kind"] == "rocker" else "m"
@@ -112,20 +147,23 @@ def to_json(mech, fbs, m) -> dict:
         outputs.append({
             "name": o["name"], "kind": o["kind"], f"{'swing' if u == 'rad' else 'stroke'}_{u}": _f(o["stroke"]),
             f"min_{u}": _f(o["min"]), f"max_{u}": _f(o["max"]),
-            "min_at_rad": _f(o["min_at"]), "max_at_rad": _f(o["max_at"]),
-            "dead_centres": [{"input_rad": float(x), f"value_{u}": float(y)} for x, y in o["dead_centres"]],
-            "flat_positions": [{"input_rad": float(x), f"value_{u}": float(y)} for x, y in o.get("flat_positions", [])],
+            f"min_at_{iu}": _f(o["min_at"]), f"max_at_{iu}": _f(o["max_at"]),
+            "dead_centres": [{f"input_{iu}": float(x), f"value_{u}": float(y)} for x, y in o["dead_centres"]],
+            "flat_positions": [{f"input_{iu}": float(x), f"value_{u}": float(y)}
+                               for x, y in o.get("flat_positions", [])],
             "min_at_flat": bool(o.get("min_flat", False)), "max_at_flat": bool(o.get("max_flat", False)),
             "rise_rad": _f(o["rise"]), "fall_rad": _f(o["fall"]), "time_ratio": _f(o["time_ratio"]),
-            f"velocity_ratio_min{v}": _f(o["velocity_min"]), "velocity_ratio_min_at_rad": _f(o["velocity_min_at"]),
-            f"velocity_ratio_max{v}": _f(o["velocity_max"]), "velocity_ratio_max_at_rad": _f(o["velocity_max_at"]),
+            f"velocity_ratio_min{v}": _f(o["velocity_min"]), f"velocity_ratio_min_at_{iu}": _f(o["velocity_min_at"]),
+            f"velocity_ratio_max{v}": _f(o["velocity_max"]), f"velocity_ratio_max_at_{iu}": _f(o["velocity_max_at"]),
         })
     out["motion"] = {
-        "full_turn": bool(m.full_turn), "lower_rad": _f(m.lower), "upper_rad": _f(m.upper),
+        "full_turn": bool(m.full_turn), f"lower_{iu}": _f(m.lower), f"upper_{iu}": _f(m.upper),
+        **({} if iu == "rad" else {"low_m": _f(m.low), "high_m": _f(m.high)}),
         "change_points_rad": [float(x) for x in m.change_points],
-        "transmission": [{"loop": t["loop"], "unknowns": list(t["unknowns"]), "min_rad": float(t["min"]),
-                          "min_at_rad": float(t["min_at"]), "max_rad": float(t["max"]),
-                          "max_at_rad": float(t["max_at"]), "worst_rad": float(t["worst"])} for t in m.transmission],
+        "transmission": [{"loop": t["loop"], "kind": t.get("kind", "RRR"), "unknowns": list(t["unknowns"]),
+                          "min_rad": float(t["min"]), f"min_at_{iu}": float(t["min_at"]), "max_rad": float(t["max"]),
+                          f"max_at_{iu}": float(t["max_at"]), "worst_rad": float(t["worst"])}
+                         for t in m.transmission],
         "outputs": outputs,
     }
     return out

@@ -555,6 +555,8 @@ def _sketch_drawing(mech, xy, loop_vec, chains, pts, shown, sample, tol, scale, 
     if lay.input[0] == "crank":
         js = dict(lay.bodies)[lay.input[1]]
         drive = Drive("crank", lay.input[1], xy[:, [index[js[0]], index[js[1]]]], sense)
+    elif lay.input[0] in ("link", "slider"):  # a floating link's angle, a slider's position: no motor drawn
+        drive = None
     else:
         drive = Drive("actuator", mech.input_name, xy[:, [index[ends[0]], index[ends[1]]]], sense)
     arms = []
