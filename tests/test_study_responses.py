@@ -113,7 +113,7 @@ limits = {{ "travel(Z, x)" = [{SPEC[0]}, {SPEC[1]}] }}
 
 # ---------------------------------------------------------------- the four-bar: values at named angles
 
-ANGLES = (30.0, 150.0, 270.0)
+ANGLES = (30.0, 152.5, 271.3)  # on a sample (5° spacing), midway, off the grid
 RPM = 60.0  # ω = 2π rad/s
 KINDS = (("vx", 1, "real"), ("vy", 1, "imag"), ("ax", 2, "real"), ("ay", 2, "imag"), ("jx", 3, "real"),
          ("jy", 3, "imag"))
@@ -141,8 +141,9 @@ def _row(rep, name):
 
 
 def test_velocity_acceleration_jerk_at_named_angles(fourbar):
-    """18 numbers — vx, vy, ax, ay, jx, jy of the coupler point at 30°, 150°, 270° — straight from
-    the study's responses, to 1e-9 of the hand-differentiated loop (per second at 60 rpm)."""
+    """18 numbers — vx, vy, ax, ay, jx, jy of the coupler point at 30°, 152.5°, 271.3° (on a
+    sample, midway between two, off the grid of 5°) — straight from the study's responses, to 1e-9
+    of the hand-differentiated loop (per second at 60 rpm)."""
     _mech, _inputs, rep = fourbar
     w = 2 * math.pi * RPM / 60
     n = 0
