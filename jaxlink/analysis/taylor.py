@@ -94,14 +94,18 @@ def newton(mech: Mechanism, q, phi, p, steps: int, loop: bool = False):
     return q
 
 
+def position_held(mech: Mechanism, q, phi, p, h):
+    """The position at the input φ + h from the solved position (q, φ): the predictor and
+    `NEWTON` steps in a loop, nothing traced (`position_at` without its traced steps)."""
+    q, p = jax.lax.stop_gradient(q), jax.lax.stop_gradient(p)
+    qs, _ = series(mech, q, phi, p, 2)
+    return jax.lax.stop_gradient(newton(mech, qs[0] + qs[1] * h + 0.5 * qs[2] * h * h, phi + h, p, NEWTON, loop=True))
+
+
 def position_at(mech: Mechanism, q, phi, p, h):
     """The position at the input φ + h from the solved position (q, φ) (module doc): the unknowns
     at φ + h, their derivative with respect to p the implicit one."""
-    ps = jax.lax.stop_gradient(p)
-    qs, _ = series(mech, jax.lax.stop_gradient(q), phi, ps, 2)
-    target = phi + h
-    q1 = newton(mech, qs[0] + qs[1] * h + 0.5 * qs[2] * h * h, target, ps, NEWTON, loop=True)
-    return newton(mech, jax.lax.stop_gradient(q1), target, p, TRACED)
+    return newton(mech, position_held(mech, q, phi, p, h), phi + h, p, TRACED)
 
 
 def refine_extreme(mech: Mechanism, q, phi, p, f, order: int, spacing: float):

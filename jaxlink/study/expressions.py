@@ -188,8 +188,8 @@ def scale(e: Expression, mech, omega: float | None) -> float:
 
 class _Legs(NamedTuple):
     """The extremes sought, one leg per max or min (a travel has two), as arrays so that one
-    compiled Newton serves all the legs of one order: f = sign (cp w·P⁽ᵏ⁾[ip] + cu q⁽ᵏ⁾[iu] +
-    cn |P⁽ᵏ⁾[ip]|²) (a magnitude's square: the same argmax)."""
+    compiled Newton serves all the legs: f = sign (cp w·P⁽ᵏ⁾[ip] + cu q⁽ᵏ⁾[iu] + cn |P⁽ᵏ⁾[ip]|²)
+    (a magnitude's square: the same argmax), k the leg's order."""
 
     sign: np.ndarray
     cp: np.ndarray
@@ -199,6 +199,7 @@ class _Legs(NamedTuple):
     iu: np.ndarray
     w: np.ndarray
     turns: np.ndarray
+    k: np.ndarray
 
 
 def _legs(exprs, legs) -> _Legs:
@@ -209,33 +210,39 @@ def _legs(exprs, legs) -> _Legs:
         norm = q.point and q.component == "norm"
         w = e.axis if e.axis is not None else ((1.0, 0.0) if q.component == "x" else (0.0, 1.0))
         rows.append((sg, float(q.point and not norm), float(not q.point), float(norm), q.ref if q.point else 0,
-                     0 if q.point else q.ref, w, float(not q.point and q.angle and q.order == 0)))
+                     0 if q.point else q.ref, w, float(not q.point and q.angle and q.order == 0), q.order))
     c = list(zip(*rows))
     f = [np.asarray(x, float) for x in c]
-    return _Legs(f[0], f[1], f[2], f[3], np.asarray(c[4], int), np.asarray(c[5], int), f[6], f[7])
+    return _Legs(f[0], f[1], f[2], f[3], np.asarray(c[4], int), np.asarray(c[5], int), f[6], f[7],
+                 np.asarray(c[8], int))
 
 
-def _leg_derivs(leg, k: int, qs, pts, n: int):
-    """(f, f′, …)[:n] of one leg from a `series` table (`_Legs`)."""
-    sign, cp, cu, cn, ip, iu, w, _turns = leg
+def _leg_derivs(leg, qs, pts, n: int):
+    """(f, f′, …)[:n] of one leg from a `series` table (`_Legs`; its order k an index)."""
+    sign, cp, cu, cn, ip, iu, w, _turns, k = leg
     P = [pts[k + j, ip] for j in range(n)]
     g = [P[0] @ P[0], 2.0 * P[0] @ P[1], 2.0 * (P[1] @ P[1] + P[0] @ P[2])] if n == 3 else [P[0] @ P[0]]
     return tuple(sign * (cp * (P[j] @ w) + cu * qs[k + j, iu] + cn * g[j]) for j in range(n))
 
 
-def _leg_value(leg, k: int, qs, pts):
+def _leg_value(leg, qs, pts):
     """The leg's quantity (not signed; a magnitude, not its square) from a `series` table."""
     import jax.numpy as jnp
 
-    _sign, cp, cu, cn, ip, iu, w, _turns = leg
+    _sign, cp, cu, cn, ip, iu, w, _turns, k = leg
     P = pts[k, ip]
     return cp * (P @ w) + cu * qs[k, iu] + cn * jnp.sqrt(P @ P)
 
 
 def evaluate(mech, exprs: tuple, qpath, phis, p, phi0: float):
     """(E,) the expressions' values (SI, per radian of the input) of one design: `qpath` (N, n) its
-    solved positions at the cycle's inputs `phis` (N,) from `phi0` (module doc). One compiled
-    position and series serve every named angle, one compiled Newton every extreme of one order."""
+    solved positions at the cycle's inputs `phis` (N,) from `phi0` (module doc).
+
+    One program for all the expressions, whatever their number and kinds (its compile is the
+    cost of an expression, paid once): the named angles' positions (Newton from the nearest
+    sample) and the extremes' inputs (one `refine_extreme` for every leg, orders as indices) are
+    located with the parameters held (no derivative), then all of them get the same `TRACED`
+    Newton steps (the implicit derivative) and one `series` of the highest order asked."""
     import jax
     import jax.numpy as jnp
 
@@ -244,63 +251,61 @@ def evaluate(mech, exprs: tuple, qpath, phis, p, phi0: float):
     N = qpath.shape[0]
     spacing = 2.0 * math.pi / N
     af = mech.units.angle
-    out: list = [None] * len(exprs)
+    ps = jax.lax.stop_gradient(p)
+    held = jax.lax.stop_gradient(qpath)
     turns = jnp.unwrap(qpath, axis=0) - qpath  # (N, n) the angle unknowns' whole turns from the start
-
-    # values at named angles: the positions there (from the nearest sample), one series
+    starts: list = []  # (q, φ) located with p held, then traced
+    # values at named angles: the positions there, from the nearest sample
     ats = sorted({e.at for e in exprs if e.kind == "at"})
     if ats:
         d = [(a * af - phi0) % (2.0 * math.pi) for a in ats]
         r = [int(round(x / spacing)) for x in d]
         ks = np.asarray([ri % N for ri in r])
         hs = jnp.asarray([x - ri * spacing for x, ri in zip(d, r)], qpath.dtype)
-        qa = jax.vmap(lambda q, ph, h: taylor.position_at(mech, q, ph, p, h))(qpath[ks], phis[ks], hs)
-        order = max(e.quantity.order for e in exprs if e.kind == "at")
-        qs, pts = jax.vmap(lambda q, ph: taylor.series(mech, q, ph, p, order))(qa, phis[ks] + hs)
-        for j, e in enumerate(exprs):
-            if e.kind != "at":
-                continue
-            a, q = ats.index(e.at), e.quantity
-            if not q.point:
-                v = qs[a, q.order, q.ref] + (turns[ks[a], q.ref] if q.angle and q.order == 0 else 0.0)
-            elif q.component == "norm":
-                v = jnp.linalg.norm(pts[a, q.order, q.ref])
-            else:
-                v = pts[a, q.order, q.ref, 0 if q.component == "x" else 1]
-            out[j] = v
+        starts.append((jax.vmap(lambda q, ph, h: taylor.position_held(mech, q, ph, ps, h))(held[ks], phis[ks], hs),
+                       phis[ks] + hs))
     # extremes: the largest sample of each leg, refined between the samples
     legs = [(j, sg) for j, e in enumerate(exprs) if e.kind != "at"
             for sg in ((1.0, -1.0) if e.kind == "travel" else ((1.0,) if e.kind == "max" else (-1.0,)))]
     if legs:
         top = max(exprs[j].quantity.order for j, _ in legs)
-        table = jax.vmap(lambda q, ph: taylor.series(mech, q, ph, p, top))(qpath, phis)
-        values: dict = {}
-        for k in sorted({exprs[j].quantity.order for j, _ in legs}):
-            group = [leg for leg in legs if exprs[leg[0]].quantity.order == k]
-            L = _legs(exprs, group)
-            arrays = tuple(jnp.asarray(a) for a in L)
+        arrays = tuple(jnp.asarray(a) for a in _legs(exprs, legs))
+        table = jax.vmap(lambda q, ph: taylor.series(mech, q, ph, ps, top))(held, phis)
+        F = jax.vmap(lambda leg: jax.vmap(lambda a, b: _leg_derivs(leg, a, b, 1)[0])(*table))(arrays)  # (L, N)
+        F = F + (arrays[0] * arrays[7])[:, None] * turns[:, arrays[5]].T
+        at = jnp.argmax(F, axis=1)
 
-            def sampled(leg, qs, pts, k=k):
-                return _leg_derivs(leg, k, qs, pts, 1)[0]
+        def refine(leg, q, ph):
+            return taylor.refine_extreme(mech, q, ph, ps, lambda a, b: _leg_derivs(leg, a, b, 3), top + 2, spacing)
 
-            F = jax.vmap(lambda leg: jax.vmap(lambda a, b: sampled(leg, a, b))(*table))(arrays)  # (L, N)
-            F = F + (arrays[0] * arrays[7])[:, None] * turns[:, arrays[5]].T
-            at = jnp.argmax(F, axis=1)
-
-            def refine(leg, q, ph, k=k):
-                return taylor.refine_extreme(mech, q, ph, p, lambda a, b: _leg_derivs(leg, k, a, b, 3), k + 2,
-                                             spacing)
-
-            phi_s, q_s = jax.vmap(refine)(arrays, qpath[at], phis[at])
-            qt = jax.vmap(lambda q, ph: taylor.newton(mech, q, ph, p, taylor.TRACED))(q_s, phi_s)
-            tq, tp = jax.vmap(lambda q, ph, k=k: taylor.series(mech, q, ph, p, k))(qt, phi_s)
-            v = jax.vmap(lambda leg, a, b, k=k: _leg_value(leg, k, a, b))(arrays, tq, tp)
-            v = v + arrays[7] * turns[at, arrays[5]]
-            for i, leg in enumerate(group):
-                values[leg] = v[i]
+        phi_s, q_s = jax.vmap(refine)(arrays, held[at], phis[at])
+        starts.append((q_s, phi_s))
+    if not starts:
+        return jnp.zeros(0, qpath.dtype)
+    Q = jax.lax.stop_gradient(jnp.concatenate([s[0] for s in starts]))
+    PH = jax.lax.stop_gradient(jnp.concatenate([s[1] for s in starts]))
+    order = max(e.quantity.order for e in exprs)
+    qt = jax.vmap(lambda q, ph: taylor.newton(mech, q, ph, p, taylor.TRACED))(Q, PH)
+    qs, pts = jax.vmap(lambda q, ph: taylor.series(mech, q, ph, p, order))(qt, PH)
+    out: list = [None] * len(exprs)
+    for j, e in enumerate(exprs):
+        if e.kind != "at":
+            continue
+        a, q = ats.index(e.at), e.quantity
+        if not q.point:
+            v = qs[a, q.order, q.ref] + (turns[ks[a], q.ref] if q.angle and q.order == 0 else 0.0)
+        elif q.component == "norm":
+            v = jnp.linalg.norm(pts[a, q.order, q.ref])
+        else:
+            v = pts[a, q.order, q.ref, 0 if q.component == "x" else 1]
+        out[j] = v
+    if legs:
+        n = len(ats)
+        v = jax.vmap(_leg_value)(arrays, qs[n:], pts[n:]) + arrays[7] * turns[at, arrays[5]]
+        values = {leg: v[i] for i, leg in enumerate(legs)}
         for j, e in enumerate(exprs):
             if e.kind == "travel":
                 out[j] = values[(j, 1.0)] - values[(j, -1.0)]
             elif e.kind in ("max", "min"):
                 out[j] = values[(j, 1.0 if e.kind == "max" else -1.0)]
-    return jnp.stack(out) if out else jnp.zeros(0, qpath.dtype)
+    return jnp.stack(out)
