@@ -63,6 +63,7 @@ from typing import Any, Mapping, NamedTuple
 
 from ..errors import MechanismError
 from ..files.keys import check_keys, suggest
+from . import expressions as _expressions
 from .distributions import DISTRIBUTIONS as _DISTRIBUTIONS
 from .distributions import sigma_per_half_width
 
@@ -246,8 +247,10 @@ def _read_study(mech, table, overrides) -> StudyInputs:
     metrics = t.get("metrics", DEFAULTS["metrics"])
     if isinstance(metrics, str):
         metrics = [metrics]
-    if not isinstance(metrics, (list, tuple)) or any(m not in METRICS for m in metrics):
-        raise _err(mech, f"'metrics' must be a list of {', '.join(map(repr, METRICS))}, got {metrics!r}", "metrics")
+    if not isinstance(metrics, (list, tuple)) or any(not isinstance(m, str) for m in metrics):
+        raise _err(mech, f"'metrics' must be a list of {', '.join(map(repr, METRICS))} or response expressions "
+                         f"({_expressions.SYNTAX}), got {metrics!r}", "metrics")
+    metrics = _metrics(mech, metrics)
 
     morris_levels = 4
     if method == "morris":  # `levels`: the Morris grid's p (one integer), not the grid's
@@ -314,6 +317,24 @@ def _read_study(mech, table, overrides) -> StudyInputs:
     out = StudyInputs(method, tuple(tolerances), positions, tuple(points), tuple(dict.fromkeys(metrics)),
                       samples, seed, chunk, rpm, ranges, sampler, bootstrap, confidence, robust, limits, **more)
     return _correlated(mech, out, t)
+
+
+def _metrics(mech, metrics) -> list:
+    """The named metrics and the response expressions (`expressions.parse`: checked, written back
+    normalized, `Q @ [a, b]` one entry per angle) of `metrics`."""
+    out: list = []
+    for m in metrics:
+        if m in METRICS:
+            out.append(m)
+        elif _expressions.is_expression(m):
+            try:
+                out += [e.text for e in _expressions.parse(mech, m)]
+            except ValueError as e:
+                raise _err(mech, str(e), "metrics") from None
+        else:
+            raise _err(mech, f"unknown metric '{m}'{suggest(m, METRICS)}; the metrics: {', '.join(map(repr, METRICS))} "
+                             f"and the response expressions: {_expressions.SYNTAX}", "metrics")
+    return out
 
 
 def _limits(mech, raw) -> tuple:

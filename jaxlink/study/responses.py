@@ -24,6 +24,9 @@ file's `[input] start` φ₀.
      (`jaxlink.analysis.transfer`), times ω and ω² when `rpm` is given (a constant input speed),
      refined the same way;
    - `deviation` is computed from the curves by the caller (max over the cycle of |P − P_nominal|);
+   - the response expressions (`expressions.py`): `travel(P, axis)`, a quantity at a named input
+     angle, `max(…)`, `min(…)`: extremes located between the samples by Newton on the exact
+     derivative (`jaxlink.analysis.taylor`), values at an angle solved there;
 4. **feasibility**: every parameter within its domain (`jaxlink.model.domains`, what the file
    reader and `--set` accept: a link length ≥ 0, …; a design outside it is infeasible, counted
    by the studies: `outside`), the start and every position converged (assembled, not singular) and, for a
@@ -49,6 +52,7 @@ from ..model import domains as _domains
 from ..solvers import dyads as _dyads
 from ..solvers.assemble import solve, solve_path
 from ..solvers.options import NewtonOptions, default_rtol
+from . import expressions as _expr
 from .inputs import StudyInputs
 
 _UNIT_NAMES = {1.0: "m", 1e-3: "mm", 1e-2: "cm"}
@@ -135,6 +139,12 @@ class Responses:
                 for p in inputs.points:
                     labels.append((f"max_{metric}({p})", unit, None))
                     scales.append((self.omega ** power if self.omega else 1.0) / lf)
+        # the response expressions (travel, values at named angles, extremes: `expressions.py`)
+        self.expressions: tuple = tuple(e for m in inputs.metrics if _expr.is_expression(m)
+                                        for e in _expr.parse(mech, m))
+        for e in self.expressions:
+            labels.append((e.text, _expr.unit(e, lu, au, self.omega is not None), None))
+            scales.append(_expr.scale(e, mech, self.omega))
         self.labels = tuple(labels)
         self.scales = np.asarray(scales)
         self.order = 2 if "acceleration" in inputs.metrics else 1 if "speed" in inputs.metrics else 0
@@ -221,6 +231,8 @@ class Responses:
                 assert t.ddpoints is not None
                 d = t.ddpoints[:, jnp.asarray(self.point_index, int)]
                 parts.append(jnp.sqrt(jax.vmap(_peak, in_axes=1)(jnp.sum(d * d, axis=-1))))
+        if self.expressions:
+            parts.append(_expr.evaluate(mech, self.expressions, sol.q, phis, p, self.phi0))
         values = jnp.concatenate(parts) * jnp.asarray(self.scales, dtype)
         good = jnp.isfinite(values)
         feasible = feasible & jnp.all(good)
