@@ -45,8 +45,7 @@ import numpy as np  # noqa: E402
 jax.config.update("jax_enable_x64", True)
 
 import jaxlink as jl  # noqa: E402
-from jaxlink.synthesis import link_chamfer, match  # noqa: E402
-from jaxlink.synthesis.bounds import MAX_PIVOT, MAX_SIZE, MIN_TRANSMISSION  # noqa: E402
+from jaxlink.synthesis import MAX_PIVOT, MAX_SIZE, MIN_TRANSMISSION, link_chamfer, match  # noqa: E402
 
 #: every designer's bound off (`--bounds off`): the search of before the defaults
 BOUNDS_OFF = dict(min_transmission=None, max_size=None, max_pivot=None)

@@ -21,6 +21,9 @@
 from .api import Design as Design
 from .api import Synthesis as Synthesis
 from .api import synthesize as synthesize
+from .bounds import MAX_PIVOT as MAX_PIVOT
+from .bounds import MAX_SIZE as MAX_SIZE
+from .bounds import MIN_TRANSMISSION as MIN_TRANSMISSION
 from .distance import Match as Match
 from .distance import link_chamfer as link_chamfer
 from .distance import match as match
