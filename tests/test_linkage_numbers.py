@@ -217,3 +217,17 @@ def test_a_crank_rocker_has_no_flat_position(four_bar):
     (o,) = m.outputs
     assert m.change_points == [] and o["flat_positions"] == [] and len(o["dead_centres"]) == 2
     assert not o["min_flat"] and not o["max_flat"]
+
+
+def test_check_at_a_flat_start_gives_the_designers_numbers(capsys):
+    """The change-point four-bar with its crank starting on the flat position (φ2 = 0: every link
+    on the frame line, the loop's Jacobian singular) assembles there: `check` said `singular` and
+    exited 1 with no designer's numbers; it names the singular start and gives them, the swing
+    acos(−0.8) and the time ratio 3 of the closed form (printed digits)."""
+    args = ["check", "four-bar"] + [f"--set={k}={v:g}" for k, v in zip("abcd", CP)]
+    assert main(args) == 0
+    out = capsys.readouterr().out
+    assert "assembly    at the start: singular" in out and "the start is a singular position" in out
+    swing, _flat, _folded, ratio = _change_point_closed_form(0.0)
+    assert f"swing {math.degrees(swing):.10g}°" in out and f"time ratio {ratio:.6g}" in out
+    assert "through the flat position at phi2 = 0°" in out

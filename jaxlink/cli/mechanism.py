@@ -630,9 +630,12 @@ def cmd_check(args) -> int:
            else f"{int(steps)} Newton steps")
     print(f"assembly    at the start: {RESULTS.names[code]} (residual {float(resid):.2e} m, "
           f"{how}, Jacobian condition number {cond:.3g})")
-    if code == RESULTS.converged:
+    if code in (RESULTS.converged, RESULTS.singular):  # singular: assembled, at a toggle or change point
         print("            start configuration: " + ", ".join(
             f"{n} = {mech.from_si(n, float(v)):.6g}" for n, v in zip(mech.unknown_names, q)))
+        if code == RESULTS.singular:
+            print("            the start is a singular position (a dead centre, toggle or change point): "
+                  "the numbers below follow the branch of the guesses away from it")
         _print_designer_numbers(mech, lu)
         return 0
     print(f"            {RESULTS.messages[code]}", file=sys.stderr)
