@@ -155,3 +155,22 @@ def test_the_command_line_counts_from_the_process_start():
     start = process_started()
     assert start <= _IMPORTED <= time.perf_counter()
     assert time.perf_counter() - start < 24 * 3600
+
+
+def test_the_compile_key_holds_every_option_of_the_programs():
+    """The record's key (`programs.compile_key`) changes with each argument that changes the
+    programs compiled — a key without one would estimate a set from another set's compile (a wrong
+    key: the same estimate for the bounded and the unbounded programs); the same arguments give the
+    same key. The programs are compiled for their blocks' shapes, so a count that leaves every block
+    as it is (16 topologies instead of 15) is the same key, one that shrinks a block is another."""
+    from jaxlink.synthesis.programs import compile_key
+
+    base = dict(n_topos=16, n_dyads=3, closed=True, samples=8192, screen_keep=64, refine=16, steps=200,
+                quick=False, polish_points=200, sliders=False, timed=False, bounded=False)
+    k0 = compile_key(**base)
+    assert compile_key(**base) == k0
+    assert compile_key(**{**base, "n_topos": 15}) == k0  # more blocks of the same shapes
+    changed = dict(n_dyads=4, closed=False, samples=256, steps=100, quick=True, polish_points=100, sliders=True,
+                   timed=True, bounded=True)
+    for name, value in changed.items():
+        assert compile_key(**{**base, name: value}) != k0, name

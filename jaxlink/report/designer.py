@@ -20,6 +20,18 @@ def compute(mech) -> tuple[list, Any]:
     return four_bars(mech), motion(mech)
 
 
+def _transmission_lines(m, name: str, ang, at) -> list[str]:
+    """The transmission line of each loop of `m`: its least and largest angle, the inputs where
+    they are (`at` formats an input) and the worst, farthest from 90°."""
+    out = []
+    for i, t in enumerate(m.transmission):
+        label = f"loop '{t['loop']}' ({', '.join(t['unknowns'])}{_MEASURED.get(t.get('kind', 'RRR'), '')})"
+        out.append(f"{'transmission' if i == 0 else '':<13}{label}: {ang(t['min'])} at {name} = "
+                   f"{at(t['min_at'])} … {ang(t['max'])} at {at(t['max_at'])}; worst (farthest from 90°) "
+                   f"{ang(t['worst'])}")
+    return out
+
+
 def lines(mech, fbs, m, lu: str) -> list:
     """The text lines (file units: `lu` the length unit's name)."""
     from ..analysis.grashof import describe
@@ -51,11 +63,7 @@ def lines(mech, fbs, m, lu: str) -> list:
         out.append(f"motion      {name} from {ends[0]} to {ends[1]}"
                    + (" (limit positions: toggles)" if m.lower is not None and m.upper is not None else "")
                    + f", a range of {inp(m.high - m.low)}")
-        for i, t in enumerate(m.transmission):
-            label = f"loop '{t['loop']}' ({', '.join(t['unknowns'])}{_MEASURED.get(t.get('kind', 'RRR'), '')})"
-            out.append(f"{'transmission' if i == 0 else '':<13}{label}: {ang(t['min'])} at {name} = "
-                       f"{inp(t['min_at'], 6)} … {ang(t['max'])} at {inp(t['max_at'], 6)}; worst (farthest from 90°) "
-                       f"{ang(t['worst'])}")
+        out += _transmission_lines(m, name, ang, lambda x: inp(x, 6))
         for i, o in enumerate(m.outputs):
             def val(x, digits=10, o=o):
                 return ang(x, digits) if o["kind"] == "rocker" else inp(x, digits)
@@ -82,11 +90,7 @@ def lines(mech, fbs, m, lu: str) -> list:
             x = 0.0 if x > 2 * np.pi - 1e-12 else x
         return ang(x, 6)
 
-    for i, t in enumerate(m.transmission):
-        label = f"loop '{t['loop']}' ({', '.join(t['unknowns'])}{_MEASURED.get(t.get('kind', 'RRR'), '')})"
-        out.append(f"{'transmission' if i == 0 else '':<13}{label}: {ang(t['min'])} at {name} = "
-                   f"{where(t['min_at'])} … {ang(t['max'])} at {where(t['max_at'])}; worst (farthest from 90°) "
-                   f"{ang(t['worst'])}")
+    out += _transmission_lines(m, name, ang, where)
     for i, o in enumerate(m.outputs):
         out.append(f"{'outputs' if i == 0 else '':<12}" + _output_line(o, name, ang, where, mech.units.length, lu))
     return out
